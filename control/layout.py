@@ -1,0 +1,287 @@
+"""The shared-memory layout between the control subprocess and its client.
+
+Two kinds of segment, both documented in ``docs/shared_memory.md``:
+
+* the **control segment**, one per session: a header with the layout version,
+  the status snapshot (seqlock, written every tick), the hold and track
+  coefficient sets (seqlock, written by the client) and the latency histogram;
+* a **move segment** per move, sized for that move: the desired path or duty
+  profile in, the recorded run out, and a progress counter.
+
+Everything is little-endian; the 8-byte counters sit on 8-byte boundaries.
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+from enum import IntEnum, IntFlag
+
+import numpy as np
+
+from hw.backend import LinkCounters
+from hw.machine import Coefficients
+
+LAYOUT_VERSION = 1
+CONTROL_MAGIC = b"SDSK"
+MOVE_MAGIC = b"SDMV"
+MAX_TAPS = 8
+HIST_BIN_NS = 5_000  # 5 µs bins, Table 2.1
+HIST_BINS = 400  # 0-2 ms, plus one overflow bin
+FAULT_TEXT = 160
+LINK_FIELDS = tuple(LinkCounters().as_dict())
+
+
+class Mode(IntEnum):
+    """Controller modes: the thesis's four (section 5.1.1) plus the rig's Initialise (3.4.1)."""
+
+    HOLD = 0
+    FOLLOW_TRACK = 1
+    MANUAL_ACTUATE = 2
+    TRACKING_ACTUATE = 3
+    INITIALISE = 4
+
+
+class Flag(IntFlag):
+    ESTOP_LATCHED = 1
+    ESTOP_INPUT = 2
+    HOMED = 4
+    UI_LOST = 8
+    LINK_FAULT = 16
+    REALTIME = 32
+    MOVING = 64
+    FAULT = 128
+
+
+def _align(n: int) -> int:
+    return (n + 7) // 8 * 8
+
+
+@dataclass(frozen=True)
+class Status:
+    """One consistent snapshot of the controller, published every tick.
+
+    Positions in joint units (mm, deg); ``duty`` is the controller output in
+    the joint's sense (percent), ``valve`` what the backend was sent.
+    """
+
+    tick: int
+    time_s: float
+    wall_ns: int
+    mode: Mode
+    flags: Flag
+    move_id: int
+    move_done: int
+    move_total: int
+    late_last_us: float
+    late_max_us: float
+    overruns: int
+    compute_last_us: float
+    compute_max_us: float
+    position: tuple[float, ...]
+    desired: tuple[float, ...]
+    duty: tuple[float, ...]
+    valve: tuple[float, ...]
+    raw: tuple[int, ...]
+    glitches: tuple[int, ...]
+    link: dict[str, int]
+    fault: str
+
+    @property
+    def estop(self) -> bool:
+        return bool(self.flags & Flag.ESTOP_LATCHED)
+
+    @property
+    def moving(self) -> bool:
+        return bool(self.flags & Flag.MOVING)
+
+    @property
+    def homed(self) -> bool:
+        return bool(self.flags & Flag.HOMED)
+
+
+class StatusLayout:
+    """The packed status record for ``n`` joints and its decoding."""
+
+    def __init__(self, n: int) -> None:
+        self.n = n
+        self.struct = struct.Struct(
+            f"<qqqiiqqqqqqqq{n}d{n}d{n}d{n}d{n}q{n}q{len(LINK_FIELDS)}q{FAULT_TEXT}s"
+        )
+
+    def decode(self, values: tuple) -> Status:
+        n = self.n
+        (tick, time_ns, wall_ns, mode, flags, move_id, done, total,
+         late_last, late_max, overruns, comp_last, comp_max) = values[:13]
+        arrays = values[13:13 + 6 * n]
+        link = values[13 + 6 * n:13 + 6 * n + len(LINK_FIELDS)]
+        fault = values[-1].rstrip(b"\0").decode("utf-8", "replace")
+        return Status(
+            tick=tick, time_s=time_ns / 1e9, wall_ns=wall_ns, mode=Mode(mode), flags=Flag(flags),
+            move_id=move_id, move_done=done, move_total=total,
+            late_last_us=late_last / 1e3, late_max_us=late_max / 1e3, overruns=overruns,
+            compute_last_us=comp_last / 1e3, compute_max_us=comp_max / 1e3,
+            position=arrays[0:n], desired=arrays[n:2 * n], duty=arrays[2 * n:3 * n],
+            valve=arrays[3 * n:4 * n], raw=arrays[4 * n:5 * n], glitches=arrays[5 * n:6 * n],
+            link=dict(zip(LINK_FIELDS, link, strict=True)), fault=fault,
+        )
+
+
+class CoefficientLayout:
+    """A coefficient set of eq. 5.1 packed for ``n`` joints, at most ``MAX_TAPS`` taps each."""
+
+    def __init__(self, n: int) -> None:
+        self.n = n
+        joint = f"{MAX_TAPS}di{MAX_TAPS}didd"
+        self.struct = struct.Struct("<" + joint * n + f"{MAX_TAPS}diddd")
+
+    def encode(self, c: Coefficients) -> tuple:
+        values: list = []
+        for j in range(self.n):
+            values += [*_padded(c.kp[j], f"kp[{j}]"), len(c.kp[j])]
+            values += [*_padded(c.w[j], f"w[{j}]"), len(c.w[j])]
+            values += [c.ki[j], c.kd[j]]
+        values += [*_padded(c.filter, "filter"), len(c.filter)]
+        values += [c.filter_divisor, c.integral_limit, c.duty_limit]
+        return tuple(values)
+
+    def decode(self, values: tuple, name: str) -> Coefficients:
+        per_joint = 2 * MAX_TAPS + 4
+        kp, w, ki, kd = [], [], [], []
+        for j in range(self.n):
+            v = values[j * per_joint:(j + 1) * per_joint]
+            kp.append(tuple(v[:v[MAX_TAPS]]))
+            w.append(tuple(v[MAX_TAPS + 1:MAX_TAPS + 1 + v[2 * MAX_TAPS + 1]]))
+            ki.append(v[2 * MAX_TAPS + 2])
+            kd.append(v[2 * MAX_TAPS + 3])
+        tail = values[self.n * per_joint:]
+        return Coefficients(
+            name=name, note=name, kp=tuple(kp), ki=tuple(ki), kd=tuple(kd), w=tuple(w),
+            filter=tuple(tail[:tail[MAX_TAPS]]), filter_divisor=tail[MAX_TAPS + 1],
+            integral_limit=tail[MAX_TAPS + 2], duty_limit=tail[MAX_TAPS + 3],
+        )
+
+
+def _padded(taps: tuple[float, ...], what: str) -> list[float]:
+    if len(taps) > MAX_TAPS:
+        raise ValueError(f"coefficient {what} has {len(taps)} taps; at most {MAX_TAPS} fit")
+    return [*taps, *([0.0] * (MAX_TAPS - len(taps)))]
+
+
+class ControlLayout:
+    """Offsets of the control segment for ``n`` joints.
+
+    header (64 B): magic, version, joint count, controller pid, then the status
+    seqlock, the hold and track coefficient seqlocks and the histogram
+    (``HIST_BINS + 1`` counts, then min, max, sum and count of lateness in ns).
+    """
+
+    HEADER = struct.Struct("<4sIII")
+    PID_OFFSET = 12
+
+    def __init__(self, n: int) -> None:
+        self.n = n
+        self.status = StatusLayout(n)
+        self.coefficients = CoefficientLayout(n)
+        self.status_offset = 64
+        self.hold_offset = _align(self.status_offset + 8 + self.status.struct.size)
+        self.track_offset = _align(self.hold_offset + 8 + self.coefficients.struct.size)
+        self.hist_offset = _align(self.track_offset + 8 + self.coefficients.struct.size)
+        self.size = self.hist_offset + 8 * (HIST_BINS + 1 + 4)
+
+    def coefficient_offset(self, which: str) -> int:
+        if which not in ("hold", "track"):
+            raise ValueError(f"coefficient set must be 'hold' or 'track', got {which!r}")
+        return self.hold_offset if which == "hold" else self.track_offset
+
+    def write_header(self, buf: memoryview) -> None:
+        self.HEADER.pack_into(buf, 0, CONTROL_MAGIC, LAYOUT_VERSION, self.n, 0)
+
+    def check_header(self, buf: memoryview) -> None:
+        magic, version, n, _ = self.HEADER.unpack_from(buf, 0)
+        if magic != CONTROL_MAGIC or version != LAYOUT_VERSION or n != self.n:
+            raise ValueError(f"control segment is {magic!r} v{version} for {n} joints; expected "
+                             f"{CONTROL_MAGIC!r} v{LAYOUT_VERSION} for {self.n}")
+
+    def histogram(self, buf: memoryview) -> np.ndarray:
+        """A (HIST_BINS + 5,) int64 view: counts, then min, max, sum, count."""
+        return np.frombuffer(buf, np.int64, HIST_BINS + 5, self.hist_offset)
+
+
+class MoveLayout:
+    """A move segment: desired path and duty profile in, recorded run out.
+
+    header (64 B): magic, version, samples N, joints J, then at offset 24 the
+    number of rows recorded so far (one aligned 8-byte store per tick). Then
+    ``desired (N, J)``, ``profile (N, J)`` and ``record (N, 1 + 3J)`` rows of
+    ``t, desired..., actual..., duty...`` as float64.
+    """
+
+    HEADER = struct.Struct("<4sIQI")
+    RECORDED_OFFSET = 24
+
+    def __init__(self, samples: int, n: int) -> None:
+        if samples < 1:
+            raise ValueError("a move needs at least one sample")
+        self.samples = samples
+        self.n = n
+        self.row = struct.Struct(f"<{1 + 3 * n}d")
+        self.target = struct.Struct(f"<{n}d")
+        self.desired_offset = 64
+        self.profile_offset = self.desired_offset + 8 * samples * n
+        self.record_offset = self.profile_offset + 8 * samples * n
+        self.size = self.record_offset + self.row.size * samples
+
+    @classmethod
+    def read_header(cls, buf: memoryview) -> MoveLayout:
+        magic, version, samples, n = cls.HEADER.unpack_from(buf, 0)
+        if magic != MOVE_MAGIC or version != LAYOUT_VERSION:
+            raise ValueError(f"move segment is {magic!r} v{version}, expected {MOVE_MAGIC!r} "
+                             f"v{LAYOUT_VERSION}")
+        return cls(samples, n)
+
+    def write_header(self, buf: memoryview) -> None:
+        self.HEADER.pack_into(buf, 0, MOVE_MAGIC, LAYOUT_VERSION, self.samples, self.n)
+
+    def desired(self, buf: memoryview) -> np.ndarray:
+        return np.ndarray((self.samples, self.n), np.float64, buf, self.desired_offset)
+
+    def profile(self, buf: memoryview) -> np.ndarray:
+        return np.ndarray((self.samples, self.n), np.float64, buf, self.profile_offset)
+
+    def record(self, buf: memoryview) -> np.ndarray:
+        return np.ndarray((self.samples, 1 + 3 * self.n), np.float64, buf, self.record_offset)
+
+
+@dataclass(frozen=True)
+class LatencyHistogram:
+    """Wake-up lateness of the loop in 5 µs bins, as Table 2.1; the last bin holds ≥ 2 ms."""
+
+    counts: np.ndarray
+    ticks: int
+    min_us: float
+    max_us: float
+    mean_us: float
+    overruns: int
+    bin_us: float = HIST_BIN_NS / 1e3
+
+    @classmethod
+    def from_counters(cls, values: np.ndarray, overruns: int) -> LatencyHistogram:
+        counts = values[:HIST_BINS + 1]
+        low, high, total, ticks = (int(v) for v in values[HIST_BINS + 1:HIST_BINS + 5])
+        return cls(counts=counts, ticks=ticks, min_us=low / 1e3, max_us=high / 1e3,
+                   mean_us=total / ticks / 1e3 if ticks else 0.0, overruns=overruns)
+
+    def percentile(self, p: float) -> float:
+        """Upper edge (µs) of the bin holding the ``p``-th percentile of lateness."""
+        if not self.ticks:
+            return 0.0
+        index = int(np.searchsorted(np.cumsum(self.counts), p / 100 * self.ticks))
+        return (min(index, HIST_BINS) + 1) * self.bin_us
+
+    def rows(self, up_to_us: float = 80.0) -> list[tuple[float, float, int]]:
+        """``(from µs, to µs, ticks)`` rows up to ``up_to_us``, then one row for the rest."""
+        edge = int(up_to_us // self.bin_us)
+        rows = [(i * self.bin_us, (i + 1) * self.bin_us, int(self.counts[i])) for i in range(edge)]
+        rows.append((edge * self.bin_us, float("inf"), int(self.counts[edge:].sum())))
+        return rows

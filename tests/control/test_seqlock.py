@@ -1,0 +1,53 @@
+"""The seqlock never hands a reader a torn record, with the writer in another process."""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import struct
+import time
+
+from control import shm
+from control.seqlock import SeqlockReader, SeqlockWriter
+
+RECORD = struct.Struct("<64q")
+
+
+def _writer(name: str, seconds: float) -> None:
+    segment = shm.attach(name)
+    writer = SeqlockWriter(segment.buf, 0, RECORD)
+    deadline = time.monotonic() + seconds
+    i = 0
+    while time.monotonic() < deadline:
+        i += 1
+        writer.write(*([i] * 64))
+    writer.release()
+    shm.release(segment, unlink=False)
+
+
+def test_reader_never_sees_a_torn_record() -> None:
+    segment = shm.create("seqlock_test", 8 + RECORD.size)
+    reader = SeqlockReader(segment.buf, 0, RECORD)
+    process = mp.get_context("spawn").Process(target=_writer, args=(segment.name, 1.5))
+    process.start()
+    try:
+        seen = set()
+        deadline = time.monotonic() + 3.0
+        while process.is_alive() and time.monotonic() < deadline:
+            values = reader.read()
+            assert len(set(values)) == 1, f"torn record: {sorted(set(values))[:4]}"
+            seen.add(values[0])
+        assert len(seen) > 100, "the writer barely ran; the test proved nothing"
+    finally:
+        process.join(5)
+        reader.release()
+        shm.release(segment, unlink=True)
+
+
+def test_unaligned_offset_is_refused() -> None:
+    buf = memoryview(bytearray(64))
+    try:
+        SeqlockWriter(buf, 4, struct.Struct("<q"))
+    except ValueError as exc:
+        assert "aligned" in str(exc)
+    else:
+        raise AssertionError("an unaligned seqlock was accepted")
