@@ -1,0 +1,523 @@
+"""The Unimate 2000B: forward and closed-form inverse kinematics, thesis sections 4.4–4.5.
+
+Joint vectors are in the thesis's actuator order (ARCHITECTURE.md)::
+
+    q = [In/Out d3 (mm), Rotate θ1, Up/Down θ2, Bend θ4, Yaw θ5, Swivel θ6 (deg)]
+
+A pose is frame 6 (the end-effector) in the base frame 0::
+
+    p = [x, y, z (mm), γ, β, α (deg, X-Y-Z fixed angles, eq. 4.04)]
+
+The inverse follows from the A matrices of section 4.4 (and Appendix A), with
+n, o, a the columns of the pose's rotation and P its position:
+
+- the Up/Down axis z1 = (sθ1, −cθ1, 0) is the normal of the arm plane, and the
+  Bend axis z3 is parallel to it;
+- the wrist point w = P − Ly·a (origin of frame 5) lies in the arm plane, so
+  θ1 = atan2(wy, wx) or that + 180° (eq. 4.14, App. A (1)–(3));
+- z1·a = cθ5, z1·n = sθ5·cθ6, z1·o = −sθ5·sθ6 give θ5, θ6 in two branches
+  (eq. 4.15, 4.16, App. A (1), (4), (5));
+- the Bend axis z4 = −(sθ6·n + cθ6·o) lies in the arm plane and the arm point
+  o3 = w − Lb·z4 = (cθ1·ρ, sθ1·ρ, d1 + h) with (ρ, h) = Rot(θ2)·(d3, a2)
+  (App. A (8), (9)), so d3 = ±√(ρ² + h² − a2²) and θ2 = atan2(h, ρ) − atan2(a2, d3):
+  eq. 4.17 solved in closed form (errata #8), without the listing's division by
+  cos θ1 (errata #9);
+- θ2 + θ4 = atan2(z4·z0, z4·x1) (eq. 4.18).
+
+That is up to 2 (θ1) × 2 (wrist) × 2 (θ2 roots) = 8 branches; each is wrapped
+into the joint limits (a ±360° copy of an angle is the same joint position),
+filtered by them and ranked by ``distance`` to a reference joint vector
+``near``: ``Σ|Δθ| (deg) + |Δd3| / MM_PER_DEGREE``, joint travel with 10 mm of
+In/Out weighing as much as 1° of a revolute joint.
+
+Singularities. Where the pose leaves joints undetermined, a joint is held at
+its ``near`` value, which is what an operator jogging the arm expects (what is
+free stays where it is and the others follow):
+
+- wrist singular (sin θ5 = 0: the Swivel axis z5 is parallel to the Bend and
+  Up/Down axes; the all-zero home pose is one). Then only θ2 + θ4 + θ6 and the
+  wrist point are fixed, a one-parameter family of In/Out, Up/Down, Bend,
+  Swivel. The two wrist branches become two members of it: Swivel held at
+  near's (then z4 = −(sθ6·n + cθ6·o) and the arm as usual), and Bend held at
+  near's (the wrist point is Rot(θ2)·(d3 + Lb·cθ4, a2 + Lb·sθ4) from the
+  shoulder, solved like eq. 4.17, Swivel last). If neither is inside the limits
+  the pose is reported unreachable with a hint to pass another ``near``;
+- wrist point on the Rotate axis (outside the Unimate's workspace, as d3 ≥ 976
+  mm keeps it at least 585 mm away): Rotate = near's Rotate and that + 180°.
+
+Near a wrist singularity the pose is still met to round-off, but the joints are
+ill-conditioned: θ6 comes from the O(sin θ5) components z1·n, z1·o, so round-off
+in the pose moves the solution by ~1e-14/sin θ5 (deg or mm) along the family
+of configurations that nearly reach it. A configuration sitting on a joint
+limit with |θ5| below ~0.005° can therefore come back just outside the limit
+(beyond LIMIT_TOL) and be reported unreachable.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from kinematics import xyz_fixed
+from kinematics.dh import DHLink
+from kinematics.dh import forward as dh_forward
+
+JOINTS = ("In/Out", "Rotate", "Up/Down", "Bend", "Yaw", "Swivel")
+UNITS = ("mm", "°", "°", "°", "°", "°")
+# Distance metric for ranking solutions: 10 mm of In/Out count as much as 1° of a revolute joint.
+MM_PER_DEGREE = 10.0
+# Round-off (mm or deg) allowed at a joint limit; a solution this close is clipped onto the limit.
+LIMIT_TOL = 1e-9
+# |sin θ5| at or below this is a wrist singularity: Swivel and Bend are not unique.
+WRIST_TOL = 1e-10
+# Wrist point within this distance (mm) of the Rotate axis: Rotate is not unique.
+ARM_TOL = 1e-9
+# The two Up/Down roots coincide when |d3| = √(ρ² + h² − a2²) is at or below this (mm).
+ROOT_TOL = 1e-9
+# Two solutions closer than this (mm or deg, every joint) are the same one.
+SAME_TOL = 1e-6
+
+DH_ORDER = (1, 2, 0, 3, 4, 5)  # DH joint i is actuator DH_ORDER[i]: θ1, θ2, d3, θ4, θ5, θ6
+_WEIGHTS = np.array([1.0 / MM_PER_DEGREE, 1.0, 1.0, 1.0, 1.0, 1.0])
+_CHUNK = 8192  # poses solved at once by inverse_batch: bounded, cache-sized temporaries
+
+
+class Unreachable(ValueError):
+    """No joint solution inside the limits exists for a pose; the message says why."""
+
+
+@dataclass(frozen=True)
+class InverseBatch:
+    """Every inverse-kinematics branch of a batch of poses (``inverse_batch``).
+
+    ``solutions: (..., 8, 6)`` joint vectors (mm, deg), NaN where a branch is
+    invalid. Slot ``4·i1 + 2·iw + ir``: i1 the Rotate branch (θ1, θ1 + 180°);
+    iw the wrist branch (θ5 ≥ 0, then −θ5 with θ6 + 180°; at a wrist
+    singularity Swivel held at near's, then Bend held at near's); ir the root
+    (+√, then −√). ``valid: (..., 8)`` the branch exists, is inside the limits
+    and repeats no other slot. ``best: (..., 6)`` the valid branch nearest
+    ``near`` (NaN where none). ``reachable: (...)`` some branch is valid.
+    """
+
+    solutions: np.ndarray
+    valid: np.ndarray
+    best: np.ndarray
+    reachable: np.ndarray
+
+
+@dataclass(frozen=True)
+class Unimate2000B:
+    """Unimate 2000B geometry (Table 4.1, mm) and joint limits (actuator order, mm and deg).
+
+    ``d1`` base height, ``a2`` Up/Down offset, ``lb`` = d5 Bend-to-Yaw length,
+    ``ly`` = d6 Yaw-to-tool length. Limits are rtshare.h's limit_neg/limit_pos.
+    """
+
+    d1: float = 1066.8
+    a2: float = 120.65
+    lb: float = 200.0
+    ly: float = 440.0
+    lower: tuple[float, ...] = (976.0, -110.0, -27.0, -110.0, -169.0, -180.0)
+    upper: tuple[float, ...] = (2041.0, 110.0, 30.0, 110.0, 174.0, 180.0)
+
+    def __post_init__(self) -> None:
+        if len(self.lower) != 6 or len(self.upper) != 6:
+            raise ValueError(f"need 6 lower and 6 upper limits ({', '.join(JOINTS)})")
+        for name, lo, hi in zip(JOINTS, self.lower, self.upper, strict=True):
+            if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+                raise ValueError(f"{name} limits {lo:g}…{hi:g} must be finite with lower < upper")
+
+    @property
+    def mid_range(self) -> tuple[float, ...]:
+        """The middle of each joint's limits (mm, deg): the default ``near``."""
+        return tuple((lo + hi) / 2 for lo, hi in zip(self.lower, self.upper, strict=True))
+
+    def links(self) -> tuple[DHLink, ...]:
+        """Table 4.1 as standard DH rows in DH order (θ1, θ2, d3, θ4, θ5, θ6).
+
+        The thesis's two-step A_2^1 (Table 4.2, eq. 4.08) is one standard link
+        with α = 90°, a = a2 and θ = θ2 + 90°.
+        """
+        return (
+            DHLink(90.0, 0.0, self.d1, 0.0),
+            DHLink(90.0, self.a2, 0.0, 90.0),
+            DHLink(-90.0, 0.0, 0.0, 0.0, prismatic=True),
+            DHLink(90.0, 0.0, 0.0, 0.0),
+            DHLink(-90.0, 0.0, self.lb, 0.0),
+            DHLink(0.0, 0.0, self.ly, 0.0),
+        )
+
+    def forward(self, q: ArrayLike) -> np.ndarray:
+        """``T_6^0`` (eq. 4.11) of joint vectors ``q: (..., 6)`` (mm, deg) → ``(..., 4, 4)`` (mm).
+
+        Defined for any finite q, inside the limits or not.
+        """
+        q = np.asarray(q, dtype=float)
+        if q.ndim == 0 or q.shape[-1] != 6:
+            raise ValueError(f"expected joint vectors of shape (..., 6), got {q.shape}")
+        return dh_forward(self.links(), q[..., list(DH_ORDER)])
+
+    def pose(self, q: ArrayLike) -> np.ndarray:
+        """Pose of joint vectors ``q: (..., 6)`` → ``(..., 6)``: x, y, z (mm), γ, β, α (deg)."""
+        t = self.forward(q)
+        angles = np.degrees(xyz_fixed.angles(t[..., :3, :3]))  # eq. 4.05, errata #15
+        return np.concatenate([t[..., :3, 3], angles], axis=-1)
+
+    def inverse(self, p: ArrayLike, near: ArrayLike | None = None) -> np.ndarray:
+        """Every in-limit joint solution of one pose, nearest ``near`` first.
+
+        ``p: (6,)`` x, y, z (mm), γ, β, α (deg). ``near: (6,)`` joint vector to
+        rank by (typically the current reading; default the middle of the
+        limits); it also supplies the joint held at a singularity (module
+        docstring). Returns ``(k, 6)``, 1 ≤ k ≤ 8, distinct. Raises Unreachable
+        naming the reason, ValueError for a NaN/inf or a wrong shape.
+
+        A scalar ``math`` transcription of ``inverse_batch`` (numpy's per-call
+        overhead would cost ~10× more for one pose); the tests hold the two to
+        each other.
+        """
+        target = _vector(p, "pose")
+        ref = self._reference(near)
+        raw, radius, singular = self._branches(target, ref)
+        fitted = [q for q in (self._fit(b, ref) for b in raw) if q is not None]
+        if not fitted:
+            raise Unreachable(self._why(raw, radius, ref if singular else None))
+        if singular:  # the two held joints can pick the same member of the family
+            fitted = [q for i, q in enumerate(fitted) if not any(_same(q, u) for u in fitted[:i])]
+        fitted.sort(key=lambda q: _distance(q, ref))
+        return np.array(fitted)
+
+    def inverse_batch(self, p: ArrayLike, near: ArrayLike | None = None) -> InverseBatch:
+        """All 8 branches of poses ``p: (..., 6)``, vectorised; see InverseBatch.
+
+        ``near: (6,)`` or ``(..., 6)`` as in ``inverse`` (default the middle of
+        the limits). Raises ValueError for a NaN/inf or a wrong shape.
+        """
+        p = np.asarray(p, dtype=float)
+        if p.ndim == 0 or p.shape[-1] != 6:
+            raise ValueError(f"expected poses of shape (..., 6), got {p.shape}")
+        if not np.isfinite(p).all():
+            bad = tuple(np.argwhere(~np.isfinite(p).all(axis=-1))[0].tolist())
+            where = f" {bad}" if bad else ""
+            raise ValueError(f"poses must be finite numbers; pose{where} is {p[bad].tolist()}")
+        shape = p.shape[:-1]
+        p = p.reshape(-1, 6)
+        ref = np.broadcast_to(self._reference_batch(near, shape), (*shape, 6)).reshape(-1, 6)
+        solutions, valid = np.empty((len(p), 8, 6)), np.empty((len(p), 8), dtype=bool)
+        for start in range(0, len(p), _CHUNK):
+            rows = slice(start, start + _CHUNK)
+            solutions[rows], valid[rows] = self._solve_batch(p[rows], ref[rows])
+        travel = np.where(valid, distance(solutions, ref[:, None]), np.inf)
+        reachable = valid.any(axis=-1)
+        nearest = solutions[np.arange(len(p)), travel.argmin(axis=-1)]
+        best = np.where(reachable[:, None], nearest, np.nan)
+        return InverseBatch(
+            solutions=solutions.reshape(*shape, 8, 6),
+            valid=valid.reshape(*shape, 8),
+            best=best.reshape(*shape, 6),
+            reachable=reachable.reshape(shape),
+        )
+
+    def _solve_batch(self, p: np.ndarray, near: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Fitted branches of poses ``p: (N, 6)`` → ``(N, 8, 6)`` (NaN where invalid), valid."""
+        raw, exists, singular = self._branches_batch(p, near)
+        fitted, inside = self._fit_batch(raw, near)
+        valid = exists & inside
+        valid[singular] &= ~_repeats(fitted[singular], valid[singular])
+        return np.where(valid[..., None], fitted, np.nan), valid
+
+    def _reference(self, near: ArrayLike | None) -> list[float]:
+        """``near`` of ``inverse`` as 6 floats, the middle of the limits if None."""
+        return list(self.mid_range) if near is None else _vector(near, "near")
+
+    def _reference_batch(self, near: ArrayLike | None, shape: tuple[int, ...]) -> np.ndarray:
+        """``near`` of ``inverse_batch``, ``(6,)`` or ``(*shape, 6)``, checked."""
+        if near is None:
+            return np.array(self.mid_range)
+        ref = np.asarray(near, dtype=float)
+        if ref.shape != (6,) and ref.shape != (*shape, 6):
+            raise ValueError(f"near must have shape (6,) or {(*shape, 6)}, got {ref.shape}")
+        if not np.isfinite(ref).all():
+            raise ValueError("near must be finite numbers; got NaN or inf")
+        return ref
+
+    def _branches(
+        self, target: list[float], near: list[float]
+    ) -> tuple[list[list[float]], float, bool]:
+        """Raw branches of one pose in slot order (deg, unwrapped); the largest distance
+        from the Up/Down axis (mm) of an arm point without a real θ2 root (0 if none);
+        whether the wrist is singular."""
+        x, y, z = target[:3]
+        g, b, al = (math.radians(v) for v in target[3:])
+        cg, sg, cb, sb, ca, sa = (
+            math.cos(g), math.sin(g), math.cos(b), math.sin(b), math.cos(al), math.sin(al),
+        )
+        n = (ca * cb, sa * cb, -sb)  # eq. 4.04
+        o = (ca * sb * sg - sa * cg, sa * sb * sg + ca * cg, cb * sg)
+        a = (ca * sb * cg + sa * sg, sa * sb * cg - ca * sg, cb * cg)
+        w = (x - self.ly * a[0], y - self.ly * a[1], z - self.ly * a[2])  # eq. 4.14
+        on_axis = math.hypot(w[0], w[1]) <= ARM_TOL
+        phi = math.radians(near[1]) if on_axis else math.atan2(w[1], w[0])
+        out: list[list[float]] = []
+        radius = 0.0
+        singular = False
+        for t1 in (phi, phi + math.pi):
+            s1, c1 = math.sin(t1), math.cos(t1)
+            zn, zo, za = s1 * n[0] - c1 * n[1], s1 * o[0] - c1 * o[1], s1 * a[0] - c1 * a[1]
+            s5 = math.hypot(zn, zo)
+            t5 = math.atan2(s5, za)  # eq. 4.16
+            if s5 > WRIST_TOL:
+                t6 = math.atan2(-zo, zn)  # eq. 4.15
+                wrists = ((t5, t6), (-t5, t6 + math.pi))
+            else:
+                singular = True
+                wrists = ((t5, math.radians(near[5])),)
+            for t5w, t6w in wrists:
+                s6, c6 = math.sin(t6w), math.cos(t6w)
+                z4 = (-s6 * n[0] - c6 * o[0], -s6 * n[1] - c6 * o[1], -s6 * n[2] - c6 * o[2])
+                rho = c1 * (w[0] - self.lb * z4[0]) + s1 * (w[1] - self.lb * z4[1])  # App. A (8)
+                h = w[2] - self.lb * z4[2] - self.d1  # App. A (9)
+                disc = rho * rho + h * h - self.a2 * self.a2
+                if disc < 0.0:
+                    radius = max(radius, math.hypot(rho, h))
+                    continue
+                root = math.sqrt(disc)
+                t24 = math.atan2(z4[2], c1 * z4[0] + s1 * z4[1])  # eq. 4.18
+                for d3 in (root, -root) if root > ROOT_TOL else (root,):
+                    t2 = math.atan2(h, rho) - math.atan2(self.a2, d3)  # eq. 4.17, errata #8
+                    out.append([
+                        d3, math.degrees(t1), math.degrees(t2), math.degrees(t24 - t2),
+                        math.degrees(t5w), math.degrees(t6w),
+                    ])
+            if s5 <= WRIST_TOL:
+                out.extend(self._hold_bend(w, n, o, t1, t5, near[3]))
+        return out, radius, singular
+
+    def _hold_bend(self, w: tuple[float, ...], n: tuple[float, ...], o: tuple[float, ...],
+                   t1: float, t5: float, bend: float) -> list[list[float]]:
+        """Wrist-singular branches with Bend held at ``bend`` (deg), up to 2.
+
+        With z4 = Rot(θ2 + θ4)·x1 in the arm plane, App. A (8), (9) become
+        (ρw, hw) = Rot(θ2)·(d3 + Lb·cθ4, a2 + Lb·sθ4): eq. 4.17's form with a
+        longer offset. Swivel then follows from z4 = −(sθ6·n + cθ6·o).
+        """
+        s1, c1 = math.sin(t1), math.cos(t1)
+        s4, c4 = math.sin(math.radians(bend)), math.cos(math.radians(bend))
+        rho, h = c1 * w[0] + s1 * w[1], w[2] - self.d1
+        offset = self.a2 + self.lb * s4
+        disc = rho * rho + h * h - offset * offset
+        if disc < 0.0:
+            return []
+        root = math.sqrt(disc)
+        out = []
+        for reach in (root, -root) if root > ROOT_TOL else (root,):
+            t2 = math.atan2(h, rho) - math.atan2(offset, reach)
+            psi = t2 + math.radians(bend)
+            z4 = (c1 * math.cos(psi), s1 * math.cos(psi), math.sin(psi))
+            t6 = math.atan2(-(z4[0] * n[0] + z4[1] * n[1] + z4[2] * n[2]),
+                            -(z4[0] * o[0] + z4[1] * o[1] + z4[2] * o[2]))
+            out.append([reach - self.lb * c4, math.degrees(t1), math.degrees(t2), bend,
+                        math.degrees(t5), math.degrees(t6)])
+        return out
+
+    def _branches_batch(
+        self, p: np.ndarray, near: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Raw branches of poses ``p: (N, 6)`` → ``(N, 8, 6)`` (deg, unwrapped), exists
+        ``(N, 8)``, and which poses have a singular wrist ``(N,)``.
+
+        Axes while solving: (N, θ1 branch, wrist branch, root).
+        """
+        r = xyz_fixed.rotation(*np.radians(p[:, 3:]).T)  # eq. 4.04
+        n, o, a = r[..., 0], r[..., 1], r[..., 2]
+        w = p[:, :3] - self.ly * a  # eq. 4.14
+        on_axis = np.hypot(w[:, 0], w[:, 1]) <= ARM_TOL
+        phi = np.where(on_axis, np.radians(near[:, 1]), np.arctan2(w[:, 1], w[:, 0]))
+        t1 = phi[:, None] + np.array([0.0, np.pi])
+        s1, c1 = np.sin(t1), np.cos(t1)
+
+        def across(v: np.ndarray) -> np.ndarray:
+            """z1·v for both θ1 branches, ``(N, 2)``."""
+            return s1 * v[:, None, 0] - c1 * v[:, None, 1]
+
+        zn, zo, za = across(n), across(o), across(a)
+        s5 = np.hypot(zn, zo)
+        singular = s5 <= WRIST_TOL
+        t5 = np.arctan2(s5, za)  # eq. 4.16
+        t6 = np.where(singular, np.radians(near[:, None, 5]), np.arctan2(-zo, zn))  # eq. 4.15
+        t5w = np.stack([t5, -t5], axis=-1)
+        t6 = np.stack([t6, t6 + np.pi], axis=-1)
+
+        s6, c6 = np.sin(t6)[..., None], np.cos(t6)[..., None]
+        z4 = -(s6 * n[:, None, None] + c6 * o[:, None, None])
+        arm = w[:, None, None] - self.lb * z4
+        s1w, c1w = s1[..., None], c1[..., None]
+        rho = c1w * arm[..., 0] + s1w * arm[..., 1]  # App. A (8)
+        h = arm[..., 2] - self.d1  # App. A (9)
+        disc = rho * rho + h * h - self.a2 * self.a2
+        root = np.sqrt(np.maximum(disc, 0.0))
+        d3 = root[..., None] * np.array([1.0, -1.0])
+        t2 = np.arctan2(h, rho)[..., None] - np.arctan2(self.a2, d3)  # eq. 4.17, errata #8
+        t24 = np.arctan2(z4[..., 2], c1w * z4[..., 0] + s1w * z4[..., 1])  # eq. 4.18
+        t4 = t24[..., None] - t2
+        exists = np.stack([disc >= 0.0, root > ROOT_TOL], axis=-1)
+
+        angles = np.degrees(np.broadcast_arrays(t1[:, :, None, None], t2, t4,
+                                                t5w[..., None], t6[..., None]))
+        q = np.stack([d3, *angles], axis=-1)
+        if singular.any():
+            rows, branch = np.nonzero(singular)
+            q[rows, branch, 1], exists[rows, branch, 1] = self._hold_bend_batch(
+                w[rows], n[rows], o[rows], t1[rows, branch], t5[rows, branch], near[rows, 3])
+        return q.reshape(-1, 8, 6), exists.reshape(-1, 8), singular.any(axis=-1)
+
+    def _hold_bend_batch(self, w: np.ndarray, n: np.ndarray, o: np.ndarray, t1: np.ndarray,
+                         t5: np.ndarray, bend: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``_hold_bend`` of K singular wrists → ``(K, 2, 6)`` (deg), exists ``(K, 2)``."""
+        s1, c1 = np.sin(t1)[:, None], np.cos(t1)[:, None]
+        t4 = np.radians(bend)[:, None]
+        s4, c4 = np.sin(t4), np.cos(t4)
+        rho, h = c1 * w[:, 0, None] + s1 * w[:, 1, None], w[:, 2, None] - self.d1
+        offset = self.a2 + self.lb * s4
+        disc = rho * rho + h * h - offset * offset
+        root = np.sqrt(np.maximum(disc, 0.0))
+        reach = root * np.array([1.0, -1.0])
+        t2 = np.arctan2(h, rho) - np.arctan2(offset, reach)
+        psi = t2 + t4
+        z4 = np.stack([c1 * np.cos(psi), s1 * np.cos(psi), np.sin(psi)], axis=-1)
+        t6 = np.arctan2(-(z4 * n[:, None]).sum(-1), -(z4 * o[:, None]).sum(-1))
+        d3 = reach - self.lb * c4
+        angles = np.degrees(np.broadcast_arrays(t1[:, None], t2, t4, t5[:, None], t6))
+        exists = np.concatenate([disc >= 0.0, root > ROOT_TOL], axis=-1)
+        return np.stack([d3, *angles], axis=-1), exists
+
+    def _fit(self, q: list[float], near: list[float]) -> list[float] | None:
+        """``q`` with each angle moved to its in-limit ±360° copy nearest ``near``
+        and clipped onto a limit it touches within LIMIT_TOL, or None if outside."""
+        lo, hi = self.lower, self.upper
+        if not lo[0] - LIMIT_TOL <= q[0] <= hi[0] + LIMIT_TOL:
+            return None
+        out = [min(max(q[0], lo[0]), hi[0])]
+        for j in range(1, 6):
+            v = _wrap(q[j], lo[j], hi[j], near[j])
+            if v is None:
+                return None
+            out.append(v)
+        return out
+
+    def _fit_batch(self, q: np.ndarray, near: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``_fit`` of ``q: (N, 8, 6)`` → fitted ``(N, 8, 6)``, inside ``(N, 8)``."""
+        lo, hi = np.array(self.lower), np.array(self.upper)
+        base, top = lo[1:] - LIMIT_TOL, hi[1:] + LIMIT_TOL
+        angle = q[..., 1:]
+        low_copy = angle - 360.0 * np.floor((angle - base) / 360.0)
+        turns = np.clip(np.round((near[:, None, 1:] - low_copy) / 360.0),
+                        0.0, np.floor((top - low_copy) / 360.0))
+        inside = ((low_copy <= top).all(axis=-1)
+                  & (q[..., 0] >= lo[0] - LIMIT_TOL) & (q[..., 0] <= hi[0] + LIMIT_TOL))
+        fitted = np.empty_like(q)
+        fitted[..., 0] = q[..., 0]
+        fitted[..., 1:] = low_copy + 360.0 * turns
+        return np.clip(fitted, lo, hi) + 0.0, inside  # + 0.0 turns -0.0 into 0.0
+
+    def _why(self, raw: list[list[float]], radius: float, held: list[float] | None) -> str:
+        """The reason no branch of a pose is usable, for Unreachable; ``held`` is
+        ``near`` when the wrist was singular and joints were held at it."""
+        hint = ("" if held is None else
+                f" (wrist singular: Swivel held at {held[5]:g}° or Bend at {held[3]:g}° "
+                f"from near; another near may reach it)")
+        if not raw:
+            return (f"out of reach: the arm point is {radius:.1f} mm from the Up/Down axis, "
+                    f"inside the a2 = {self.a2:g} mm offset (eq. 4.17 has no real root){hint}")
+        closest = min((self._violations(q) for q in raw), key=lambda v: sum(c for *_, c in v))
+        parts = []
+        for j, value, _ in closest:
+            lo, hi = self.lower[j], self.upper[j]
+            if j == 0:
+                gap = (f"{value - hi:.1f} mm beyond" if value > hi
+                       else f"{lo - value:.1f} mm short of")
+                parts.append(f"In/Out would be {value:.1f} mm, {gap} {lo:g}…{hi:g} mm")
+            else:
+                parts.append(f"{JOINTS[j]} would be {value:.1f}°, outside {lo:g}…{hi:g}°")
+        head = "out of reach" if closest[0][0] == 0 else "outside the joint limits"
+        return f"{head}: {'; '.join(parts)}{hint}"
+
+    def _violations(self, q: list[float]) -> list[tuple[int, float, float]]:
+        """(joint, value, weighted excess) for each joint of ``q`` outside its limits;
+        an angle is taken at its ±360° copy nearest the middle of its range."""
+        out = []
+        for j, (v, lo, hi) in enumerate(zip(q, self.lower, self.upper, strict=True)):
+            if j:
+                mid = (lo + hi) / 2
+                v = mid + (v - mid + 180.0) % 360.0 - 180.0
+            excess = max(lo - v, v - hi)
+            if excess > LIMIT_TOL:
+                out.append((j, v, excess * _WEIGHTS[j]))
+        return out
+
+
+def _repeats(q: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """Slots of ``q: (N, 8, 6)`` that repeat a valid earlier slot → ``(N, 8)``.
+
+    Only a singular wrist's two held joints can meet (every other pair differs
+    by 180° in θ1 or θ6, or in the sign of a root), so wrist branch 1 is
+    compared with wrist branch 0 of the same θ1 branch.
+    """
+    q, valid = q.reshape(-1, 2, 2, 2, 6), valid.reshape(-1, 2, 2, 2)
+    gap = np.abs(q[:, :, 1, :, None] - q[:, :, 0, None, :]).max(axis=-1)
+    repeats = np.zeros_like(valid)
+    repeats[:, :, 1] = ((gap <= SAME_TOL) & valid[:, :, 0, None, :]).any(axis=-1)
+    return repeats.reshape(-1, 8)
+
+
+def _wrap(v: float, lo: float, hi: float, near: float) -> float | None:
+    """The ±360° copy of angle ``v`` inside lo…hi nearest ``near``, clipped onto a
+    limit it touches within LIMIT_TOL; None if no copy is inside (deg)."""
+    base, top = lo - LIMIT_TOL, hi + LIMIT_TOL
+    v -= 360.0 * math.floor((v - base) / 360.0)
+    if v > top:
+        return None
+    turns = round((near - v) / 360.0)
+    if turns > 0:
+        v += 360.0 * min(turns, math.floor((top - v) / 360.0))
+    return min(max(v, lo), hi) + 0.0  # + 0.0 turns -0.0 into 0.0
+
+
+def distance(q: ArrayLike, near: ArrayLike) -> np.ndarray:
+    """Ranking metric of joint vectors ``(..., 6)``, broadcast together:
+    Σ|Δθ| (deg) + |Δd3| / MM_PER_DEGREE."""
+    return (np.abs(np.asarray(q, dtype=float) - near) * _WEIGHTS).sum(axis=-1)
+
+
+def _same(q: Sequence[float], u: Sequence[float]) -> bool:
+    """Whether two joint vectors are one solution (every joint within SAME_TOL)."""
+    return all(abs(a - b) <= SAME_TOL for a, b in zip(q, u, strict=True))
+
+
+def _distance(q: Sequence[float], near: Sequence[float]) -> float:
+    """``distance`` of one pair of joint vectors, in plain floats for ``inverse``."""
+    return abs(q[0] - near[0]) / MM_PER_DEGREE + sum(
+        abs(v - r) for v, r in zip(q[1:], near[1:], strict=True)
+    )
+
+
+def _vector(v: ArrayLike, what: str) -> list[float]:
+    """One finite 6-vector as floats; ValueError naming ``what`` otherwise."""
+    arr = np.asarray(v, dtype=float)
+    if arr.shape != (6,):
+        raise ValueError(f"{what} must have 6 values, got shape {arr.shape}")
+    values = arr.tolist()
+    if not all(map(math.isfinite, values)):
+        raise ValueError(f"{what} must be finite numbers, got {values}")
+    return values
+
+
+MODEL = Unimate2000B()
+forward = MODEL.forward
+pose = MODEL.pose
+inverse = MODEL.inverse
+inverse_batch = MODEL.inverse_batch

@@ -1,0 +1,161 @@
+"""``servodesk fk`` / ``servodesk ik``, run in-process through their argparse subcommands."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+import numpy as np
+import pytest
+
+from app import cli_kinematics
+from kinematics import unimate
+
+
+def parser() -> argparse.ArgumentParser:
+    """A top-level parser like app.cli's, with an option of its own."""
+    top = argparse.ArgumentParser(prog="servodesk")
+    top.add_argument("--machine", default="unimate2000b")
+    cli_kinematics.add_parsers(top.add_subparsers())
+    return top
+
+
+def run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
+    args = parser().parse_args(argv)
+    code = args.func(args)
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def is_row(line: str) -> bool:
+    """A solution row of ``ik``'s table: a mark column, then 6 joints and a distance."""
+    try:
+        return line[:1] in "* " and len([float(v) for v in line[1:].split()]) == 7
+    except ValueError:
+        return False
+
+
+HOME = ["1000", "0", "0", "0", "0", "0"]
+Q = [1857.5, -20.0, 4.3, -103.9, 89.5, 13.7]  # two in-limit wrist branches
+
+
+def test_fk_prints_the_pose(capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, err = run(["fk", *HOME], capsys)
+    assert code == 0 and err == ""
+    assert "x   1200.000 mm" in out
+    assert "y   -440.000 mm" in out
+    assert "z   1187.450 mm" in out
+    assert "β    -90.000 °" in out
+
+
+def test_fk_json(capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, _ = run(["fk", "--json", *map(str, Q)], capsys)
+    assert code == 0
+    doc = json.loads(out)
+    assert list(doc["q"].values()) == Q
+    np.testing.assert_allclose(list(doc["pose"].values()), unimate.pose(Q), atol=1e-9)
+    assert list(doc["pose"]) == ["x", "y", "z", "gamma", "beta", "alpha"]
+    assert doc["outside_limits"] == []
+
+
+@pytest.mark.parametrize("text, value", [("-27", -27.0), ("-1e1", -10.0), ("-.5", -0.5),
+                                         ("-2.5E+1", -25.0)])
+def test_negative_numbers_are_values_not_options(
+    capsys: pytest.CaptureFixture[str], text: str, value: float,
+) -> None:
+    code, out, _ = run(["fk", "--json", "1000", "0", text, "0", "0", "0"], capsys)
+    assert code == 0
+    assert json.loads(out)["q"]["Up/Down"] == value
+
+
+def test_fk_notes_joints_outside_the_limits(capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, _ = run(["fk", "0", "0", "0", "0", "0", "0"], capsys)
+    assert code == 0
+    assert "note: In/Out outside the joint limits" in out
+
+
+@pytest.mark.parametrize("bad, reason", [
+    ("abc", "Bend 'abc' is not a number"),
+    ("nan", "Bend 'nan' must be a finite number"),
+    ("inf", "Bend 'inf' must be a finite number"),
+    ("-inf", "Bend '-inf' must be a finite number"),
+    ("-NaN", "Bend '-NaN' must be a finite number"),
+])
+def test_fk_bad_numbers_exit_2_with_one_line(
+    capsys: pytest.CaptureFixture[str], bad: str, reason: str,
+) -> None:
+    code, out, err = run(["fk", "1000", "0", "0", bad, "0", "0"], capsys)
+    assert code == 2 and out == ""
+    assert err == f"servodesk fk: {reason}\n"
+
+
+def test_ik_lists_every_solution_nearest_first_and_marks_the_chosen_one(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    pose = unimate.pose(Q)
+    code, out, err = run(["ik", *map(repr, pose.tolist()), "--near", *map(str, Q)], capsys)
+    assert code == 0 and err == ""
+    rows = [line for line in out.splitlines() if is_row(line)]
+    solutions = unimate.inverse(pose, near=Q)
+    assert len(rows) == len(solutions) > 1
+    assert [r[0] for r in rows] == ["*"] + [" "] * (len(rows) - 1)
+    printed = np.array([[float(v) for v in r[1:].split()] for r in rows])
+    np.testing.assert_allclose(printed[:, :6], solutions, atol=1e-3)
+    np.testing.assert_allclose(printed[0, :6], Q, atol=1e-3)
+    assert list(printed[:, 6]) == sorted(printed[:, 6])
+
+
+def test_ik_json_round_trips_fk(capsys: pytest.CaptureFixture[str]) -> None:
+    _, out, _ = run(["fk", "--json", *map(str, Q)], capsys)
+    pose = [repr(v) for v in json.loads(out)["pose"].values()]
+    code, out, _ = run(["ik", "--json", *pose, "--near", *map(str, Q)], capsys)
+    assert code == 0
+    doc = json.loads(out)
+    assert doc["chosen"] == 0
+    np.testing.assert_allclose(list(doc["solutions"][0].values()), Q, atol=1e-6)
+    assert doc["distance"] == sorted(doc["distance"])
+    assert doc["wrist_singular"] is False
+
+
+def test_ik_default_near_is_the_middle_of_the_limits(capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, _ = run(["ik", "--json", "1200", "-440", "1187.45", "90", "-90", "0"], capsys)
+    assert code == 0
+    doc = json.loads(out)
+    assert doc["near"] == {"In/Out": 1508.5, "Rotate": 0.0, "Up/Down": 1.5, "Bend": 0.0,
+                           "Yaw": 2.5, "Swivel": 0.0}
+    np.testing.assert_allclose(list(doc["solutions"][0].values()), [1000, 0, 0, 0, 0, 0],
+                               atol=1e-9)
+    assert doc["wrist_singular"] is True
+
+
+def test_ik_notes_a_wrist_singularity(capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, _ = run(["ik", "1200", "-440", "1187.45", "90", "-90", "0"], capsys)
+    assert code == 0
+    assert "note: wrist singular" in out
+
+
+def test_ik_unreachable_exits_2_with_the_reason(capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, err = run(["ik", "5000", "0", "0", "0", "0", "0"], capsys)
+    assert code == 2 and out == ""
+    assert err.startswith("servodesk ik: out of reach: In/Out would be")
+    assert err.count("\n") == 1
+
+
+@pytest.mark.parametrize("argv, reason", [
+    (["ik", "1", "2", "x", "0", "0", "0"], "servodesk ik: z 'x' is not a number\n"),
+    (["ik", "1", "2", "3", "0", "-inf", "0"], "servodesk ik: β '-inf' must be a finite number\n"),
+    (["ik", *HOME, "--near", "1000", "0", "0", "0", "0", "nan"],
+     "servodesk ik: Swivel 'nan' must be a finite number\n"),
+])
+def test_ik_bad_numbers_exit_2_with_one_line(
+    capsys: pytest.CaptureFixture[str], argv: list[str], reason: str,
+) -> None:
+    code, out, err = run(argv, capsys)
+    assert (code, out, err) == (2, "", reason)
+
+
+def test_wrong_number_of_values_is_an_argparse_error(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as info:
+        parser().parse_args(["fk", "1", "2", "3"])
+    assert info.value.code == 2
+    assert "required: BEND, YAW, SWIVEL" in capsys.readouterr().err
