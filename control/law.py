@@ -1,0 +1,256 @@
+"""The controller of eq. 5.1: a generalised difference equation, one joint per call.
+
+    u(k+1) = Σ w[i]·u(k−i) + Σ kp[i]·e(k−i) + kd·Σ f[i]·e(k−i) / (p·Δt) + Σ ki·e(k)·Δt
+
+then saturation to ±100 %, minimum-PWM compensation (section 5.4.1, errata #5)
+and the coefficient set's duty limit. Taps are newest first (errata #21). With
+``w`` empty, ``kp = [Kp]`` and the filter (11, −18, 9, −2)/6 it is the PID of
+eq. 3.3; with ``w`` non-empty, the observer controller of section 3.6.2.
+
+Inputs per tick: joint index and error e(k) = desired − actual in joint units
+(mm, deg). Output: u(k+1) in percent, before down-scaling and polarity, which
+``valve_duty`` applies. The tick path uses plain floats and fixed-length lists
+shifted in place: six joints at 1 kHz cost microseconds (``benchmarks/law.py``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from numbers import Real
+from operator import mul
+
+from hw.machine import Coefficients, Joint, Machine
+
+EQ33_FILTER = (11.0, -18.0, 9.0, -2.0)  # eq. 3.3: 4-point backward difference of e
+EQ33_DIVISOR = 6.0  # eq. 3.3: divided by 6·Δt (errata #1, #20)
+INTEGRAL_LIMIT = 50.0  # section 3.6.1: Σ Ki·e·Δt limited to 50
+SATURATION = 100.0  # u(k) ∈ [−100 %, 100 %], eq. 5.1
+_INF = math.inf
+
+
+@dataclass(frozen=True, slots=True)
+class _JointGains:
+    """One joint's coefficients prepared for the tick; rebuilt only by ``set_coefficients``."""
+
+    gain_unit: float  # joint units per unit of error the gains act on (errata #18)
+    w: tuple[float, ...]  # weights on u(k), u(k−1), …
+    b: tuple[float, ...]  # taps on e(k), e(k−1), …: kp[i] + kd·f[i] / (p·Δt), see _error_taps
+    ki_dt: float  # ki·Δt
+    integral_limit: float
+    pos_scale: float  # 1 − pmin/100
+    pmin: float
+    neg_scale: float  # 1 − nmin/100
+    nmin: float
+    duty_limit: float
+
+
+class _JointState:
+    """Histories (newest first) and integrator of one joint; mutated in place every tick."""
+
+    __slots__ = ("e", "integral", "u")
+
+    def __init__(self, n_errors: int, n_outputs: int) -> None:
+        self.e = [0.0] * n_errors
+        self.u = [0.0] * n_outputs
+        self.integral = 0.0
+
+
+@dataclass(frozen=True)
+class LawState:
+    """A snapshot of one joint's state: errors in gain units, outputs in %, newest first."""
+
+    errors: tuple[float, ...]
+    outputs: tuple[float, ...]
+    integral: float
+
+
+class DifferenceLaw:
+    """Eq. 5.1 for every joint of a machine, with state kept across coefficient changes.
+
+    ``dt`` is the sample time Δt in seconds. ``set_coefficients`` may be called
+    at any time, even mid-move (section 6.3): histories and integrators are
+    kept, so the change is bumpless.
+    """
+
+    def __init__(self, machine: Machine, coefficients: Coefficients, dt: float) -> None:
+        if not (math.isfinite(dt) and dt > 0):
+            raise ValueError(f"sample time must be a positive number of seconds, got {dt}")
+        self.machine = machine
+        self.dt = dt
+        self._states = [_JointState(1, 1) for _ in machine.joints]
+        self.set_coefficients(coefficients)
+
+    @property
+    def coefficients(self) -> Coefficients:
+        return self._coefficients
+
+    def set_coefficients(self, c: Coefficients) -> None:
+        """Swap the gains; histories grow to the new tap lengths, integrators are kept."""
+        _check_shape(c, self.machine)
+        gains = tuple(_prepare(joint, c, j, self.dt) for j, joint in enumerate(self.machine.joints))
+        for state, g in zip(self._states, gains, strict=True):
+            _grow(state.e, max(len(g.b), len(c.filter)))
+            _grow(state.u, max(len(g.w), 1))
+        self._gains = gains
+        self._coefficients = c
+
+    def reset(self) -> None:
+        """Clear every history and integrator (after an E-stop, before a fresh start)."""
+        for s in self._states:
+            s.e[:] = [0.0] * len(s.e)
+            s.u[:] = [0.0] * len(s.u)
+            s.integral = 0.0
+
+    def state(self, j: int) -> LawState:
+        """A copy of joint ``j``'s histories and integrator (for display and tests)."""
+        s = self._states[j]
+        return LawState(tuple(s.e), tuple(s.u), s.integral)
+
+    def update(self, j: int, error: float) -> float:
+        """u(k+1) in % for joint ``j`` from e(k) = desired − actual in mm or degrees."""
+        g = self._gains[j]
+        s = self._states[j]
+        e = error / g.gain_unit  # error in gain units, errata #18
+        if not -_INF < e < _INF:  # a NaN would poison the integrator for good
+            raise ValueError(f"{self.machine.joints[j].name}: error {error} is not a number")
+        errors = s.e
+        errors.pop()
+        errors.insert(0, e)  # e(k), e(k−1), … newest first
+        u = sum(map(mul, g.w, s.u))  # Σ w[i]·u(k−i)
+        u += sum(map(mul, g.b, errors))  # Σ kp[i]·e(k−i) + kd·Σ f[i]·e(k−i) / (p·Δt)
+        integral = s.integral + g.ki_dt * e  # Σ ki·e(k)·Δt on the newest error, errata #2, #3
+        if integral > g.integral_limit:
+            integral = g.integral_limit
+        elif integral < -g.integral_limit:
+            integral = -g.integral_limit
+        s.integral = integral
+        u += integral
+        if u > SATURATION:
+            u = SATURATION
+        elif u < -SATURATION:
+            u = -SATURATION
+        if u > 0.0:  # minimum PWM maps (0, 100] onto (pmin, 100], errata #5
+            u = g.pos_scale * u + g.pmin
+        elif u < 0.0:
+            u = g.neg_scale * u - g.nmin
+        if u > g.duty_limit:
+            u = g.duty_limit
+        elif u < -g.duty_limit:
+            u = -g.duty_limit
+        outputs = s.u
+        outputs.pop()
+        outputs.insert(0, u)  # u(k+1) becomes u(k) of the next tick
+        return u
+
+
+def valve_duty(joint: Joint, u: float) -> float:
+    """Valve duty in % from controller output: down_scale on negative output (section 3.6,
+    errata #11), then the joint's polarity (errata #17)."""
+    if u < 0.0:
+        u *= joint.down_scale
+    return joint.polarity * u
+
+
+def pid(machine: Machine, kp: float | Sequence[float], ki: float | Sequence[float],
+        kd: float | Sequence[float], *, integral_limit: float = INTEGRAL_LIMIT,
+        duty_limit: float = SATURATION, name: str = "pid", note: str = "") -> Coefficients:
+    """A PID coefficient set of eq. 3.3; each gain is one number for all joints or one per joint."""
+    n = machine.n_joints
+    kps, kis, kds = (_per_joint(g, n, label) for g, label in ((kp, "kp"), (ki, "ki"), (kd, "kd")))
+    return Coefficients(
+        name=name,
+        note=note or f"PID of eq. 3.3: Kp {_gains_text(kps)}, Ki {_gains_text(kis)}, "
+                     f"Kd {_gains_text(kds)}",
+        kp=tuple((k,) for k in kps),
+        ki=kis,
+        kd=kds,
+        w=tuple(() for _ in range(n)),
+        filter=EQ33_FILTER,
+        filter_divisor=EQ33_DIVISOR,
+        integral_limit=integral_limit,
+        duty_limit=duty_limit,
+    )
+
+
+def pi(machine: Machine, kp: float | Sequence[float], ki: float | Sequence[float], *,
+       integral_limit: float = INTEGRAL_LIMIT, duty_limit: float = SATURATION,
+       name: str = "pi", note: str = "") -> Coefficients:
+    """A P.I. set (section 5.4.2): ``pid`` with Kd = 0."""
+    c = pid(machine, kp, ki, 0.0, integral_limit=integral_limit, duty_limit=duty_limit,
+            name=name, note=note)
+    if note:
+        return c
+    return replace(c, note=f"P.I. of section 5.4.2: Kp {_gains_text(tuple(k[0] for k in c.kp))}, "
+                           f"Ki {_gains_text(c.ki)}")
+
+
+def preset(name: str, machine: Machine) -> Coefficients:
+    """A coefficient set of the machine file by name: ``hold``, ``track``, the Unimate's
+    ``thesis_pi`` (section 5.4.2), the rig's ``observer`` (section 3.6.2, as printed, errata
+    #12)."""
+    try:
+        return machine.coefficients[name]
+    except KeyError:
+        have = ", ".join(machine.coefficients)
+        raise KeyError(f"machine {machine.name} has no coefficient set {name!r} "
+                       f"(it has: {have})") from None
+
+
+def _prepare(joint: Joint, c: Coefficients, j: int, dt: float) -> _JointGains:
+    return _JointGains(
+        gain_unit=joint.gain_unit,
+        w=tuple(c.w[j]),
+        b=_error_taps(c.kp[j], c.kd[j], c.filter, c.filter_divisor, dt),
+        ki_dt=c.ki[j] * dt,
+        integral_limit=c.integral_limit,
+        pos_scale=1.0 - joint.min_pwm_pos / 100.0,
+        pmin=joint.min_pwm_pos,
+        neg_scale=1.0 - joint.min_pwm_neg / 100.0,
+        nmin=joint.min_pwm_neg,
+        duty_limit=c.duty_limit,
+    )
+
+
+def _error_taps(kp: Sequence[float], kd: float, f: Sequence[float], divisor: float,
+                dt: float) -> tuple[float, ...]:
+    """The proportional and derivative terms of eq. 5.1 both weigh e(k−i), so they are one
+    tap vector: b[i] = kp[i] + kd·f[i] / (p·Δt). Summing once per tick instead of twice
+    saves a quarter of a PID tick (benchmarks/law.py); the arithmetic is the equation's."""
+    d = [kd * fi / (divisor * dt) for fi in f] if kd else []
+    n = max(len(kp), len(d))
+    kp = [*kp, *[0.0] * (n - len(kp))]
+    d = [*d, *[0.0] * (n - len(d))]
+    return tuple(p + q for p, q in zip(kp, d, strict=True))
+
+
+def _check_shape(c: Coefficients, machine: Machine) -> None:
+    n = machine.n_joints
+    for label, value in (("kp", c.kp), ("ki", c.ki), ("kd", c.kd), ("w", c.w)):
+        if len(value) != n:
+            raise ValueError(f"coefficient set {c.name!r}: {label} has {len(value)} entries, "
+                             f"machine {machine.name} has {n} joints")
+    if c.filter_divisor <= 0:
+        raise ValueError(f"coefficient set {c.name!r}: filter_divisor must be positive, "
+                         f"got {c.filter_divisor:g}")
+
+
+def _grow(history: list[float], length: int) -> None:
+    """Extend a history with zeros (oldest end) so ``length`` taps can read it; never shrink."""
+    if len(history) < length:
+        history.extend([0.0] * (length - len(history)))
+
+
+def _per_joint(gain: float | Sequence[float], n: int, label: str) -> tuple[float, ...]:
+    values = (float(gain),) * n if isinstance(gain, Real) else tuple(map(float, gain))
+    if len(values) != n:
+        raise ValueError(f"{label}: expected one gain or {n}, got {len(values)}")
+    bad = [v for v in values if not math.isfinite(v)]
+    if bad:
+        raise ValueError(f"{label}: gains must be finite numbers, got {bad[0]}")
+    return values
+
+
+def _gains_text(values: tuple[float, ...]) -> str:
+    return f"{values[0]:g}" if len(set(values)) == 1 else "/".join(f"{v:g}" for v in values)

@@ -1,0 +1,332 @@
+"""Desired paths for the thesis's inputs, and the summary of a finished move.
+
+Every path is ``(N, J)`` joint positions (mm, deg) at the sample time ``dt``
+(s), sample ``k`` at ``t = k·dt``, from ``t = 0`` to ``t = duration``
+inclusive. Row 0 is ``start``, the pose the move begins from (the thesis first
+drives there with move(), errata #19), so a summary knows the step it was asked
+for. With ``machine`` given, every target is checked against the joint limits
+(the error names the joint), and ramps and sines against ``max_speed``.
+
+Settle tail: a step's ``duration`` is the whole run, including the time to
+settle. Left out, it is the slowest joint's travel time at ``max_speed`` plus
+``SETTLE_TAIL_S``; a ramp's ``total_duration`` likewise defaults to the ramp
+time plus ``SETTLE_TAIL_S``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from numbers import Real
+
+import numpy as np
+
+from hw.machine import Joint, Machine
+
+SETTLE_TAIL_S = 2.0  # hold after arriving: the rig's steps settle within ~1 s (Figs 3.7-3.10)
+RISE_LOW, RISE_HIGH = 0.1, 0.9  # rise time is 10 % → 90 % of the step
+STEADY_FRACTION = 0.1  # steady-state error: mean over the last 10 % of the run
+
+
+@dataclass(frozen=True)
+class StepSummary:
+    """How one joint followed its move. Positions and errors in the joint's unit, times in s.
+
+    Error is desired − actual. Times are measured from the move's start, the
+    first sample whose desired value differs from sample 0 (t = 0 if none).
+    ``None`` means the response never got there within the run; ``notes``
+    say why, and which samples were ignored.
+    """
+
+    joint: str
+    unit: str
+    initial: float  # desired at t = 0
+    final: float  # desired at the end
+    step: float  # final − initial
+    overshoot: float  # beyond final, in the step's direction (≥ 0)
+    overshoot_pct: float  # of |step|
+    rise_time_s: float | None  # 10 % → 90 % of the step
+    settling_time_s: float | None  # until inside ±tolerance of final for good
+    steady_state_error: float  # mean error over the last 10 % of the run
+    max_abs_error: float
+    rms_error: float
+    tolerance: float
+    notes: tuple[str, ...] = ()
+
+
+def times(n: int, dt: float) -> np.ndarray:
+    """``t (n,)`` in seconds: ``k·dt``."""
+    return np.arange(n) * dt
+
+
+def step(start: Sequence[float], joint: int | str, target: float, duration: float | None = None,
+         *, dt: float | None = None, machine: Machine | None = None) -> np.ndarray:
+    """One joint steps to ``target`` at t = dt; the others hold (option.c SingleStepInput)."""
+    q0 = _start(start, machine)
+    j = _joint_index(joint, len(q0), machine)
+    goal = q0.copy()
+    goal[j] = target
+    goal = _targets(_vector(goal, "target", machine), machine)
+    path = _held(q0, _samples(_step_duration(q0, goal, duration, machine), _dt(dt, machine)))
+    path[1:, j] = goal[j]
+    return path
+
+
+def multi_step(start: Sequence[float], targets: Sequence[float], duration: float | None = None,
+               *, dt: float | None = None, machine: Machine | None = None) -> np.ndarray:
+    """Every joint steps to its target at once at t = dt (option.c MultiStepInput)."""
+    q0 = _start(start, machine)
+    goal = _targets(_vector(targets, "targets", machine, len(q0)), machine)
+    path = _held(q0, _samples(_step_duration(q0, goal, duration, machine), _dt(dt, machine)))
+    path[1:] = goal
+    return path
+
+
+def rig_sequence(start: Sequence[float] | float,
+                 steps: Sequence[tuple[Sequence[float] | float, float]], *,
+                 dt: float | None = None, machine: Machine | None = None) -> np.ndarray:
+    """Step to each position in turn and stay ``dwell_s`` seconds (function.c MultiStep).
+
+    Positions are ``(J,)``, or numbers on a one-joint machine such as the rig.
+    The last dwell is the settle tail.
+    """
+    q0 = _start(start, machine)
+    if not steps:
+        raise ValueError("a sequence needs at least one (position, dwell_s) step")
+    step_dt = _dt(dt, machine)
+    rows = [q0[None, :]]
+    for i, (position, dwell_s) in enumerate(steps, start=1):
+        where = f"step {i}"
+        q = _targets(_vector(np.atleast_1d(position), where, machine, len(q0)), machine, where)
+        rows.append(_held(q, _samples(dwell_s, step_dt, f"{where} dwell") - 1))
+    return np.concatenate(rows)
+
+
+def ramp(start: Sequence[float], end: Sequence[float], ramp_time: float,
+         total_duration: float | None = None, *, dt: float | None = None,
+         machine: Machine | None = None) -> np.ndarray:
+    """Linear from ``start`` to ``end`` in ``ramp_time`` s, then hold (function.c RampInput)."""
+    q0 = _start(start, machine)
+    q1 = _targets(_vector(end, "end", machine, len(q0)), machine, "end")
+    _positive(ramp_time, "ramp_time")
+    total = ramp_time + SETTLE_TAIL_S if total_duration is None else total_duration
+    _positive(total, "total_duration")
+    if total < ramp_time:
+        raise ValueError(f"total_duration {total:g} s is shorter than ramp_time {ramp_time:g} s")
+    _check_speed(np.abs(q1 - q0) / ramp_time, machine, "ramp_time", ramp_time)
+    step_dt = _dt(dt, machine)
+    t = times(_samples(total, step_dt, "total_duration"), step_dt)
+    fraction = np.minimum(t / ramp_time, 1.0)[:, None]
+    return q0 + (q1 - q0) * fraction
+
+
+def sine(start: Sequence[float], end: Sequence[float], period: float, duration: float, *,
+         dt: float | None = None, machine: Machine | None = None) -> np.ndarray:
+    """``start + (end − start)/2·(1 − cos 2πt/T)``: at ``end`` at T/2, back at T (function.c
+    Sinewave)."""
+    q0 = _start(start, machine)
+    q1 = _targets(_vector(end, "end", machine, len(q0)), machine, "end")
+    _positive(period, "period")
+    _check_speed(np.pi * np.abs(q1 - q0) / period, machine, "period", period)  # peak speed
+    step_dt = _dt(dt, machine)
+    t = times(_samples(duration, step_dt), step_dt)
+    return q0 + (q1 - q0) / 2.0 * (1.0 - np.cos(2.0 * np.pi * t / period))[:, None]
+
+
+def hold_path(q: Sequence[float], duration: float, *, dt: float | None = None,
+              machine: Machine | None = None) -> np.ndarray:
+    """Stay at ``q`` for ``duration`` s."""
+    q0 = _start(q, machine, "hold position")
+    return _held(q0, _samples(duration, _dt(dt, machine)))
+
+
+def summary(t: np.ndarray, desired: np.ndarray, actual: np.ndarray, joints: Sequence[Joint],
+            tolerance: float | Sequence[float] | None = None) -> list[StepSummary]:
+    """Per joint: overshoot, rise and settling time, steady-state, max and RMS error.
+
+    ``t (N,)`` s, ``desired`` and ``actual`` ``(N, J)``; ``tolerance`` (units)
+    is the settle band, by default each joint's ``tolerance``. Samples where
+    actual (or desired) is NaN are ignored, with a note.
+    """
+    t = np.asarray(t, dtype=np.float64)
+    desired = np.asarray(desired, dtype=np.float64)
+    actual = np.asarray(actual, dtype=np.float64)
+    n_joints = len(joints)
+    if t.ndim != 1 or desired.shape != (len(t), n_joints) or actual.shape != desired.shape:
+        raise ValueError(f"expected t (N,), desired and actual (N, {n_joints}); got "
+                         f"{t.shape}, {desired.shape}, {actual.shape}")
+    bands = ([j.tolerance for j in joints] if tolerance is None
+             else _vector(np.broadcast_to(tolerance, (n_joints,)), "tolerance", n=n_joints))
+    return [_joint_summary(t, desired[:, j], actual[:, j], joint, float(bands[j]))
+            for j, joint in enumerate(joints)]
+
+
+def _joint_summary(t: np.ndarray, d: np.ndarray, y: np.ndarray, joint: Joint,
+                   tol: float) -> StepSummary:
+    valid = np.isfinite(d) & np.isfinite(y)
+    notes: list[str] = []
+    if not valid.any():
+        nan = math.nan
+        return StepSummary(joint=joint.name, unit=joint.unit, initial=nan, final=nan, step=nan,
+                           overshoot=nan, overshoot_pct=nan, rise_time_s=None,
+                           settling_time_s=None, steady_state_error=nan, max_abs_error=nan,
+                           rms_error=nan, tolerance=tol, notes=("no valid samples",))
+    if not valid.all():
+        notes.append(f"{int((~valid).sum())} of {len(t)} samples with NaN ignored")
+    initial, final = float(d[valid][0]), float(d[valid][-1])
+    size = final - initial
+    changed = valid & (d != initial)
+    start = int(np.argmax(changed)) if changed.any() else 0
+    tail = np.arange(len(t)) >= len(t) - max(1, math.ceil(STEADY_FRACTION * len(t)))
+    tt, yy, e = t[valid], y[valid], (d - y)[valid]
+    moving = tt >= t[start]
+    t0 = float(t[start])
+    overshoot, rise = 0.0, None
+    if size != 0.0:
+        overshoot = float(np.max(np.sign(size) * (yy[moving] - final), initial=0.0))
+        rise = _rise_time(tt, (yy - initial) / size, notes)
+    else:
+        notes.append("no step: rise time undefined")
+    settling = _settling_time(tt[moving], yy[moving] - final, tol, t0, notes)
+    steady = e[tail[valid]]
+    if len(steady) == 0:
+        notes.append("no valid samples in the last 10 %")
+    return StepSummary(
+        joint=joint.name, unit=joint.unit, initial=initial, final=final, step=size,
+        overshoot=overshoot, overshoot_pct=100.0 * overshoot / abs(size) if size else 0.0,
+        rise_time_s=rise, settling_time_s=settling,
+        steady_state_error=float(np.mean(steady)) if len(steady) else math.nan,
+        max_abs_error=float(np.max(np.abs(e))), rms_error=float(np.sqrt(np.mean(e**2))),
+        tolerance=tol, notes=tuple(notes),
+    )
+
+
+def _rise_time(t: np.ndarray, progress: np.ndarray, notes: list[str]) -> float | None:
+    """Time from 10 % to 90 % of the step; ``progress`` is 0 at initial, 1 at final."""
+    low = _first_crossing(t, progress, RISE_LOW)
+    high = _first_crossing(t, progress, RISE_HIGH)
+    if low is None or high is None:
+        notes.append("did not reach 90 % of the step")
+        return None
+    return high - low
+
+
+def _first_crossing(t: np.ndarray, x: np.ndarray, level: float) -> float | None:
+    """First time ``x`` reaches ``level``, interpolated between samples."""
+    above = np.flatnonzero(x >= level)
+    if len(above) == 0:
+        return None
+    i = int(above[0])
+    if i == 0:
+        return float(t[0])
+    return _interpolate(t[i - 1], t[i], x[i - 1], x[i], level)
+
+
+def _settling_time(t: np.ndarray, deviation: np.ndarray, tol: float, t0: float,
+                   notes: list[str]) -> float | None:
+    """Time from ``t0`` until |deviation| ≤ tol from then on, interpolated at the band edge."""
+    outside = np.flatnonzero(np.abs(deviation) > tol)
+    if len(outside) == 0:
+        return 0.0
+    i = int(outside[-1])
+    if i == len(deviation) - 1:
+        notes.append(f"did not settle within ±{tol:g} by the end of the run")
+        return None
+    edge = tol if deviation[i] > 0 else -tol
+    return _interpolate(t[i], t[i + 1], deviation[i], deviation[i + 1], edge) - t0
+
+
+def _interpolate(t1: float, t2: float, x1: float, x2: float, level: float) -> float:
+    return float(t1 + (level - x1) / (x2 - x1) * (t2 - t1)) if x2 != x1 else float(t2)
+
+
+def _dt(dt: float | None, machine: Machine | None) -> float:
+    if dt is None:
+        if machine is None:
+            raise ValueError("give the sample time dt (s) or the machine")
+        return machine.sample_time_s
+    _positive(dt, "dt")
+    return float(dt)
+
+
+def _samples(duration: float, dt: float, name: str = "duration") -> int:
+    """Samples from t = 0 to t = duration inclusive."""
+    _positive(duration, name)
+    if duration < dt:
+        raise ValueError(f"{name} {duration:g} s is shorter than one sample ({dt:g} s)")
+    return round(duration / dt) + 1
+
+
+def _positive(value: float, name: str) -> None:
+    if isinstance(value, bool) or not isinstance(value, Real) or not 0 < value < math.inf:
+        raise ValueError(f"{name} must be a positive number of seconds, got {value}")
+
+
+def _vector(values: Sequence[float] | np.ndarray, name: str, machine: Machine | None = None,
+            n: int | None = None) -> np.ndarray:
+    """A finite ``(J,)`` vector; the error names the joint when the machine is known."""
+    q = np.asarray(values, dtype=np.float64)
+    n = len(q) if n is None else n
+    if q.shape != (n,):
+        raise ValueError(f"{name} must have {n} joint values, got shape {q.shape}")
+    bad = np.flatnonzero(~np.isfinite(q))
+    if len(bad):
+        j = int(bad[0])
+        label = machine.joints[j].name if machine is not None else f"joint {j}"
+        raise ValueError(f"{name}: {label} value {q[j]} is not a number")
+    return q
+
+
+def _start(start: Sequence[float] | np.ndarray, machine: Machine | None,
+           what: str = "start") -> np.ndarray:
+    n = machine.n_joints if machine is not None else None
+    return _targets(_vector(np.atleast_1d(start), what, machine, n), machine, what)
+
+
+def _targets(q: np.ndarray, machine: Machine | None, what: str = "") -> np.ndarray:
+    """``q`` if every joint is inside its limits; the error names the joint (and ``what``)."""
+    if machine is not None:
+        try:
+            machine.check_targets(tuple(q))
+        except ValueError as exc:
+            raise ValueError(f"{what}: {exc}" if what else str(exc)) from None
+    return q
+
+
+def _joint_index(joint: int | str, n: int, machine: Machine | None) -> int:
+    if isinstance(joint, str):
+        if machine is None:
+            raise ValueError(f"joint {joint!r} given by name: pass machine= too")
+        return machine.joint_index(joint)
+    if not 0 <= int(joint) < n:
+        raise ValueError(f"joint index {joint} is outside 0…{n - 1}")
+    return int(joint)
+
+
+def _held(q: np.ndarray, n: int) -> np.ndarray:
+    return np.repeat(q[None, :], n, axis=0)
+
+
+def _step_duration(q0: np.ndarray, goal: np.ndarray, duration: float | None,
+                   machine: Machine | None) -> float:
+    """``duration``, or the slowest joint's travel at max_speed plus the settle tail."""
+    if duration is not None:
+        return duration
+    if machine is None:
+        raise ValueError("give the duration (s) or the machine (to derive it from max_speed)")
+    speeds = np.array([j.max_speed for j in machine.joints])
+    return float(np.max(np.abs(goal - q0) / speeds)) + SETTLE_TAIL_S
+
+
+def _check_speed(speed: np.ndarray, machine: Machine | None, knob: str, value: float) -> None:
+    """Refuse a path faster than a joint's max_speed; the error says how slow to make it."""
+    if machine is None:
+        return
+    for joint, v in zip(machine.joints, speed, strict=True):
+        if v > joint.max_speed:
+            need = value * v / joint.max_speed
+            raise ValueError(
+                f"{joint.name} would move at {v:g} {joint.unit}/s, above its max_speed "
+                f"{joint.max_speed:g} {joint.unit}/s (machine {machine.name}): make {knob} at "
+                f"least {need:.3g} s")

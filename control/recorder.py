@@ -1,0 +1,427 @@
+"""Saving runs, so nothing the operator ran is lost: atomically, never overwriting.
+
+A run is three files with one stem, ``YYYYMMDD-HHMMSS-<machine>-<kind>`` (start
+time in UTC; ``-2``, ``-3``… when the stem is taken):
+
+- ``.tsv`` — the thesis's layout (option.c SaveData): sample number, then
+  desired, actual and duty of every joint, tab-separated, no header. The
+  listing's ``%.1f`` is too coarse for the rig's 0.1 mm, so every number is
+  written with the shortest text that reads back to the same float.
+- ``.csv`` — a time column in seconds and the same columns, under a header
+  that names joints and units: ``t [s],Ram desired [mm],Ram actual [mm],Ram duty [%]``.
+- ``.json`` — machine, kind, status, start time, sample time, coefficients,
+  joints, sample count, file names and free-form ``meta``.
+
+Each file is written to a temporary file in the same directory, fsynced, then
+hard-linked to its name, which fails if the name exists (errata #14): a crash
+never leaves half a file and no run is ever overwritten, even by a concurrent
+save. The JSON is placed last, so a run listed by ``list_runs`` is complete.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import errno
+import io
+import json
+import math
+import os
+import re
+import uuid
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import platformdirs
+
+from hw.machine import Coefficients, Machine
+
+FORMAT = "servodesk-run"
+VERSION = 1
+MAX_SUFFIX = 10_000  # stems tried before giving up: far beyond same-second saves
+_NO_HARD_LINKS = {errno.EPERM, errno.EOPNOTSUPP, errno.ENOTSUP, errno.ENOSYS, errno.EINVAL}
+_SUFFIXES = (".json", ".csv", ".tsv")
+
+
+class RecorderError(OSError):
+    """A run could not be saved or read; the message names the place and the reason."""
+
+
+@dataclass(frozen=True, eq=False)
+class Run:
+    """One recorded move. Positions in mm/deg, duty in %, times in s.
+
+    ``kind`` names the move (``step``, ``multi_step``, ``ramp``, ``sine``, ``path``,
+    ``end_point``, ``tracking_actuate``, ``set_pulse``, …); ``status`` is
+    ``complete``, ``estop``, ``fault: <why>`` or ``interrupted: <why>``.
+    ``t (N,)`` seconds from the start of the move; ``desired``, ``actual``,
+    ``duty`` ``(N, J)`` in joint order (float64 arrays are kept, not copied).
+    ``coefficients`` and ``meta`` are kept as JSON-compatible copies (a
+    ``Coefficients`` set, numpy scalars, arrays and paths converted). Equality
+    compares every field, arrays by value (NaN equal to NaN).
+    """
+
+    machine: str
+    kind: str
+    status: str
+    start_time: str  # ISO 8601, UTC
+    sample_time_s: float
+    coefficients: Mapping[str, Any]
+    joint_names: tuple[str, ...]
+    joint_units: tuple[str, ...]
+    t: np.ndarray
+    desired: np.ndarray
+    actual: np.ndarray
+    duty: np.ndarray
+    meta: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        put = object.__setattr__
+        put(self, "joint_names", tuple(map(str, self.joint_names)))
+        put(self, "joint_units", tuple(map(str, self.joint_units)))
+        put(self, "start_time", _utc(self.start_time).isoformat())
+        coefficients = self.coefficients
+        if isinstance(coefficients, Coefficients):
+            coefficients = coefficients_record(coefficients)
+        put(self, "coefficients", _jsonable(dict(coefficients)))
+        put(self, "meta", _jsonable(dict(self.meta)))
+        for name in ("t", "desired", "actual", "duty"):
+            put(self, name, np.asarray(getattr(self, name), dtype=np.float64))
+        self._check()
+
+    def _check(self) -> None:
+        if not self.machine or not self.kind:
+            raise ValueError("a run needs a machine name and a kind")
+        if not (math.isfinite(self.sample_time_s) and self.sample_time_s > 0):
+            raise ValueError(f"sample time must be positive seconds, got {self.sample_time_s}")
+        n, j = len(self.t), len(self.joint_names)
+        if len(self.joint_units) != j:
+            raise ValueError(f"{j} joint names but {len(self.joint_units)} units")
+        if self.t.ndim != 1:
+            raise ValueError(f"t must be (N,) seconds, got shape {self.t.shape}")
+        for name in ("desired", "actual", "duty"):
+            shape = getattr(self, name).shape
+            if shape != (n, j):
+                raise ValueError(f"{name} must be (N, J) = ({n}, {j}), got {shape}")
+
+    @classmethod
+    def from_machine(cls, machine: Machine, kind: str, status: str,
+                     coefficients: Coefficients | Mapping[str, Any], t: np.ndarray,
+                     desired: np.ndarray, actual: np.ndarray, duty: np.ndarray, *,
+                     start_time: str | datetime | None = None,
+                     meta: Mapping[str, Any] | None = None) -> Run:
+        """A run of ``machine``: names, units and sample time from its description."""
+        start = datetime.now(UTC) if start_time is None else start_time
+        return cls(machine.name, kind, status, _utc(start).isoformat(), machine.sample_time_s,
+                   coefficients, tuple(j.name for j in machine.joints),
+                   tuple(j.unit for j in machine.joints), t, desired, actual, duty, meta or {})
+
+    @property
+    def samples(self) -> int:
+        return len(self.t)
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Run):
+            return NotImplemented
+        arrays = ("t", "desired", "actual", "duty")
+        return all(
+            np.array_equal(getattr(self, f), getattr(other, f), equal_nan=True) if f in arrays
+            else getattr(self, f) == getattr(other, f)
+            for f in self.__dataclass_fields__
+        )
+
+
+@dataclass(frozen=True)
+class RunFiles:
+    """Where one run was saved: three paths sharing ``stem``."""
+
+    stem: str
+    tsv: Path
+    csv: Path
+    json: Path
+
+    @classmethod
+    def at(cls, directory: Path, stem: str) -> RunFiles:
+        return cls(stem, directory / f"{stem}.tsv", directory / f"{stem}.csv",
+                   directory / f"{stem}.json")
+
+    @classmethod
+    def from_json(cls, path: Path) -> RunFiles:
+        """The files of a run from its JSON's (or any of its files') path."""
+        path = Path(path)
+        return cls.at(path.parent, path.stem if path.suffix in _SUFFIXES else path.name)
+
+
+@dataclass(frozen=True)
+class RunInfo:
+    """A saved run as listed: its metadata, or why it could not be read (``problem``)."""
+
+    files: RunFiles
+    machine: str = ""
+    kind: str = ""
+    status: str = ""
+    start_time: str = ""
+    samples: int = 0
+    problem: str = ""
+
+    @property
+    def damaged(self) -> bool:
+        return bool(self.problem)
+
+
+def default_data_dir() -> Path:
+    """The user's run directory: ``<user data dir>/servodesk/runs``."""
+    return Path(platformdirs.user_data_dir("servodesk", appauthor=False)) / "runs"
+
+
+def coefficients_record(c: Coefficients) -> dict[str, Any]:
+    """A coefficient set as JSON-compatible data (taps newest first, as in the machine file)."""
+    return _jsonable(asdict(c))
+
+
+def save_run(run: Run, data_dir: Path) -> RunFiles:
+    """Save ``run`` in ``data_dir`` (created if missing) under a new stem; return the files.
+
+    Raises RecorderError naming the directory and the reason (unwritable, disk
+    full, …); then nothing of this run is left in the directory and the caller
+    still holds ``run``.
+    """
+    data_dir = Path(data_dir)
+    tsv, table = _tsv(run).encode(), _csv(run).encode()
+    base = f"{_utc(run.start_time):%Y%m%d-%H%M%S}-{_safe(run.machine)}-{_safe(run.kind)}"
+    placed: list[Path] = []
+    try:
+        data_dir.mkdir(parents=True, exist_ok=True)
+        for n in range(1, MAX_SUFFIX + 1):
+            files = RunFiles.at(data_dir, base if n == 1 else f"{base}-{n}")
+            if _place_all(((files.tsv, tsv), (files.csv, table), (files.json, _json(run, files))),
+                          placed):
+                _sync_dir(data_dir)
+                return files
+        raise OSError(errno.EEXIST, f"stems {base} to {base}-{MAX_SUFFIX} are all taken")
+    except OSError as exc:
+        _remove(placed)
+        reason = exc.strerror or str(exc)
+        raise RecorderError(f"cannot save the {run.kind} run in {data_dir}: {reason}") from exc
+
+
+def load_run(path: Path) -> Run:
+    """Read a run back from its JSON and CSV; ``path`` may be any of its files or the stem."""
+    files = RunFiles.from_json(Path(path))
+    doc = _read_json(files.json)
+    try:
+        joints = doc["joints"]
+        names = tuple(j["name"] for j in joints)
+        table = _read_table(files.csv, 1 + 3 * len(names), int(doc["samples"]))
+        by_joint = table[:, 1:].reshape(len(table), len(names), 3)
+        return Run(
+            machine=doc["machine"], kind=doc["kind"], status=doc["status"],
+            start_time=doc["start_time"], sample_time_s=float(doc["sample_time_s"]),
+            coefficients=doc["coefficients"], joint_names=names,
+            joint_units=tuple(j["unit"] for j in joints), t=table[:, 0],
+            desired=by_joint[:, :, 0], actual=by_joint[:, :, 1], duty=by_joint[:, :, 2],
+            meta=doc.get("meta", {}),
+        )
+    except (KeyError, TypeError, ValueError) as exc:
+        raise RecorderError(f"{files.json}: damaged run ({type(exc).__name__}: {exc})") from exc
+
+
+def list_runs(data_dir: Path) -> list[RunInfo]:
+    """The runs saved in ``data_dir``, newest first; unreadable ones are listed as damaged."""
+    data_dir = Path(data_dir)
+    if not data_dir.is_dir():
+        return []
+    found = [(_info(p), p) for p in data_dir.glob("*.json") if not p.name.startswith(".")]
+    found.sort(key=lambda item: (_sort_time(item[0], item[1]), _suffix(item[1].stem),
+                                 _mtime_ns(item[1])), reverse=True)
+    return [info for info, _ in found]
+
+
+def _info(path: Path) -> RunInfo:
+    files = RunFiles.from_json(path)
+    try:
+        doc = _read_json(path)
+        return RunInfo(files, str(doc["machine"]), str(doc["kind"]), str(doc["status"]),
+                       _utc(doc["start_time"]).isoformat(), int(doc["samples"]))
+    except (RecorderError, KeyError, TypeError, ValueError) as exc:
+        return RunInfo(files, problem=str(exc))
+
+
+def _sort_time(info: RunInfo, path: Path) -> datetime:
+    if info.start_time:
+        return _utc(info.start_time)
+    with contextlib.suppress(ValueError):
+        return datetime.strptime(path.name[:15], "%Y%m%d-%H%M%S").replace(tzinfo=UTC)
+    return datetime.fromtimestamp(_mtime_ns(path) / 1e9, UTC)
+
+
+def _suffix(stem: str) -> int:
+    """The ``-2``, ``-3``… a stem got because the name was taken; 1 without one."""
+    match = re.search(r"-(\d+)$", stem)
+    return int(match.group(1)) if match else 1
+
+
+def _mtime_ns(path: Path) -> int:
+    try:
+        return path.stat().st_mtime_ns
+    except OSError:
+        return 0
+
+
+def _read_json(path: Path) -> dict[str, Any]:
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise RecorderError(f"{path}: cannot read ({exc.strerror or exc})") from exc
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise RecorderError(f"{path}: damaged run metadata ({exc})") from exc
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        raise RecorderError(f"{path}: not a servodesk run (no \"format\": \"{FORMAT}\")")
+    return doc
+
+
+def _read_table(path: Path, columns: int, rows: int) -> np.ndarray:
+    try:
+        lines = path.read_text(encoding="utf-8").splitlines()[1:]
+    except OSError as exc:
+        raise RecorderError(f"{path}: cannot read ({exc.strerror or exc})") from exc
+    table = (np.loadtxt(lines, delimiter=",", ndmin=2, dtype=np.float64) if lines
+             else np.empty((0, columns)))
+    if table.shape != (rows, columns):
+        raise ValueError(f"{path.name} holds {table.shape[0]}×{table.shape[1]} numbers, "
+                         f"the metadata says {rows}×{columns}")
+    return table
+
+
+def _tsv(run: Run) -> str:
+    """option.c SaveData: ``k``, then desired, actual, duty per joint, tab-separated."""
+    return "".join(f"{k}\t" + "\t".join(map(repr, row)) + "\n"
+                   for k, row in enumerate(_interleaved(run).tolist()))
+
+
+def _csv(run: Run) -> str:
+    """``t [s]`` then desired, actual, duty per joint, under a header with names and units."""
+    header = ["t [s]"]
+    for name, unit in zip(run.joint_names, run.joint_units, strict=True):
+        header += [f"{name} desired [{unit}]", f"{name} actual [{unit}]", f"{name} duty [%]"]
+    out = io.StringIO()
+    csv.writer(out, lineterminator="\n").writerow(header)
+    for t, row in zip(run.t.tolist(), _interleaved(run).tolist(), strict=True):
+        out.write(repr(t) + "," + ",".join(map(repr, row)) + "\n")
+    return out.getvalue()
+
+
+def _json(run: Run, files: RunFiles) -> bytes:
+    doc = {
+        "format": FORMAT,
+        "version": VERSION,
+        "machine": run.machine,
+        "kind": run.kind,
+        "status": run.status,
+        "start_time": run.start_time,
+        "sample_time_s": run.sample_time_s,
+        "samples": run.samples,
+        "joints": [{"name": n, "unit": u}
+                   for n, u in zip(run.joint_names, run.joint_units, strict=True)],
+        "coefficients": run.coefficients,
+        "meta": run.meta,
+        "files": {"tsv": files.tsv.name, "csv": files.csv.name, "json": files.json.name},
+        "tsv_columns": "sample, then desired, actual, duty of each joint (option.c SaveData)",
+    }
+    return (json.dumps(doc, indent=2, ensure_ascii=False) + "\n").encode()
+
+
+def _interleaved(run: Run) -> np.ndarray:
+    """(N, 3J): desired, actual, duty of joint 0, then of joint 1, …"""
+    by_joint = np.stack([run.desired, run.actual, run.duty], axis=2)
+    return by_joint.reshape(run.samples, 3 * len(run.joint_names))
+
+
+def _place_all(contents: tuple[tuple[Path, bytes], ...], placed: list[Path]) -> bool:
+    """Place every file, in order; if a name is taken, remove what was placed and say False."""
+    for path, data in contents:
+        if not _place(data, path):
+            _remove(placed)
+            return False
+        placed.append(path)
+    return True
+
+
+def _place(data: bytes, target: Path) -> bool:
+    """Give ``target`` exactly ``data``, complete or not at all; False if ``target`` exists."""
+    if target.exists():
+        return False
+    tmp = target.parent / f".{uuid.uuid4().hex}.tmp"
+    try:
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        return _link(tmp, target)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def _link(tmp: Path, target: Path) -> bool:
+    try:
+        os.link(tmp, target)  # atomic, and fails if target exists: no overwrite, no race
+        return True
+    except FileExistsError:
+        return False
+    except OSError as exc:
+        if exc.errno not in _NO_HARD_LINKS:
+            raise
+    try:  # no hard links here (FAT, some shares): reserve the name, then replace it
+        os.close(os.open(target, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
+    except FileExistsError:
+        return False
+    os.replace(tmp, target)
+    return True
+
+
+def _remove(paths: list[Path]) -> None:
+    for p in paths:
+        with contextlib.suppress(OSError):
+            p.unlink()
+    paths.clear()
+
+
+def _sync_dir(directory: Path) -> None:
+    """Make the new names durable; not every platform can open a directory."""
+    with contextlib.suppress(OSError):
+        fd = os.open(directory, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+
+
+def _utc(value: str | datetime) -> datetime:
+    """An aware UTC datetime from ISO text or a datetime; naive times are taken as UTC."""
+    when = datetime.fromisoformat(value) if isinstance(value, str) else value
+    if when.tzinfo is None:
+        return when.replace(tzinfo=UTC)
+    return when.astimezone(UTC)
+
+
+def _safe(name: str) -> str:
+    """A file-name-safe part of a stem: letters, digits, ``_`` and ``-`` only."""
+    return re.sub(r"[^A-Za-z0-9_-]+", "_", name).strip("_")[:48] or "run"
+
+
+def _jsonable(value: Any) -> Any:
+    """A JSON-compatible deep copy: tuples to lists, numpy to Python, anything else to str."""
+    if isinstance(value, Mapping):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple | np.ndarray):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    if value is None or isinstance(value, bool | int | float | str):
+        return value
+    return str(value)
