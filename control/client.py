@@ -1,0 +1,487 @@
+"""``ControlClient``: the only handle the TUI, the CLI, scripts and tests use.
+
+It starts the control subprocess, owns the shared memory (and unlinks it on
+every exit path), sends commands through the channel, sends heartbeats, turns
+the controller's events into saved runs, and notices within 250 ms when the
+controller dies::
+
+    with ControlClient("unimate2000b") as robot:
+        move = robot.move(moves.step(robot.status().position, joint=2, target=10.0,
+                                     duration=3.0, dt=robot.dt), kind="step")
+        result = robot.wait(move)           # the run is already saved on disk
+"""
+
+from __future__ import annotations
+
+import contextlib
+import itertools
+import os
+import queue
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from multiprocessing.connection import Connection
+from pathlib import Path
+
+import numpy as np
+
+import control
+from control import process, shm
+from control.layout import ControlLayout, LatencyHistogram, MoveLayout, Status
+from control.recorder import Run, RunFiles, coefficients_record, default_data_dir, save_run
+from control.runs import run_from_record, start_stamp
+from control.seqlock import SeqlockReader, SeqlockWriter
+from hw.machine import Coefficients, Machine, load_machine
+
+HEARTBEAT_S = 0.05
+DEATH_S = 0.25
+
+
+class ControllerError(RuntimeError):
+    """The control subprocess could not start, crashed or died."""
+
+
+@dataclass(frozen=True)
+class Event:
+    """Something the controller (or the client's watchdog) reported."""
+
+    kind: str
+    payload: dict
+    wall: float = field(default_factory=time.monotonic)
+
+    @property
+    def message(self) -> str:
+        return str(self.payload.get("message") or self.payload.get("status")
+                   or self.payload.get("reason") or self.kind)
+
+
+@dataclass(frozen=True)
+class MoveResult:
+    """A finished move: its status, its run, and where the run was saved."""
+
+    move_id: int
+    status: str
+    run: Run
+    files: RunFiles | None
+    save_error: str = ""
+
+    @property
+    def complete(self) -> bool:
+        return self.status == "complete"
+
+
+@dataclass
+class MoveHandle:
+    """A move sent to the controller; ``ControlClient.wait`` returns its result."""
+
+    move_id: int
+    kind: str
+    samples: int
+    meta: dict
+    segment: object
+    layout: MoveLayout
+    done: threading.Event = field(default_factory=threading.Event)
+    result: MoveResult | None = None
+
+
+class ControlClient:
+    """Start and talk to the control subprocess of one machine.
+
+    ``machine`` is a built-in name, a TOML path or a loaded ``Machine``;
+    ``backend`` is ``sim`` or ``serial`` (with ``port``). ``lockstep`` runs the
+    simulator as fast as it computes (tests). ``on_event`` is called from the
+    client's monitor thread for every event (a TUI marshals it to its loop).
+    """
+
+    def __init__(self, machine: str | Path | Machine = "unimate2000b", backend: str = "sim", *,
+                 port: str | None = None, seed: int = 0, lockstep: bool = False,
+                 data_dir: str | Path | None = None, period_s: float | None = None,
+                 realtime: bool = True, spin_us: float = 0.0,
+                 heartbeat_timeout_s: float = DEATH_S, orphan_timeout_s: float = 5.0,
+                 start_timeout_s: float = 30.0, sim_options: dict | None = None,
+                 on_event: Callable[[Event], None] | None = None) -> None:
+        self.machine = machine if isinstance(machine, Machine) else load_machine(machine)
+        self.backend = backend
+        self.lockstep = lockstep
+        self.data_dir = Path(data_dir) if data_dir is not None else default_data_dir()
+        self.dt = period_s or self.machine.sample_time_s
+        self.on_event = on_event
+        self.events: queue.Queue[Event] = queue.Queue()
+        self.notice = ""
+        self.realtime = False
+        self.dead = ""
+        self._moves: dict[int, MoveHandle] = {}
+        self._ids = itertools.count(1)
+        self._send_lock = threading.Lock()
+        self._closing = threading.Event()
+        self._stopping = False
+        self._manual = [0.0] * self.machine.n_joints
+        self.coefficients = {"hold": self.machine.hold, "track": self.machine.track}
+        shm.cleanup_orphans()
+        self.layout = ControlLayout(self.machine.n_joints)
+        self._segment = shm.create("ctl", self.layout.size)
+        buf = self._segment.buf
+        self.layout.write_header(buf)
+        self._status = SeqlockReader(buf, self.layout.status_offset, self.layout.status.struct)
+        self._coefficient_writers = {
+            which: SeqlockWriter(buf, self.layout.coefficient_offset(which),
+                                 self.layout.coefficients.struct) for which in ("hold", "track")}
+        for which, c in self.coefficients.items():
+            self._coefficient_writers[which].write(*self.layout.coefficients.encode(c))
+        config = process.ProcessConfig(
+            machine=str(self.machine.path), backend=backend, port=port, seed=seed,
+            lockstep=lockstep, control_segment=self._segment.name, data_dir=str(self.data_dir),
+            period_s=self.dt, spin_us=spin_us, realtime=realtime,
+            heartbeat_timeout_s=heartbeat_timeout_s, orphan_timeout_s=orphan_timeout_s,
+            sim_options=dict(sim_options or {}))
+        ours, theirs = socket.socketpair()
+        self._conn = Connection(ours.detach())
+        self._stderr = tempfile.TemporaryFile()  # noqa: SIM115  # lives as long as the client
+        try:
+            self._process = subprocess.Popen(
+                [sys.executable, "-m", "control.process", config.to_json(), str(theirs.fileno())],
+                pass_fds=[theirs.fileno()], stdin=subprocess.DEVNULL,
+                stdout=subprocess.DEVNULL, stderr=self._stderr, env=_child_env())
+        finally:
+            theirs.close()
+        try:
+            self._await_ready(start_timeout_s)
+        except BaseException:
+            self._shutdown_process()
+            self._release()
+            raise
+        self._monitor = threading.Thread(target=self._watch, name="servodesk-events",
+                                         daemon=True)
+        self._heart = threading.Thread(target=self._beat, name="servodesk-heartbeat",
+                                       daemon=True)
+        self._monitor.start()
+        self._heart.start()
+
+    # -- lifecycle -------------------------------------------------------------------
+
+    def __enter__(self) -> ControlClient:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    @property
+    def pid(self) -> int:
+        return self._process.pid
+
+    @property
+    def alive(self) -> bool:
+        return self._process.poll() is None
+
+    def close(self) -> None:
+        """Stop the controller (valves closed), save what it finished, unlink every segment."""
+        if self._closing.is_set():
+            return
+        self._stopping = True
+        if not self.dead:
+            with contextlib.suppress(OSError, ValueError):
+                self._send("stop")
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                self._process.wait(timeout=3.0)
+        self._closing.set()
+        for thread in (self._monitor, self._heart):
+            if thread.is_alive():
+                thread.join(timeout=2.0)
+        self._drain()
+        self._shutdown_process()
+        for handle in list(self._moves.values()):
+            self._finish(handle, "interrupted: client closed", None)
+        self._release()
+
+    def _await_ready(self, timeout_s: float) -> None:
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if self._conn.poll(0.05):
+                try:
+                    kind, payload = self._conn.recv()
+                except EOFError:
+                    break
+                if kind == "ready":
+                    self.notice = str(payload.get("notice", ""))
+                    self.realtime = bool(payload.get("realtime"))
+                    return
+                if kind == "crash":
+                    raise ControllerError(f"control process failed to start: "
+                                          f"{payload['message']}")
+                self._dispatch(Event(kind, payload))
+            elif not self.alive:
+                break
+        code = self._process.poll()
+        raise ControllerError("control process did not start"
+                              + (f" (exit code {code}): {self._last_words()}" if code is not None
+                                 else f" within {timeout_s:g} s"))
+
+    def _last_words(self) -> str:
+        """The last line the controller wrote to stderr (its traceback's summary)."""
+        with contextlib.suppress(OSError):
+            self._stderr.seek(0)
+            lines = self._stderr.read().decode("utf-8", "replace").strip().splitlines()
+            return lines[-1] if lines else "no output"
+        return "no output"
+
+    def _shutdown_process(self) -> None:
+        for stop in (self._process.terminate, self._process.kill):
+            if not self.alive:
+                break
+            stop()
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                self._process.wait(timeout=2.0)
+
+    def _release(self) -> None:
+        self._status.release()
+        for writer in self._coefficient_writers.values():
+            writer.release()
+        shm.release(self._segment, unlink=True)
+        with contextlib.suppress(OSError):
+            self._conn.close()
+        self._stderr.close()
+
+    # -- the monitor thread: heartbeats out, events in, death noticed -------------------
+
+    def _beat(self) -> None:
+        """Heartbeats on their own thread, so saving a run or a busy UI never silences them."""
+        while not self._closing.wait(HEARTBEAT_S):
+            if self.dead or self._stopping:
+                return
+            with contextlib.suppress(OSError, ValueError, ControllerError):
+                self._send("hb")
+
+    def _watch(self) -> None:
+        while not self._closing.is_set():
+            try:
+                if self._conn.poll(0.01):
+                    kind, payload = self._conn.recv()
+                    self._dispatch(Event(kind, payload))
+            except (EOFError, OSError):
+                self._died("the control process closed its channel")
+            if not self.dead and not self.alive:
+                self._died(f"the control process exited (code {self._process.returncode})")
+            if self.dead:
+                self._closing.wait(0.05)
+
+    def _drain(self) -> None:
+        with contextlib.suppress(EOFError, OSError):
+            while self._conn.poll():
+                kind, payload = self._conn.recv()
+                self._dispatch(Event(kind, payload))
+
+    def _died(self, why: str) -> None:
+        if self.dead or self._stopping:
+            return
+        self.dead = (f"controller died: {why}. The valves are closed by the I/O board's "
+                     "watchdog; restart servodesk to continue")
+        for handle in list(self._moves.values()):
+            self._finish(handle, "interrupted: controller died", None)
+        self._dispatch(Event("died", {"message": self.dead}))
+
+    def _dispatch(self, event: Event) -> None:
+        if event.kind == "move_done":
+            handle = self._moves.get(int(event.payload["move_id"]))
+            if handle is not None:
+                self._finish(handle, str(event.payload["status"]), event.payload.get("saved"))
+        elif event.kind == "crash":
+            event = Event("fault", {"kind": "crash", "joint": -1,
+                                    "message": f"controller crashed: {event.payload['message']}"})
+        self.events.put(event)
+        if self.on_event is not None:
+            self.on_event(event)
+
+    def _finish(self, handle: MoveHandle, status: str, saved: str | None) -> None:
+        """Turn a finished move's record into a saved run and free its segment."""
+        if self._moves.pop(handle.move_id, None) is None:
+            return
+        buf = handle.segment.buf
+        recorded = int.from_bytes(buf[MoveLayout.RECORDED_OFFSET:MoveLayout.RECORDED_OFFSET + 8],
+                                  "little")
+        record = handle.layout.record(buf)[:recorded].copy()
+        run = run_from_record(self.machine, handle.kind, status, handle.meta, record, self.dt)
+        files, error = None, ""
+        if saved:
+            files = RunFiles.from_json(Path(saved))
+        elif recorded:
+            try:
+                files = save_run(run, self.data_dir)
+            except OSError as exc:
+                error = (f"run not saved ({exc}); it is kept in memory: save it elsewhere from "
+                         "the Runs tab")
+        handle.result = MoveResult(handle.move_id, status, run, files, error)
+        shm.release(handle.segment, unlink=True)
+        handle.done.set()
+
+    # -- commands ------------------------------------------------------------------------
+
+    def _send(self, *message: object) -> None:
+        if self.dead:
+            raise ControllerError(self.dead)
+        with self._send_lock:
+            self._conn.send(message)
+
+    def hold(self) -> None:
+        """Abort any move and hold every joint where it is (the thesis's default mode)."""
+        self._send("hold")
+
+    def estop(self) -> None:
+        """Latch every valve closed until ``reset``."""
+        self._send("estop")
+
+    def reset(self) -> None:
+        """Release a latched E-stop (refused while the E-stop input is pressed)."""
+        self._send("reset")
+
+    def initialise(self) -> None:
+        """Rig: drive the ram to the bottom and zero the encoder (section 3.5)."""
+        self._send("initialise")
+
+    def inject(self, method: str, *args: object) -> None:
+        """Simulator only: drive a simulated input, e.g. ``inject("press_estop", True)``."""
+        self._send("inject", method, *args)
+
+    def jog(self, duty: Sequence[float]) -> None:
+        """Manual actuation: open-loop duty per joint in %, in each joint's positive sense."""
+        values = [float(d) for d in duty]
+        if len(values) != self.machine.n_joints or not all(np.isfinite(values)):
+            raise ValueError(f"jog needs {self.machine.n_joints} finite duties, got {duty!r}")
+        self._manual = [max(-100.0, min(100.0, v)) for v in values]
+        self._send("manual", self._manual)
+
+    def jog_joint(self, joint: int, duty: float) -> None:
+        """Set one joint's manual duty, keeping the others'."""
+        manual = list(self._manual)
+        manual[joint] = duty
+        self.jog(manual)
+
+    def jog_position(self, joint: int, delta: float) -> None:
+        """Closed-loop jog: move the hold target of one joint by ``delta`` (mm or deg)."""
+        if not np.isfinite(delta):
+            raise ValueError(f"position jog step must be a number, got {delta}")
+        self._send("jog_position", int(joint), float(delta))
+
+    def set_coefficients(self, which: str, coefficients: Coefficients) -> None:
+        """Replace the hold or track set; applied at once, even during a move (section 6.3)."""
+        encoded = self.layout.coefficients.encode(coefficients)
+        self._coefficient_writers[which].write(*encoded)
+        self.coefficients[which] = coefficients
+        self._send("coefficients", which)
+
+    def move(self, desired: np.ndarray, kind: str = "path", meta: dict | None = None) -> MoveHandle:
+        """follow_track: track ``desired (N, J)`` (mm, deg) each tick, then hold at its end."""
+        path = np.asarray(desired, dtype=np.float64)
+        self._check_path(path)
+        return self._start(path, None, kind, meta)
+
+    def actuate(self, profile: np.ndarray, kind: str = "tracking_actuate",
+                meta: dict | None = None) -> MoveHandle:
+        """tracking_actuate: play ``profile (N, J)`` duty in % open loop and record the response."""
+        duty = np.asarray(profile, dtype=np.float64)
+        if duty.ndim != 2 or duty.shape[1] != self.machine.n_joints or len(duty) == 0:
+            raise ValueError(f"a duty profile is (N, {self.machine.n_joints}), got {duty.shape}")
+        bad = np.argwhere(~np.isfinite(duty) | (np.abs(duty) > 100))
+        if len(bad):
+            k, j = bad[0]
+            raise ValueError(f"{self.machine.joints[j].name} duty {duty[k, j]} at sample {k} is "
+                             "not a number in -100…100 %")
+        return self._start(None, duty, kind, meta)
+
+    def _check_path(self, path: np.ndarray) -> None:
+        n = self.machine.n_joints
+        if path.ndim != 2 or path.shape[1] != n or len(path) == 0:
+            raise ValueError(f"a path is (N, {n}) joint positions, got shape {path.shape}")
+        lower, upper = np.array(self.machine.lower), np.array(self.machine.upper)
+        bad = np.argwhere(~np.isfinite(path) | (path < lower) | (path > upper))
+        if len(bad):
+            k, j = bad[0]
+            joint = self.machine.joints[j]
+            try:
+                joint.check_target(float(path[k, j]), self.machine.name)
+            except ValueError as exc:
+                raise ValueError(f"{exc} at sample {k} (t = {k * self.dt:.3f} s)") from None
+
+    def _start(self, path: np.ndarray | None, profile: np.ndarray | None, kind: str,
+               meta: dict | None) -> MoveHandle:
+        samples = len(path if path is not None else profile)
+        layout = MoveLayout(samples, self.machine.n_joints)
+        move_id = next(self._ids)
+        segment = shm.create(f"mv{move_id}", layout.size)
+        layout.write_header(segment.buf)
+        if path is not None:
+            layout.desired(segment.buf)[:] = path
+        else:
+            layout.profile(segment.buf)[:] = profile
+        full_meta = {
+            "backend": self.backend,
+            "start_time": start_stamp(),
+            "coefficients": {k: coefficients_record(c) for k, c in self.coefficients.items()},
+            **(meta or {}),
+        }
+        handle = MoveHandle(move_id, kind, samples, full_meta, segment, layout)
+        self._moves[move_id] = handle
+        try:
+            self._send("move", move_id, segment.name, kind, path is None, full_meta)
+        except BaseException:
+            self._moves.pop(move_id, None)
+            shm.release(segment, unlink=True)
+            raise
+        return handle
+
+    def wait(self, handle: MoveHandle, timeout: float | None = None) -> MoveResult:
+        """Block until the move ends (complete, aborted, E-stop or fault) and return its result."""
+        if not handle.done.wait(timeout):
+            raise TimeoutError(f"move {handle.move_id} ({handle.kind}) still running after "
+                               f"{timeout:g} s")
+        assert handle.result is not None
+        return handle.result
+
+    # -- observation -----------------------------------------------------------------------
+
+    def status(self) -> Status:
+        """The controller's newest status snapshot (consistent: read under the seqlock)."""
+        return self.layout.status.decode(self._status.read())
+
+    def histogram(self) -> LatencyHistogram:
+        """The loop's wake-up lateness histogram in 5 µs bins, as Table 2.1."""
+        return LatencyHistogram.from_counters(self.layout.histogram(self._segment.buf).copy(),
+                                              self.status().overruns)
+
+    def poll_events(self) -> list[Event]:
+        """Every event since the last call, oldest first."""
+        out = []
+        with contextlib.suppress(queue.Empty):
+            while True:
+                out.append(self.events.get_nowait())
+        return out
+
+    def wait_event(self, kind: str, timeout: float = 5.0,
+                   match: Callable[[Event], bool] | None = None) -> Event:
+        """Wait for the next event of ``kind`` (others are dropped)."""
+        deadline = time.monotonic() + timeout
+        while (left := deadline - time.monotonic()) > 0:
+            try:
+                event = self.events.get(timeout=left)
+            except queue.Empty:
+                break
+            if event.kind == kind and (match is None or match(event)):
+                return event
+        raise TimeoutError(f"no {kind!r} event within {timeout:g} s")
+
+    def check(self) -> None:
+        """Raise ``ControllerError`` if the controller has died."""
+        if self.dead:
+            raise ControllerError(self.dead)
+
+
+def _child_env() -> dict[str, str]:
+    """The environment for the control process, with servodesk importable from where it is."""
+    root = str(Path(control.__file__).resolve().parent.parent)
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
+    return env

@@ -1,0 +1,103 @@
+"""Entry point of the control subprocess: owns the backend, runs the loop, cleans up.
+
+``ControlClient`` starts it as ``python -m control.process CONFIG_JSON FD``: a
+fresh interpreter that shares nothing with the UI process but one end of a
+socketpair (the command channel) and the shared memory.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import signal
+import sys
+import traceback
+from dataclasses import asdict, dataclass
+from multiprocessing.connection import Connection
+from pathlib import Path
+
+from control import shm
+from control.layout import ControlLayout
+from control.loop import Controller, LoopConfig
+from control.realtime import enter_realtime
+from hw.backend import RealClock
+from hw.factory import make_backend
+from hw.machine import load_machine
+
+
+@dataclass(frozen=True)
+class ProcessConfig:
+    """Everything the subprocess needs, picklable."""
+
+    machine: str
+    backend: str
+    port: str | None
+    seed: int
+    lockstep: bool
+    control_segment: str
+    data_dir: str | None
+    period_s: float
+    spin_us: float
+    realtime: bool
+    heartbeat_timeout_s: float
+    orphan_timeout_s: float
+    sim_options: dict
+
+    def to_json(self) -> str:
+        return json.dumps(asdict(self))
+
+    @classmethod
+    def from_json(cls, text: str) -> ProcessConfig:
+        return cls(**json.loads(text))
+
+
+def main(config: ProcessConfig, conn: Connection) -> None:
+    """Run the controller until told to stop, orphaned, or killed by SIGTERM."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl+C belongs to the operator's UI
+    segment = shm.attach(config.control_segment)
+    controller: Controller | None = None
+    try:
+        machine = load_machine(config.machine)
+        options = config.sim_options
+        backend = (make_backend(machine, "sim", seed=config.seed, lockstep=config.lockstep,
+                                **options) if config.backend == "sim"
+                   else make_backend(machine, config.backend, port=config.port))
+        layout = ControlLayout(machine.n_joints)
+        layout.check_header(segment.buf)
+        loop_config = LoopConfig(
+            period_ns=round(config.period_s * 1e9),
+            heartbeat_timeout_ns=round(config.heartbeat_timeout_s * 1e9),
+            orphan_timeout_ns=round(config.orphan_timeout_s * 1e9),
+            data_dir=Path(config.data_dir) if config.data_dir else None,
+        )
+        if isinstance(backend.clock, RealClock):
+            backend.clock.spin_ns = round(config.spin_us * 1e3)
+        controller = Controller(machine, backend, conn, segment.buf, loop_config)
+        signal.signal(signal.SIGTERM, lambda *_: setattr(controller, "running", False))
+        backend.open()
+        try:
+            report = enter_realtime() if config.realtime and not config.lockstep else None
+            controller.realtime = bool(report and report.fifo)
+            controller.start()
+            notice = report.notice if report else "real-time scheduling off (lockstep or asked)"
+            controller.event("ready", realtime=controller.realtime, notice=notice)
+            controller.flush_events()
+            controller.run()
+        finally:
+            with contextlib.suppress(Exception):
+                controller.zero_valves()
+            backend.close()
+    except Exception as exc:
+        with contextlib.suppress(Exception):
+            conn.send(("crash", {"message": f"{type(exc).__name__}: {exc}",
+                                 "traceback": traceback.format_exc()}))
+        raise
+    finally:
+        orphaned = controller is None or controller.orphaned
+        if controller is not None:
+            controller.release()
+        shm.release(segment, unlink=orphaned)
+
+
+if __name__ == "__main__":
+    main(ProcessConfig.from_json(sys.argv[1]), Connection(int(sys.argv[2])))
