@@ -1,0 +1,511 @@
+"""Actuator and joint dynamics of both machines: valve, two oil columns, load, stops.
+
+Every joint is the same physical model with its own numbers (the machine file's
+``[plant]`` and ``[joints.plant]`` sections, documented in docs/simulator.md):
+
+* A servo valve (:mod:`hw.valve`) feeds one chamber from supply ``ps`` and
+  drains the other to tank. Chamber ``a`` drives the joint towards larger
+  readings, chamber ``b`` towards smaller; positive duty feeds ``a`` when the
+  joint's valve polarity is +1 and ``b`` when it is -1. The Unimate's In/Out
+  ram has system pressure on its rod side at all times (section 4.6.1): its
+  chamber ``b`` is tied to supply and the valve meters chamber ``a`` only.
+* Each chamber is a column of compressible oil (section 3.6.1, Figure 3.10):
+  ``dp/dt = beta / V * (Q_valve + Q_leak - dV/dt)`` with
+  ``V = V_dead + D * stroke used``. ``D`` is the piston area (prismatic, m^3/m)
+  or the displacement per radian of a rack-and-pinion, lever or motor drive
+  (revolute, m^3/rad).
+* The load: ``M dv/dt = p_a D_a - p_b D_b + F_gravity - F_viscous - F_coulomb``
+  with stiction at rest. Gravity is ``-m g sin(incline)`` on a prismatic joint
+  (the rig's vertical ram: ``-(m_ram + load) g``) and ``-G cos(q + phase)`` on a
+  revolute one (Up/Down lifting the arm). Hard end stops at the joint limits
+  stop the load dead.
+
+Integration is semi-implicit with plain floats (measured about eight times
+faster than numpy arrays over six joints): each step solves the chamber
+pressures by backward Euler in closed form, the orifice law included, so a
+wide-open valve into a small volume cannot go unstable; then the velocity from
+the new pressures (symplectic Euler for the mass on the oil spring), Coulomb
+friction and stiction implicitly, and the position. The steady state of the
+discrete equations is the steady state of the continuous ones, so the
+velocity-vs-duty lines do not depend on the step.
+
+Calibration of the rig against Figure 3.2 (eq. 3.1, 3.2; 13.3 MPa, 300 kg)
+--------------------------------------------------------------------------
+Rod side below the piston (``a``, A_a = 0.887e-3 m^2), full bore above
+(``b``, A_b = 2.027e-3 m^2), weight W = m g hanging on the rod, Coulomb
+friction F, valve edges K_a on port a and K_b on port b. In steady motion
+each chamber's flow passes one metering edge, ``A v = K o sqrt(dp)``, and the
+forces balance. Eliminating the pressures, with ``o = (|duty| - lap) / 100``:
+
+    up:    v = o sqrt((ps A_a - W - F) / (A_a^3 / K_a^2 + A_b^3 / K_b^2))
+    down:  v = o sqrt((ps A_b + W - F) / (A_a^3 / K_a^2 + A_b^3 / K_b^2))
+
+Both are straight lines in the duty, as the thesis measured, crossing zero at
+the overlaps: 0.0056/0.64 = 0.875 % up, 0.0056/1.19 = 0.471 % down.
+
+* Their ratio does not depend on the valve: with 300 kg of weights and 12 kg
+  of rod, piston and carrier it is 0.5395 without friction, the load and the
+  areas alone (section 3.3 says as much); F = 75 N of seal and guide friction
+  makes it 0.64/1.19 = 0.5378.
+* With a symmetric valve the cap side would have to fall to -0.33 MPa going
+  down: the oil cavitates and the down line turns into a meter-out line set
+  by the load alone (slope 1.31, not 1.19). A valve whose b port passes at
+  least 1.15 times the a port keeps both chambers above tank pressure; the
+  rig's is taken as the usual 2:1 valve for a differential cylinder.
+* The up slope 0.64 m/s then fixes K_a = 3.63e-7 m^3/(s sqrt(Pa)): port a
+  rated 40.7 L/min at 7 MPa, port b 81.4 L/min.
+
+The null leakage (0.02 L/min) moves the lines by less than 0.5 % above 5 %
+duty; the bounce damping (``column_loss``) does not move them at all.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+from hw.machine import Joint, Machine, MachineError
+from hw.valve import Valve
+
+GRAVITY = 9.81  # m/s^2
+VAPOUR_PA = -1.0e5  # gauge pressure at which oil cavitates (absolute zero)
+MAX_STEP_S = 1.0e-3  # longest integration step
+
+# machine-level [plant] keys; the lamp_* and photocell_* keys are read by hw.encoders
+MACHINE_KEYS = {"supply_mpa", "relief_mpa", "bulk_modulus_mpa", "column_loss_ms",
+                "spool_time_ms", "valve_rated_drop_mpa",
+                "lamp_cool_ms", "lamp_ripple", "photocell_spread", "lamp_dropouts_per_s"}
+COMMON_KEYS = {"dead_volume_a_m3", "dead_volume_b_m3", "valve_rated_lpm", "valve_b_ratio",
+               "null_leak_lpm", "overlap_pos_pct", "overlap_neg_pct", "b_at_supply"}
+PRISMATIC_KEYS = {"area_a_m2", "area_b_m2", "mass_kg", "load_kg", "load_min_kg", "load_max_kg",
+                  "incline_deg", "coulomb_n", "stiction_n", "viscous_n_s_per_m"}
+REVOLUTE_KEYS = {"disp_a_m3_per_rad", "disp_b_m3_per_rad", "inertia_kgm2", "gravity_nm",
+                 "gravity_phase_deg", "coulomb_nm", "stiction_nm", "viscous_nm_s_per_rad"}
+
+
+class PlantKeys:
+    """Typed reads from one ``plant`` mapping; every error names the file and the key."""
+
+    def __init__(self, machine: Machine, where: str, table: Mapping[str, float],
+                 allowed: set[str]) -> None:
+        self.file = machine.path.name
+        self.where = where
+        self.table = table
+        unknown = sorted(set(table) - allowed)
+        if unknown:
+            raise MachineError(f"{self.file}: {where}: unknown key(s) {', '.join(unknown)}; "
+                               f"allowed: {', '.join(sorted(allowed))}")
+
+    def number(self, name: str, default: float | None = None, low: float = -math.inf,
+               high: float = math.inf, positive: bool = False) -> float:
+        if name not in self.table:
+            if default is None:
+                raise MachineError(f"{self.file}: {self.where}.{name}: missing number")
+            return default
+        value = self.table[name]
+        if positive and value <= 0:
+            raise MachineError(f"{self.file}: {self.where}.{name}: {value:g} must be > 0")
+        if not low <= value <= high:
+            raise MachineError(f"{self.file}: {self.where}.{name}: {value:g} out of range "
+                               f"(must be in {low:g}…{high:g})")
+        return value
+
+
+@dataclass(frozen=True)
+class Hydraulics:
+    """Machine-wide hydraulic numbers, SI: pressures and bulk modulus in Pa, times in s.
+
+    relief_pa: relief valve setting; a chamber pressure never exceeds it.
+    column_loss_s: Kelvin-Voigt loss of the oil columns (see ``Actuator.step``).
+    """
+
+    supply_pa: float
+    relief_pa: float
+    bulk_modulus_pa: float
+    column_loss_s: float
+    spool_time_s: float
+    rated_drop_pa: float
+    tank_pa: float = 0.0
+
+    @classmethod
+    def from_machine(cls, machine: Machine, supply_mpa: float | None = None) -> Hydraulics:
+        keys = PlantKeys(machine, "plant", machine.plant, MACHINE_KEYS)
+        supply = keys.number("supply_mpa", positive=True, high=35.0)
+        if supply_mpa is not None:
+            if not 0.0 < supply_mpa <= 35.0:
+                raise ValueError(f"supply pressure {supply_mpa:g} MPa is outside 0…35 MPa "
+                                 f"(machine {machine.name})")
+            supply = supply_mpa
+        relief = keys.number("relief_mpa", math.inf, low=supply)
+        return cls(
+            supply_pa=supply * 1e6,
+            relief_pa=relief * 1e6,
+            bulk_modulus_pa=keys.number("bulk_modulus_mpa", positive=True) * 1e6,
+            column_loss_s=keys.number("column_loss_ms", 0.0, low=0.0) / 1e3,
+            spool_time_s=keys.number("spool_time_ms", positive=True) / 1e3,
+            rated_drop_pa=keys.number("valve_rated_drop_mpa", positive=True) * 1e6,
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class ActuatorParams:
+    """One joint's actuator and load, SI: m or rad, m^3, kg or kg m^2, N or N m.
+
+    unit_si: metres per mm or radians per degree (joint units to SI).
+    disp_a, disp_b: chamber displacement, m^3 per m or per rad.
+    gravity_const, gravity_cos, gravity_phase: F_gravity = const + cos_amp * cos(q + phase).
+    """
+
+    unit_si: float
+    lower: float
+    upper: float
+    disp_a: float
+    disp_b: float
+    dead_a: float
+    dead_b: float
+    b_at_supply: bool
+    mass: float
+    gravity_const: float
+    gravity_cos: float
+    gravity_phase: float
+    coulomb: float
+    stiction: float
+    viscous: float
+    polarity: int
+    valve: Valve
+
+    @classmethod
+    def from_joint(cls, machine: Machine, index: int, hyd: Hydraulics,
+                   load_kg: float | None = None) -> ActuatorParams:
+        joint = machine.joints[index]
+        where = f"joints[{index}].plant"
+        if joint.kind == "prismatic":
+            keys = PlantKeys(machine, where, joint.plant, COMMON_KEYS | PRISMATIC_KEYS)
+            unit_si = 1e-3
+            disp_a = keys.number("area_a_m2", positive=True)
+            disp_b = keys.number("area_b_m2", positive=True)
+            load = _load(keys, joint, machine, load_kg)
+            mass = keys.number("mass_kg", positive=True) + load
+            incline = math.radians(keys.number("incline_deg", 0.0, -90.0, 90.0))
+            gravity_const, gravity_cos, phase = -mass * GRAVITY * math.sin(incline), 0.0, 0.0
+            friction = ("coulomb_n", "stiction_n", "viscous_n_s_per_m")
+        else:
+            keys = PlantKeys(machine, where, joint.plant, COMMON_KEYS | REVOLUTE_KEYS)
+            unit_si = math.pi / 180.0
+            disp_a = keys.number("disp_a_m3_per_rad", positive=True)
+            disp_b = keys.number("disp_b_m3_per_rad", positive=True)
+            mass = keys.number("inertia_kgm2", positive=True)
+            gravity_const, gravity_cos = 0.0, -keys.number("gravity_nm", 0.0, low=0.0)
+            phase = math.radians(keys.number("gravity_phase_deg", 0.0, -180.0, 180.0))
+            friction = ("coulomb_nm", "stiction_nm", "viscous_nm_s_per_rad")
+        coulomb = keys.number(friction[0], low=0.0)
+        b_at_supply = keys.number("b_at_supply", 0.0, 0.0, 1.0) == 1.0
+        params = cls(
+            unit_si=unit_si,
+            lower=joint.lower * unit_si,
+            upper=joint.upper * unit_si,
+            disp_a=disp_a,
+            disp_b=disp_b,
+            dead_a=keys.number("dead_volume_a_m3", positive=True),
+            dead_b=0.0 if b_at_supply else keys.number("dead_volume_b_m3", positive=True),
+            b_at_supply=b_at_supply,
+            mass=mass,
+            gravity_const=gravity_const,
+            gravity_cos=gravity_cos,
+            gravity_phase=phase,
+            coulomb=coulomb,
+            stiction=keys.number(friction[1], coulomb, low=coulomb),
+            viscous=keys.number(friction[2], 0.0, low=0.0),
+            polarity=joint.polarity,
+            valve=_valve(keys, joint, machine, hyd),
+        )
+        params.check_holds(hyd, joint, machine)
+        return params
+
+    def check_holds(self, hyd: Hydraulics, joint: Joint, machine: Machine) -> None:
+        """Raise if the supply cannot hold the joint against its largest gravity load."""
+        if self.b_at_supply and self.disp_a <= self.disp_b:
+            raise MachineError(f"{machine.path.name}: joints[{machine.joints.index(joint)}]"
+                               f".plant: with b_at_supply the a side must be the larger")
+        push_up = hyd.supply_pa * (self.disp_a - self.disp_b if self.b_at_supply else self.disp_a)
+        push_down = hyd.supply_pa * self.disp_b
+        pull_down = abs(self.gravity_cos) - self.gravity_const
+        pull_up = abs(self.gravity_cos) + self.gravity_const
+        ratio = max(pull_down / push_up, pull_up / push_down)
+        if ratio >= 1.0:
+            raise ValueError(f"{joint.name} cannot hold its load: it needs more than "
+                             f"{ratio * hyd.supply_pa / 1e6:.1f} MPa, the supply is "
+                             f"{hyd.supply_pa / 1e6:g} MPa (machine {machine.name})")
+
+    def gravity(self, q: float) -> float:
+        """Gravity force or moment on the joint at position ``q`` (SI), towards larger readings."""
+        return self.gravity_const + self.gravity_cos * math.cos(q + self.gravity_phase)
+
+
+def _load(keys: PlantKeys, joint: Joint, machine: Machine, load_kg: float | None) -> float:
+    """Payload hanging on a prismatic joint, from the option or the machine file."""
+    low = keys.number("load_min_kg", 0.0, low=0.0)
+    high = keys.number("load_max_kg", math.inf, low=low)
+    load = keys.number("load_kg", 0.0, low, high) if load_kg is None else load_kg
+    if not low <= load <= high:
+        raise ValueError(f"{joint.name} load {load:g} kg is outside {low:g}…{high:g} kg "
+                         f"(machine {machine.name})")
+    return load
+
+
+def _valve(keys: PlantKeys, joint: Joint, machine: Machine, hyd: Hydraulics) -> Valve:
+    """The joint's valve; the overlap defaults to the measured minimum PWM (section 5.4.1).
+
+    A joint starts moving at ``min_pwm`` and not one PWM step below it, so the
+    overlap sits half a step under it.
+    """
+    half_step = machine.valve_resolution_pct / 2.0
+    return Valve.from_ratings(
+        lap_pos_pct=keys.number("overlap_pos_pct", max(joint.min_pwm_pos - half_step, 0.0),
+                                0.0, 99.0),
+        lap_neg_pct=keys.number("overlap_neg_pct", max(joint.min_pwm_neg - half_step, 0.0),
+                                0.0, 99.0),
+        rated_lpm=keys.number("valve_rated_lpm", positive=True),
+        rated_drop_pa=hyd.rated_drop_pa,
+        b_ratio=keys.number("valve_b_ratio", 1.0, low=0.1, high=10.0),
+        null_leak_lpm=keys.number("null_leak_lpm", 0.0, low=0.0),
+        supply_pa=hyd.supply_pa,
+        spool_time_s=hyd.spool_time_s,
+    )
+
+
+class Actuator:
+    """State and integration step of one valve-controlled actuator and its load.
+
+    State: ``q`` position (m or rad), ``v`` velocity, ``pa``/``pb`` chamber
+    pressures (Pa), ``spool`` in % of stroke (= duty). The spool follows
+    ``target``; a new command waits ``switch_in`` seconds (the rest of the
+    current PWM period) before it becomes the target.
+    """
+
+    __slots__ = ("_beta", "_decay", "_decay_h", "_force", "_loss", "_max_h", "_p", "_ps", "_pt",
+                 "_relief", "next_target", "pa", "pb", "q", "spool", "switch_in", "target",
+                 "v")
+
+    def __init__(self, params: ActuatorParams, hyd: Hydraulics, q: float) -> None:
+        self._p = params
+        self._ps = hyd.supply_pa
+        self._pt = hyd.tank_pa
+        self._relief = hyd.relief_pa
+        self._beta = hyd.bulk_modulus_pa
+        self._loss = hyd.column_loss_s
+        self._decay_h = 0.0
+        self._decay = 1.0
+        self.q = q
+        self.v = 0.0
+        self.spool = 0.0
+        self.target = 0.0
+        self.next_target = 0.0
+        self.switch_in = math.inf
+        self.pa, self.pb = self.holding_pressures(q)
+        self._force = self.pa * params.disp_a - self.pb * params.disp_b
+        self._max_h = self.stable_step()
+
+    def stable_step(self) -> float:
+        """Longest step, s, that integrates the stiffest oil column stably with margin 2.
+
+        The step is symplectic Euler on the mass and oil spring plus an explicit
+        loss term; it is stable while ``omega^2 h (h + 2 loss) < 4``, and omega is
+        largest at an end of the stroke, where a chamber holds only its dead volume.
+        """
+        p = self._p
+        stiffness = p.disp_a**2 / p.dead_a + (0.0 if p.b_at_supply else p.disp_b**2 / p.dead_b)
+        omega2 = self._beta * stiffness / p.mass
+        return -self._loss + math.sqrt(self._loss**2 + 2.0 / omega2)
+
+    def holding_pressures(self, q: float) -> tuple[float, float]:
+        """Chamber pressures that hold the load still at ``q``, nearest to half supply each."""
+        p, ps = self._p, self._ps
+        load = -p.gravity(q)
+        if p.b_at_supply:
+            return min(max((load + ps * p.disp_b) / p.disp_a, 0.0), ps), ps
+        mu = (load - 0.5 * ps * (p.disp_a - p.disp_b)) / (p.disp_a**2 + p.disp_b**2)
+        return (min(max(0.5 * ps + mu * p.disp_a, 0.0), ps),
+                min(max(0.5 * ps - mu * p.disp_b, 0.0), ps))
+
+    def command(self, spool_pct: float, delay_s: float) -> None:
+        """Make ``spool_pct`` the spool's target after ``delay_s`` seconds (0: at once)."""
+        if delay_s <= 0.0:
+            self.target = spool_pct
+            self.switch_in = math.inf
+        else:
+            self.next_target = spool_pct
+            self.switch_in = delay_s
+
+    def step(self, h: float) -> None:
+        """Advance by ``h`` seconds, in as many equal steps as stability needs."""
+        if h <= self._max_h:
+            self._step(h)
+            return
+        n = math.ceil(h / self._max_h)
+        for _ in range(n):
+            self._step(h / n)
+
+    def _step(self, h: float) -> None:
+        """One integration step of ``h`` seconds.
+
+        The oil columns push with ``F = p_a D_a - p_b D_b`` plus a loss term
+        ``column_loss * dF/dt`` (a Kelvin-Voigt column: hose walls and entrained
+        air dissipate as the oil is compressed). It damps the mass on the oil
+        spring, ``zeta = omega_h * column_loss / 2``, and vanishes in any steady
+        state, so it leaves the velocity-vs-duty lines alone.
+        """
+        p = self._p
+        self._step_spool(h, p.valve.spool_time_s)
+        opening = p.valve.opening(self.spool) * p.polarity
+        open_fraction = abs(opening)
+        ps, pt, q, v = self._ps, self._pt, self.q, self.v
+        leak = p.valve.null_leak
+        pa = _chamber(self.pa, h * self._beta / (p.dead_a + p.disp_a * (q - p.lower)),
+                      leak, ps + pt, p.disp_a * v, p.valve.flow_coeff * open_fraction,
+                      ps if opening > 0.0 else pt)
+        self.pa = pa if pa < self._relief else self._relief
+        if not p.b_at_supply:
+            pb = _chamber(self.pb, h * self._beta / (p.dead_b + p.disp_b * (p.upper - q)),
+                          leak, ps + pt, -p.disp_b * v, p.valve.flow_coeff_b * open_fraction,
+                          ps if opening < 0.0 else pt)
+            self.pb = pb if pb < self._relief else self._relief
+        column = self.pa * p.disp_a - self.pb * p.disp_b
+        force = column + self._loss * (column - self._force) / h + p.gravity_const
+        self._force = column
+        if p.gravity_cos:
+            force += p.gravity_cos * math.cos(q + p.gravity_phase)
+        v = _friction_step(v, force, h, p.mass, p.coulomb, p.stiction, p.viscous)
+        q += h * v
+        if q < p.lower:
+            q, v = p.lower, 0.0
+        elif q > p.upper:
+            q, v = p.upper, 0.0
+        self.q, self.v = q, v
+
+    def _step_spool(self, h: float, tau: float) -> None:
+        """First-order lag toward the target, switching target mid-step when the PWM period ends."""
+        if self.switch_in <= h + 1e-12:  # the clock's ns grid, seen through float seconds
+            t1 = self.switch_in
+            s = self.target + (self.spool - self.target) * math.exp(-t1 / tau)
+            self.target = self.next_target
+            self.switch_in = math.inf
+            self.spool = self.target + (s - self.target) * math.exp((t1 - h) / tau)
+            return
+        self.switch_in -= h
+        if h != self._decay_h:
+            self._decay_h, self._decay = h, math.exp(-h / tau)
+        self.spool = self.target + (self.spool - self.target) * self._decay
+
+
+def _chamber(p0: float, c: float, leak: float, leak_sum: float, dvdt: float,
+             conductance: float, source: float) -> float:
+    """Backward-Euler chamber pressure after one step, solved in closed form.
+
+    The orifice term is :func:`hw.valve.orifice_flow` from ``source`` into the chamber.
+
+    Solves ``p = p0 + c * (leak * (ps + pt - 2 p) - dV/dt + g * sign(src - p) sqrt|src - p|)``
+    with ``c = h beta / V``: the leak terms fold into ``p0`` and ``c``, the orifice
+    term is a quadratic in ``s = sqrt|src - p|``, taken with its stable root.
+    """
+    den = 1.0 + 2.0 * c * leak
+    free = (p0 + c * (leak * leak_sum - dvdt)) / den
+    a = c * conductance / den
+    d = free - source
+    if d > 0.0:
+        s = 2.0 * d / (a + math.sqrt(a * a + 4.0 * d))
+        p = source + s * s
+    elif d < 0.0:
+        s = -2.0 * d / (a + math.sqrt(a * a - 4.0 * d))
+        p = source - s * s
+    else:
+        p = source
+    return p if p > VAPOUR_PA else VAPOUR_PA
+
+
+def _friction_step(v: float, force: float, h: float, mass: float, coulomb: float,
+                   stiction: float, viscous: float) -> float:
+    """New velocity under ``force`` with Coulomb, stiction and viscous friction, implicitly.
+
+    At rest the load stays stuck while |force| <= stiction; moving, a step that
+    would reverse the velocity ends at rest instead.
+    """
+    if v == 0.0:
+        if -stiction <= force <= stiction:
+            return 0.0
+        return h * (force - math.copysign(coulomb, force)) / (mass + h * viscous)
+    v1 = (mass * v + h * (force - math.copysign(coulomb, v))) / (mass + h * viscous)
+    return 0.0 if v1 * v < 0.0 else v1
+
+
+class Plant:
+    """All joints of a machine: actuator coordinates, transmissions and one ``step`` for all.
+
+    Actuator coordinates are what each encoder measures; a joint coupled to
+    another (``encoder.coupled_to``, rtshare.h joint_dep: the Yaw chain drive
+    runs through the Bend joint) reads ``q = actuator + coupling * q[coupled_to]``.
+    Hard end stops act on the actuator, at the joint's limits.
+    """
+
+    def __init__(self, machine: Machine, *, initial: Sequence[float] | None = None,
+                 load_kg: float | None = None, supply_mpa: float | None = None) -> None:
+        self.hydraulics = Hydraulics.from_machine(machine, supply_mpa)
+        self.params = tuple(ActuatorParams.from_joint(machine, i, self.hydraulics, load_kg)
+                            for i in range(machine.n_joints))
+        self.coupling = tuple(_coupling(machine, i) for i in range(machine.n_joints))
+        start = self.actuator_start(machine, initial)
+        self.actuators = tuple(Actuator(p, self.hydraulics, a * p.unit_si)
+                               for p, a in zip(self.params, start, strict=True))
+
+    def actuator_start(self, machine: Machine, initial: Sequence[float] | None) -> list[float]:
+        """Actuator coordinates (joint units) of joint positions ``initial``, default mid-range."""
+        if initial is None:
+            q = [0.5 * (j.lower + j.upper) for j in machine.joints]
+        else:
+            q = [float(v) for v in initial]
+            if len(q) != machine.n_joints:
+                raise ValueError(f"expected {machine.n_joints} initial positions for "
+                                 f"{machine.name}, got {len(q)}")
+        a = [q[i] - c * q[k] for i, (k, c) in enumerate(self.coupling)]
+        for joint, value in zip(machine.joints, a, strict=True):
+            if not joint.lower <= value <= joint.upper:
+                raise ValueError(f"{joint.name} initial actuator position {value:g}{joint.symbol}"
+                                 f" is outside {joint.limit_text()} (machine {machine.name})")
+        return a
+
+    def step(self, h: float) -> None:
+        """Advance every joint by ``h`` seconds."""
+        for actuator in self.actuators:
+            actuator.step(h)
+
+    def actuator_positions(self, out: list[float]) -> None:
+        """Fill ``out`` with actuator positions in joint units (mm, degrees)."""
+        for i, (actuator, p) in enumerate(zip(self.actuators, self.params, strict=True)):
+            out[i] = actuator.q / p.unit_si
+
+    def joint_positions(self, out: list[float]) -> None:
+        """Fill ``out`` with joint positions in joint units, couplings included."""
+        self.actuator_positions(out)
+        for i, (k, c) in enumerate(self.coupling):
+            if c:
+                out[i] += c * out[k]
+
+    def joint_velocities(self, out: list[float]) -> None:
+        """Fill ``out`` with joint velocities in joint units per second, couplings included."""
+        for i, (actuator, p) in enumerate(zip(self.actuators, self.params, strict=True)):
+            out[i] = actuator.v / p.unit_si
+        for i, (k, c) in enumerate(self.coupling):
+            if c:
+                out[i] += c * out[k]
+
+
+def _coupling(machine: Machine, index: int) -> tuple[int, float]:
+    """(coupled joint, coefficient) of joint ``index``; (index, 0.0) when uncoupled."""
+    cal = machine.joints[index].encoder
+    if cal.coupled_to is None or cal.coupling == 0.0:
+        return index, 0.0
+    if cal.coupled_to > index:
+        raise MachineError(f"{machine.path.name}: joints[{index}].encoder.coupled_to: the "
+                           f"simulator couples a joint only to an earlier one")
+    return cal.coupled_to, cal.coupling

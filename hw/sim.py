@@ -1,0 +1,183 @@
+"""The simulator backend: hydraulic plant, UPP card PWM and encoders behind ``Backend``.
+
+Like ros2_control's ``GenericSystem`` this is a real backend, not a test
+double: the plant (:mod:`hw.plant`) is advanced lazily to the clock's time on
+every ``read``/``write``, in steps of at most 1 ms, and the encoders
+(:mod:`hw.encoders`) latch what they would have seen. With ``lockstep=True``
+the clock is a ``StepClock``: time passes only when the control loop sleeps
+until its next deadline, so a 10 s move simulates in a fraction of a second
+and every run with the same seed gives the same raw words.
+
+The read/write path allocates no lists; it is meant to be called from one thread.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from hw.backend import LinkCounters, RealClock, StepClock
+from hw.encoders import GrayEncoderBoard, QuadratureEncoder
+from hw.machine import Machine
+from hw.plant import MAX_STEP_S, Plant
+from hw.valve import next_period_ns, quantise_duty
+
+MAX_CATCH_UP_NS = 1_000_000_000  # a plant left alone longer is simulated for the last second only
+
+
+class SimBackend:
+    """Simulated machine: plant, PWM output and encoders, with an E-stop input.
+
+    Options (all keyword):
+      initial: joint positions at power-up, joint units (default: mid-range of each joint).
+      load_kg: load on a prismatic joint, e.g. the rig's weights, 50…300 kg (default: machine file).
+      supply_mpa: supply pressure (default: machine file; the rig's Figure 3.2 used 13.3 MPa).
+      glitch_scale: multiplies the encoders' wrong-reading rate; 0 turns wrong readings off.
+      scan_period_s: time the I/O board takes to scan all Gray-code encoders once
+        (default: the sample time, a full six-joint sample per tick).
+    """
+
+    def __init__(self, machine: Machine, seed: int = 0, lockstep: bool = False, *,
+                 initial: Sequence[float] | None = None, load_kg: float | None = None,
+                 supply_mpa: float | None = None, glitch_scale: float = 1.0,
+                 scan_period_s: float | None = None) -> None:
+        self.machine = machine
+        self.clock: StepClock | RealClock = StepClock() if lockstep else RealClock()
+        self.counters = LinkCounters()
+        self.plant = Plant(machine, initial=initial, load_kg=load_kg, supply_mpa=supply_mpa)
+        n = machine.n_joints
+        self._n = n
+        self._step_ns = round(MAX_STEP_S * 1e9)
+        self._period_ns = round(machine.valve_period_us * 1e3)
+        self._resolution = machine.valve_resolution_pct
+        self._t_ns = self.clock.now_ns()
+        self._a_prev = [0.0] * n
+        self._a_now = [0.0] * n
+        self.plant.actuator_positions(self._a_now)
+        self._duty = [0.0] * n
+        self._estop = False
+        self._board: GrayEncoderBoard | None = None
+        self._quadrature: tuple[QuadratureEncoder, ...] = ()
+        if machine.encoder_kind == "gray":
+            self._board = GrayEncoderBoard(machine, self._a_now, seed=seed,
+                                           glitch_scale=glitch_scale,
+                                           scan_period_s=scan_period_s, start_ns=self._t_ns)
+        else:
+            self._quadrature = tuple(QuadratureEncoder(j.encoder.gradient, a)
+                                     for j, a in zip(machine.joints, self._a_now, strict=True))
+
+    # -- Backend ---------------------------------------------------------------------------
+
+    def open(self) -> None:
+        """Bring every valve to closed (0 % duty)."""
+        self._close_valves()
+
+    def close(self) -> None:
+        """Close every valve; safe to call twice."""
+        self._close_valves()
+
+    def read(self, raw: list[int]) -> None:
+        """Fill ``raw`` with the encoder words: Gray words (Unimate) or signed counts (rig)."""
+        self._advance()
+        if self._board is not None:
+            words = self._board.words
+            for i in range(self._n):
+                raw[i] = words[i]
+        else:
+            a = self._a_now
+            for i, encoder in enumerate(self._quadrature):
+                raw[i] = encoder.count(a[i])
+
+    def write(self, duty_pct: Sequence[float]) -> None:
+        """Command signed valve duty per joint, percent; clipped to ±100 and quantised.
+
+        A new duty reaches the valve at the start of the next PWM period. While the
+        E-stop is pressed it is remembered but the valves stay closed.
+        """
+        self._advance()
+        delay_s = (next_period_ns(self._t_ns, self._period_ns) - self._t_ns) * 1e-9
+        for i, actuator in enumerate(self.plant.actuators):
+            duty = quantise_duty(duty_pct[i], self._resolution)
+            self._duty[i] = duty
+            if not self._estop:
+                actuator.command(duty, delay_s)
+
+    @property
+    def estop(self) -> bool:
+        """True while the E-stop is pressed; the valves are then closed whatever is commanded."""
+        return self._estop
+
+    @property
+    def fault(self) -> str:
+        """Always healthy: the simulated link cannot fail."""
+        return ""
+
+    # -- simulator inputs and probes ---------------------------------------------------------
+
+    def press_estop(self, pressed: bool) -> None:
+        """Press (True) or release the E-stop; releasing lets the last written duty through."""
+        self._advance()
+        self._estop = pressed
+        if pressed:
+            for actuator in self.plant.actuators:
+                actuator.command(0.0, 0.0)
+        else:
+            delay_s = (next_period_ns(self._t_ns, self._period_ns) - self._t_ns) * 1e-9
+            for actuator, duty in zip(self.plant.actuators, self._duty, strict=True):
+                actuator.command(duty, delay_s)
+
+    def joint_positions(self) -> list[float]:
+        """True joint positions now, joint units (mm, degrees), couplings included."""
+        self._advance()
+        out = [0.0] * self._n
+        self.plant.joint_positions(out)
+        return out
+
+    def joint_velocities(self) -> list[float]:
+        """True joint velocities now, joint units per second."""
+        self._advance()
+        out = [0.0] * self._n
+        self.plant.joint_velocities(out)
+        return out
+
+    def applied_duty(self) -> list[float]:
+        """Duty the valves receive now, percent: quantised, this PWM period's, 0 under E-stop."""
+        self._advance()
+        return [a.target for a in self.plant.actuators]
+
+    def chamber_pressures(self) -> list[tuple[float, float]]:
+        """(p_a, p_b) per joint, Pa: chamber a drives towards larger readings."""
+        self._advance()
+        return [(a.pa, a.pb) for a in self.plant.actuators]
+
+    def wrong_readings(self) -> list[int]:
+        """Encoder words latched wrong since power-up, per joint (quadrature encoders: none)."""
+        return [0] * self._n if self._board is None else list(self._board.wrong_readings)
+
+    # -- internals ---------------------------------------------------------------------------
+
+    def _close_valves(self) -> None:
+        self._advance()
+        for i, actuator in enumerate(self.plant.actuators):
+            self._duty[i] = 0.0
+            actuator.command(0.0, 0.0)
+
+    def _advance(self) -> None:
+        """Integrate the plant, and latch the encoders, up to the clock's time."""
+        now = self.clock.now_ns()
+        if now <= self._t_ns:
+            return
+        if now - self._t_ns > MAX_CATCH_UP_NS:
+            self._t_ns = now - MAX_CATCH_UP_NS
+        t0 = self._t_ns
+        steps = -(-(now - t0) // self._step_ns)
+        for k in range(1, steps + 1):
+            self._step_to(t0 + (now - t0) * k // steps)
+
+    def _step_to(self, t1: int) -> None:
+        t0 = self._t_ns
+        self._a_prev, self._a_now = self._a_now, self._a_prev
+        self.plant.step((t1 - t0) * 1e-9)
+        self.plant.actuator_positions(self._a_now)
+        if self._board is not None:
+            self._board.update(t0, t1, self._a_prev, self._a_now)
+        self._t_ns = t1

@@ -1,0 +1,183 @@
+"""Plant dynamics: the thesis's measured numbers come out of the model."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from hw.machine import Machine, MachineError, load_machine, parse_machine
+from hw.plant import Plant
+from hw.valve import quantise_duty
+
+UNIMATE = load_machine("unimate2000b")
+RIG = load_machine("rig")
+MACHINES = Path(__file__).resolve().parents[2] / "hw" / "machines"
+STEP = 1e-3
+
+
+def drive(plant: Plant, duty: dict[int, float], seconds: float) -> list[list[float]]:
+    """Hold ``duty`` (joint -> %) for ``seconds``; joint positions, joint units, every step."""
+    for j, d in duty.items():
+        plant.actuators[j].command(quantise_duty(d, 1.0), 0.0)
+    out = []
+    for _ in range(round(seconds / STEP)):
+        plant.step(STEP)
+        q = [0.0] * len(plant.actuators)
+        plant.joint_positions(q)
+        out.append(q)
+    return out
+
+
+def steady_speed(machine: Machine, joint: int, duty: float, start: list[float],
+                 seconds: float, **options: float) -> float:
+    """Velocity over the last 40 % of a run at constant duty, joint units per second."""
+    q = [row[joint] for row in drive(Plant(machine, initial=start, **options), {joint: duty},
+                                      seconds)]
+    i0 = int(len(q) * 0.6)
+    return (q[-1] - q[i0]) / ((len(q) - 1 - i0) * STEP)
+
+
+# -- the rig, Figure 3.2 ---------------------------------------------------------------------
+
+@pytest.mark.parametrize("pwm", [5, 10, 20, 40, 60, 80, 100])
+def test_rig_follows_figure_3_2_within_2_percent(pwm: int) -> None:
+    up = steady_speed(RIG, 0, pwm, [100.0], min(0.9, 0.35 / (0.0064 * pwm))) / 1e3
+    down = steady_speed(RIG, 0, -pwm, [1150.0], min(0.9, 0.35 / (0.0119 * pwm))) / 1e3
+    assert up == pytest.approx(0.64 * pwm / 100 - 0.0056, rel=0.02)  # eq. 3.1
+    assert down == pytest.approx(1.19 * -pwm / 100 + 0.0056, rel=0.02)  # eq. 3.2
+
+
+def test_rig_load_changes_the_speeds() -> None:
+    light_up = steady_speed(RIG, 0, 40, [100.0], 0.6, load_kg=50.0)
+    heavy_up = steady_speed(RIG, 0, 40, [100.0], 0.6, load_kg=300.0)
+    light_down = steady_speed(RIG, 0, -40, [1150.0], 0.6, load_kg=50.0)
+    heavy_down = steady_speed(RIG, 0, -40, [1150.0], 0.6, load_kg=300.0)
+    assert light_up > heavy_up * 1.05
+    assert -heavy_down > -light_down * 1.02
+
+
+def test_higher_supply_is_faster() -> None:
+    assert (steady_speed(RIG, 0, 40, [100.0], 0.6, supply_mpa=20.0)
+            > 1.1 * steady_speed(RIG, 0, 40, [100.0], 0.6))
+
+
+def test_rig_mass_bounces_on_the_oil_column() -> None:
+    # Figure 3.10: halted quickly, the load oscillates against the compressed oil
+    plant = Plant(RIG, initial=[1100.0])
+    drive(plant, {0: -40.0}, 0.3)
+    q = [row[0] for row in drive(plant, {0: 0.0}, 0.4)]
+    low = min(range(len(q)), key=q.__getitem__)
+    rebound = max(q[low:]) - q[low]
+    assert rebound > 1.0
+    assert q[-1] == pytest.approx(q[-20], abs=0.01)
+
+
+def test_rig_sags_slowly_with_the_valve_closed() -> None:
+    q = [row[0] for row in drive(Plant(RIG), {0: 0.0}, 5.0)]
+    assert -1.0 < q[-1] - 600.0 < -0.05
+
+
+# -- the Unimate ------------------------------------------------------------------------------
+
+def home() -> list[float]:
+    return [1500.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+
+
+@pytest.mark.parametrize("joint", range(6))
+def test_minimum_pwm_starts_each_joint_each_way(joint: int) -> None:
+    # section 5.4.1; polarity -1: positive duty moves towards smaller readings
+    spec = UNIMATE.joints[joint]
+    for sign, minimum in ((1, spec.min_pwm_pos), (-1, spec.min_pwm_neg)):
+        below = drive(Plant(UNIMATE, initial=home()), {joint: sign * (minimum - 1)}, 0.5)
+        at = drive(Plant(UNIMATE, initial=home()), {joint: sign * minimum}, 0.5)
+        assert below[-1][joint] == pytest.approx(home()[joint], abs=1e-3)
+        moved = at[-1][joint] - home()[joint]
+        assert moved * sign * spec.polarity > 0.02
+
+
+@pytest.mark.parametrize("joint", range(6))
+def test_full_duty_gives_about_the_rated_speed(joint: int) -> None:
+    spec = UNIMATE.joints[joint]
+    span = spec.upper - spec.lower
+    seconds = 0.3 * span / spec.max_speed
+    for duty in (100.0, -100.0):
+        start = home()
+        towards_lower = duty * spec.polarity < 0
+        start[joint] = spec.upper - 0.1 * span if towards_lower else spec.lower + 0.1 * span
+        speed = abs(steady_speed(UNIMATE, joint, duty, start, seconds))
+        assert speed == pytest.approx(spec.max_speed, rel=0.25)
+
+
+@pytest.mark.parametrize("joint", range(6))
+def test_end_stops_hold_at_the_limits(joint: int) -> None:
+    spec = UNIMATE.joints[joint]
+    for duty, limit in ((100.0, spec.lower), (-100.0, spec.upper)):
+        q = [row[joint] for row in drive(Plant(UNIMATE, initial=home()), {joint: duty},
+                                          1.3 * (spec.upper - spec.lower) / spec.max_speed + 0.5)]
+        assert q[-1] == pytest.approx(limit, abs=1e-9)
+        assert q[-100] == pytest.approx(limit, abs=1e-9)
+
+
+def test_up_down_gravity_helps_down_and_hinders_up() -> None:
+    start = home()
+    down = steady_speed(UNIMATE, 2, 60.0, start, 0.4)
+    up = steady_speed(UNIMATE, 2, -60.0, start, 0.4)
+    assert down < 0 < up
+    assert -down > 1.1 * up
+
+
+def test_up_down_sags_with_the_valves_closed() -> None:
+    q = drive(Plant(UNIMATE, initial=home()), {}, 10.0)
+    assert -0.1 < q[-1][2] < -0.002
+    assert q[-1][:2] + q[-1][3:] == home()[:2] + home()[3:]
+
+
+def test_yaw_reading_includes_bend() -> None:
+    # rtshare.h joint_dep: bending the wrist turns the yaw reading with it
+    plant = Plant(UNIMATE, initial=home())
+    q = drive(plant, {3: -60.0}, 0.5)[-1]
+    assert q[3] > 10.0
+    assert q[4] == pytest.approx(q[3])
+
+
+def test_initial_positions_are_checked_against_the_limits() -> None:
+    with pytest.raises(ValueError, match=r"Up/Down initial actuator position 40° is outside"):
+        Plant(UNIMATE, initial=[1500.0, 0.0, 40.0, 0.0, 0.0, 0.0])
+    with pytest.raises(ValueError, match="expected 6 initial positions"):
+        Plant(UNIMATE, initial=[0.0])
+
+
+# -- parameters ---------------------------------------------------------------------------
+
+def edited(name: str, old: str, new: str) -> Machine:
+    text = (MACHINES / name).read_text()
+    assert old in text
+    return parse_machine(text.replace(old, new, 1), MACHINES / name)
+
+
+def test_missing_key_names_file_and_key() -> None:
+    machine = edited("unimate2000b.toml", "inertia_kgm2 = 120.0\n", "")
+    with pytest.raises(MachineError,
+                       match=r"unimate2000b.toml: joints\[2\].plant.inertia_kgm2: missing number"):
+        Plant(machine)
+
+
+def test_key_of_the_wrong_joint_kind_is_refused_with_the_allowed_list() -> None:
+    machine = edited("rig.toml", "coulomb_n = 75.0", "coulomb_nm = 75.0")
+    with pytest.raises(MachineError, match=r"rig.toml: joints\[0\].plant: unknown key\(s\) "
+                                           r"coulomb_nm; allowed: .*coulomb_n,"):
+        Plant(machine)
+
+
+def test_bad_machine_level_value() -> None:
+    machine = edited("rig.toml", "bulk_modulus_mpa = 1000.0", "bulk_modulus_mpa = -3.0")
+    with pytest.raises(MachineError, match=r"rig.toml: plant.bulk_modulus_mpa: -3 must be > 0"):
+        Plant(machine)
+
+
+def test_load_and_supply_options_are_checked() -> None:
+    with pytest.raises(ValueError, match=r"Ram load 400 kg is outside 50…300 kg"):
+        Plant(RIG, load_kg=400.0)
+    with pytest.raises(ValueError, match=r"Ram cannot hold its load: it needs more than 3\.\d MPa"):
+        Plant(RIG, supply_mpa=3.0)
