@@ -1,0 +1,147 @@
+"""Measure the control loop: compute per tick, wake-up lateness, overruns, CPU use.
+
+Runs the real control subprocess on the simulator for ``--seconds`` and, when
+Debian's ``cyclictest`` (rt-tests) is installed, runs it at the same period in
+the same window on the other core, then prints both side by side with the
+thesis's Table 2.1 (486-66, RTL 1.0). Prints figures; asserts nothing.
+
+    python benchmarks/loop.py --seconds 20
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from control import ControlClient  # noqa: E402
+from control.layout import HIST_BIN_NS  # noqa: E402
+
+TABLE_2_1 = {"min_us": 11.5, "mean_us": 13.97, "max_us": 54.0, "ticks": 100_290}
+
+
+@dataclass(frozen=True)
+class Lateness:
+    """Percentiles (µs) of a latency histogram given as bin upper edges and counts."""
+
+    ticks: int
+    p50: float
+    p99: float
+    p999: float
+    max_us: float
+    over_1ms: int
+
+    @classmethod
+    def from_histogram(cls, edges_us: np.ndarray, counts: np.ndarray, max_us: float) -> Lateness:
+        total = int(counts.sum())
+        cumulative = np.cumsum(counts)
+
+        def pct(p: float) -> float:
+            return float(edges_us[min(np.searchsorted(cumulative, p / 100 * total),
+                                      len(edges_us) - 1)])
+
+        over = int(counts[edges_us > 1000].sum())
+        return cls(total, pct(50), pct(99), pct(99.9), max_us, over)
+
+
+def cpu_seconds(pid: int) -> float:
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def start_cyclictest(period_us: int, seconds: float, cpu: int) -> subprocess.Popen | None:
+    if shutil.which("cyclictest") is None:
+        return None
+    loops = int(seconds * 1e6 / period_us)
+    return subprocess.Popen(
+        ["cyclictest", "-m", "-p", "80", "--policy=fifo", "-i", str(period_us), "-l", str(loops),
+         "-q", "-h", "2000", "-a", str(cpu)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        text=True)
+
+
+def parse_cyclictest(output: str) -> Lateness:
+    counts = np.zeros(2001, np.int64)
+    for line in output.splitlines():
+        if re.match(r"^\d+\s+\d+", line):
+            us, count = (int(v) for v in line.split()[:2])
+            counts[min(us, 2000)] += count
+    max_line = re.search(r"# Max Latencies:\s+(\d+)", output)
+    overflow = re.search(r"# Histogram Overflows:\s+(\d+)", output)
+    if overflow:
+        counts[2000] += int(overflow.group(1))
+    edges = np.arange(2001, dtype=float) + 1.0  # a count at n µs lies in [n, n+1)
+    return Lateness.from_histogram(edges, counts, float(max_line.group(1)) if max_line else 0.0)
+
+
+def run(seconds: float, machine: str, spin_us: float, warmup: float) -> None:
+    print(f"machine: {platform.node()} {platform.machine()}, {os.cpu_count()} CPUs, "
+          f"{platform.system()} {platform.release()}, Python {platform.python_version()}")
+    with tempfile.TemporaryDirectory() as data, \
+            ControlClient(machine, data_dir=data, spin_us=spin_us) as client:
+        print(f"control process pid {client.pid}: SCHED_FIFO {'granted' if client.realtime else 'refused'}"
+              f"{' - ' + client.notice if client.notice else ''}; spin {spin_us:g} µs")
+        period_us = round(client.dt * 1e6)
+        time.sleep(warmup)
+        others = sorted(os.sched_getaffinity(0))
+        cyclic = start_cyclictest(period_us, seconds, others[0])
+        before, status0, cpu0, wall0 = client.histogram(), client.status(), cpu_seconds(
+            client.pid), time.monotonic()
+        time.sleep(seconds)
+        after, status1, cpu1, wall1 = client.histogram(), client.status(), cpu_seconds(
+            client.pid), time.monotonic()
+        cyclic_out = cyclic.communicate(timeout=seconds + 30)[0] if cyclic else ""
+    ticks = status1.tick - status0.tick
+    counts = after.counts - before.counts
+    edges = (np.arange(len(counts)) + 1) * HIST_BIN_NS / 1e3
+    edges[-1] = np.inf
+    ours = Lateness.from_histogram(edges, counts, after.max_us)
+    compute_us = (status1.compute_total_s - status0.compute_total_s) / max(ticks, 1) * 1e6
+    cpu_pct = 100 * (cpu1 - cpu0) / (wall1 - wall0)
+    print(f"\nservodesk loop, {machine}, period {period_us} µs, {seconds:g} s, {ticks} ticks")
+    print(f"  compute per six-joint tick: mean {compute_us:.1f} µs, max {status1.compute_max_us:.0f} µs")
+    print(f"  CPU use of the control process: {cpu_pct:.1f} % of a core")
+    print(f"  overruns: {status1.overruns - status0.overruns}")
+    header = f"  {'':<22}{'p50':>8}{'p99':>8}{'p99.9':>8}{'max':>9}{'>1 ms':>8}"
+    print("\nwake-up lateness (µs; servodesk in 5 µs bins, upper edges)")
+    print(header)
+    print(f"  {'servodesk':<22}{ours.p50:>8.0f}{ours.p99:>8.0f}{ours.p999:>8.0f}"
+          f"{ours.max_us:>9.0f}{ours.over_1ms:>8d}")
+    if cyclic_out:
+        ct = parse_cyclictest(cyclic_out)
+        print(f"  {'cyclictest (C)':<22}{ct.p50:>8.0f}{ct.p99:>8.0f}{ct.p999:>8.0f}"
+              f"{ct.max_us:>9.0f}{ct.over_1ms:>8d}")
+        print(f"  ratio p99 servodesk/cyclictest: {ours.p99 / max(ct.p99, 1):.2f} "
+              f"(target <= 1.5); ticks > 1 ms: {ours.over_1ms} vs {ct.over_1ms}")
+    else:
+        print("  cyclictest: not installed (apt-get install rt-tests) - no comparison")
+    print(f"  thesis Table 2.1 (486-66, RTL): min {TABLE_2_1['min_us']} mean "
+          f"{TABLE_2_1['mean_us']} max {TABLE_2_1['max_us']} over {TABLE_2_1['ticks']} interrupts")
+    print(f"  servodesk over the whole run: min {after.min_us:.1f} mean {after.mean_us:.1f} "
+          f"max {after.max_us:.1f} over {after.ticks} ticks")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=10.0)
+    parser.add_argument("--machine", default="unimate2000b")
+    parser.add_argument("--spin-us", type=float, default=0.0,
+                        help="spin this long before each deadline instead of sleeping")
+    parser.add_argument("--warmup", type=float, default=1.0)
+    args = parser.parse_args()
+    run(args.seconds, args.machine, args.spin_us, args.warmup)
+
+
+if __name__ == "__main__":
+    main()
