@@ -26,8 +26,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from control import ControlClient  # noqa: E402
-from control.layout import HIST_BIN_NS  # noqa: E402
+from control import ControlClient
+from control.layout import HIST_BIN_NS
 
 TABLE_2_1 = {"min_us": 11.5, "mean_us": 13.97, "max_us": 54.0, "ticks": 100_290}
 
@@ -85,12 +85,31 @@ def parse_cyclictest(output: str) -> Lateness:
     return Lateness.from_histogram(edges, counts, float(max_line.group(1)) if max_line else 0.0)
 
 
+def command_latency(client: ControlClient, samples: int = 300) -> np.ndarray:
+    """Seconds from ``client.jog`` to that duty at the backend (the status' valve field)."""
+    joint = client.machine.joints[0]
+    out = []
+    for i in range(samples):
+        duty = 5.0 + i % 2  # small: the joint barely moves
+        client.jog_joint(0, duty)
+        t0 = time.perf_counter()
+        target = joint.polarity * duty
+        while client.status().valve[0] != target:
+            if time.perf_counter() - t0 > 1.0:
+                break
+        out.append(time.perf_counter() - t0)
+        time.sleep(0.002)
+    client.hold()
+    return np.array(out)
+
+
 def run(seconds: float, machine: str, spin_us: float, warmup: float) -> None:
     print(f"machine: {platform.node()} {platform.machine()}, {os.cpu_count()} CPUs, "
           f"{platform.system()} {platform.release()}, Python {platform.python_version()}")
     with tempfile.TemporaryDirectory() as data, \
             ControlClient(machine, data_dir=data, spin_us=spin_us) as client:
-        print(f"control process pid {client.pid}: SCHED_FIFO {'granted' if client.realtime else 'refused'}"
+        fifo = "granted" if client.realtime else "refused"
+        print(f"control process pid {client.pid}: SCHED_FIFO {fifo}"
               f"{' - ' + client.notice if client.notice else ''}; spin {spin_us:g} µs")
         period_us = round(client.dt * 1e6)
         time.sleep(warmup)
@@ -102,6 +121,7 @@ def run(seconds: float, machine: str, spin_us: float, warmup: float) -> None:
         after, status1, cpu1, wall1 = client.histogram(), client.status(), cpu_seconds(
             client.pid), time.monotonic()
         cyclic_out = cyclic.communicate(timeout=seconds + 30)[0] if cyclic else ""
+        latency = command_latency(client) * 1e3
     ticks = status1.tick - status0.tick
     counts = after.counts - before.counts
     edges = (np.arange(len(counts)) + 1) * HIST_BIN_NS / 1e3
@@ -110,9 +130,13 @@ def run(seconds: float, machine: str, spin_us: float, warmup: float) -> None:
     compute_us = (status1.compute_total_s - status0.compute_total_s) / max(ticks, 1) * 1e6
     cpu_pct = 100 * (cpu1 - cpu0) / (wall1 - wall0)
     print(f"\nservodesk loop, {machine}, period {period_us} µs, {seconds:g} s, {ticks} ticks")
-    print(f"  compute per six-joint tick: mean {compute_us:.1f} µs, max {status1.compute_max_us:.0f} µs")
+    print(f"  compute per six-joint tick (simulator included): mean {compute_us:.1f} µs, "
+          f"max {status1.compute_max_us:.0f} µs")
     print(f"  CPU use of the control process: {cpu_pct:.1f} % of a core")
     print(f"  overruns: {status1.overruns - status0.overruns}")
+    print(f"  client.jog -> duty at the backend: median {np.median(latency):.2f} ms, "
+          f"p99 {np.percentile(latency, 99):.2f} ms, max {latency.max():.2f} ms "
+          f"over {len(latency)} commands (target < 2 ms)")
     header = f"  {'':<22}{'p50':>8}{'p99':>8}{'p99.9':>8}{'max':>9}{'>1 ms':>8}"
     print("\nwake-up lateness (µs; servodesk in 5 µs bins, upper edges)")
     print(header)
