@@ -1,6 +1,6 @@
 """Cost of the eq. 5.1 controller per tick: µs for one update of six joints.
 
-Run: ``PYTHONPATH=. python benchmarks/law.py``. The loop calls
+Run: ``python benchmarks/law.py``. The loop calls
 ``DifferenceLaw.update`` once per joint per 1 ms tick, so this is the share of
 the period the control law takes. Errors vary every tick so no branch is
 always taken; the best of several repeats is printed (least disturbed by the OS).
@@ -8,7 +8,11 @@ always taken; the best of several repeats is printed (least disturbed by the OS)
 
 from __future__ import annotations
 
+import sys
 import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # ahead of benchmarks/hw.py
 
 from control.law import DifferenceLaw, pid
 from hw.machine import Coefficients, Machine, load_machine

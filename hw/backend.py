@@ -100,6 +100,10 @@ class Backend(Protocol):
         """Close every valve and release the device; safe to call twice."""
         ...
 
+    def reconnect(self) -> None:
+        """The operator's way back after a fault: reopen the device (raise OSError if it fails)."""
+        ...
+
     def read(self, raw: list[int]) -> None:
         """Fill ``raw`` (one entry per joint) with the current raw encoder words."""
         ...

@@ -75,6 +75,9 @@ class SimBackend:
         """Close every valve; safe to call twice."""
         self._close_valves()
 
+    def reconnect(self) -> None:
+        """A simulator has no link to lose."""
+
     def read(self, raw: list[int]) -> None:
         """Fill ``raw`` with the encoder words: Gray words (Unimate) or signed counts (rig)."""
         self._advance()

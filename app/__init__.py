@@ -1,0 +1,1 @@
+"""servodesk's operator side: the Textual TUI and the ``servodesk`` command line."""

@@ -1,0 +1,60 @@
+"""The ``servodesk`` command line: one entry point, a subcommand per job.
+
+With no subcommand it will open the TUI; today it prints the commands.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from app import cli_emulate, cli_kinematics, cli_machine
+from hw.factory import BACKENDS
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="servodesk",
+        description="Terminal workstation for real-time control of hydraulic manipulators "
+                    "(Unimate 2000B, single-axis test rig).",
+    )
+    parser.add_argument("--machine", default="unimate2000b",
+                        help="built-in machine (unimate2000b, rig) or a machine TOML path")
+    parser.add_argument("--backend", default="sim", choices=BACKENDS,
+                        help="sim (default) or serial (an I/O board)")
+    parser.add_argument("--port", help="pyserial URL of the I/O board for --backend serial")
+    parser.add_argument("--data-dir", metavar="DIR",
+                        help="where runs are saved (default: the user's data directory, "
+                             "servodesk/runs)")
+    parser.add_argument("--seed", type=int, default=0, help="simulator seed (default 0)")
+    sub = parser.add_subparsers(title="commands (none: open the TUI)", metavar="COMMAND")
+    for module in (cli_kinematics, cli_machine, cli_emulate):
+        module.add_parsers(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if hasattr(args, "func"):
+        return args.func(args)
+    if args.backend == "serial" and not args.port:
+        parser.error("--backend serial needs --port URL (a device, the emulator's pty path or "
+                     "socket://HOST:PORT)")
+    from app.tui import ServodeskApp
+    from hw.machine import MachineError
+
+    try:
+        app = ServodeskApp(args.machine, args.backend, args.port, args.data_dir, seed=args.seed)
+    except MachineError as exc:
+        print(f"servodesk: {exc}", file=sys.stderr)
+        return 2
+    try:
+        app.run()
+    finally:
+        app.shutdown_client()
+    return 0 if app.return_code in (None, 0) else app.return_code
+
+
+if __name__ == "__main__":
+    sys.exit(main())

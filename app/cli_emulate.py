@@ -1,0 +1,92 @@
+"""``servodesk emulate``: an emulated I/O board serving the simulator on a pty or TCP port.
+
+The first line on stdout is what to pass to ``--port`` (the pty path or a
+``socket://`` URL); on SIGINT or SIGTERM the emulator stops, prints a one-line
+JSON summary of its counts on stdout and exits 0. SIGUSR1 presses the board's
+E-stop button, SIGUSR2 releases it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import sys
+
+from hw.emulator import Emulator, Faults
+from hw.machine import MachineError, load_machine
+
+DEFAULT_MACHINE = "unimate2000b"
+
+
+def add_parsers(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "emulate", help="run the I/O board emulator (the simulator behind a pty or TCP port)",
+        description="Serve an emulated I/O board (docs/protocol.md) in front of the simulator, "
+                    "so `--backend serial --port URL` can be run without hardware. Prints the "
+                    "URL on the first line. SIGUSR1 presses the E-stop, SIGUSR2 releases it.")
+    # SUPPRESS: an unset subcommand option must not hide the global --machine
+    p.add_argument("--machine", default=argparse.SUPPRESS,
+                   help=f"built-in machine or a machine TOML path (default {DEFAULT_MACHINE})")
+    p.add_argument("--tcp", type=int, metavar="PORT",
+                   help="serve one TCP client on 127.0.0.1:PORT (0: any free port) "
+                        "instead of a pseudo-terminal")
+    p.add_argument("--seed", type=int, default=0, help="simulator and fault-injection seed")
+    p.add_argument("--glitch-scale", type=float, default=1.0, metavar="X",
+                   help="multiplies the simulated encoders' wrong-reading rate (0: none)")
+    p.add_argument("--corrupt-rate", type=_rate, default=0.0, metavar="R",
+                   help="probability that a board-to-host frame has one bit flipped")
+    p.add_argument("--corrupt-rx-rate", type=_rate, default=0.0, metavar="R",
+                   help="probability that a host-to-board frame has one bit flipped on arrival")
+    p.add_argument("--drop-rate", type=_rate, default=0.0, metavar="R",
+                   help="probability that a board-to-host frame is never sent")
+    p.add_argument("--silent-after", type=float, metavar="S",
+                   help="stop answering S seconds after the first configuration (a hung board)")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from hw.sim import SimBackend
+
+    try:
+        machine = load_machine(getattr(args, "machine", DEFAULT_MACHINE))
+        plant = SimBackend(machine, seed=args.seed, lockstep=False,
+                           glitch_scale=args.glitch_scale)
+    except (MachineError, ValueError) as exc:
+        print(f"servodesk: {exc}", file=sys.stderr)
+        return 2
+    faults = Faults(corrupt_rate=args.corrupt_rate, corrupt_rx_rate=args.corrupt_rx_rate,
+                    drop_rate=args.drop_rate, silent_after_s=args.silent_after)
+    try:
+        emulator = Emulator(plant, tcp_port=args.tcp, faults=faults, seed=args.seed)
+    except OSError as exc:
+        print(f"servodesk: cannot serve the emulator: {exc}", file=sys.stderr)
+        return 2
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: emulator.stop())
+    signal.signal(signal.SIGUSR1, lambda *_: emulator.board.press_estop())
+    signal.signal(signal.SIGUSR2, lambda *_: emulator.board.release_estop())
+    print(emulator.url, flush=True)
+    pid = os.getpid()
+    print(f"emulating the {machine.title} I/O board on {emulator.url}; Ctrl-C stops it, "
+          f"kill -USR1 {pid} presses the E-stop, kill -USR2 {pid} releases it",
+          file=sys.stderr, flush=True)
+    emulator.serve()
+    print(json.dumps(emulator.summary()), flush=True)
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run ``emulate`` on its own (``python -c 'from app.cli_emulate import main; main()'``)."""
+    parser = argparse.ArgumentParser(prog="servodesk")
+    add_parsers(parser.add_subparsers())
+    args = parser.parse_args(["emulate", *(sys.argv[1:] if argv is None else argv)])
+    return args.func(args)
+
+
+def _rate(text: str) -> float:
+    value = float(text)
+    if not 0.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f"{text} is not a probability in 0…1")
+    return value
