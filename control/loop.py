@@ -37,6 +37,7 @@ from hw.machine import Machine
 
 MS = 1_000_000
 INJECTABLE = ("press_estop",)
+OUTBOX_LIMIT = 256
 ESTOP_LATCHED, ESTOP_INPUT, HOMED, UI_LOST = (int(f) for f in (
     Flag.ESTOP_LATCHED, Flag.ESTOP_INPUT, Flag.HOMED, Flag.UI_LOST))
 LINK_FAULT, REALTIME, MOVING, FAULT = (int(f) for f in (
@@ -144,6 +145,8 @@ class Controller:
         self.outbox: list[tuple[str, dict]] = []
         self.poller = select.poll()
         self.poller.register(conn.fileno(), select.POLLIN)
+        self.writable = select.poll()  # a unix socket polls writable with 3/4 of its buffer free
+        self.writable.register(conn.fileno(), select.POLLOUT)
 
     # -- the loop ---------------------------------------------------------------
 
@@ -280,14 +283,30 @@ class Controller:
         if self.backend.estop:
             self.event("notice", message="E-stop input still pressed: release it, then reset")
             return
-        if self.backend.fault:
-            self.event("notice", message=f"cannot reset: {self.backend.fault}")
+        if self.backend.fault and not self.reconnect():
             return
         self.estop_latched = False
         self.fault = ""
         self.law.reset()
         self.hold_here()
         self.event("estop", latched=False, reason="reset by operator")
+
+    def reconnect(self) -> bool:
+        """Reopen a faulted link on the operator's reset; the valves stay closed meanwhile.
+
+        This blocks the loop while the board answers (ticks overrun and are counted);
+        with the E-stop latched and the link down there is nothing else to do.
+        """
+        try:
+            self.backend.reconnect()
+        except OSError as exc:
+            self.event("notice", message=f"cannot reset: reconnecting failed: {exc}")
+            return False
+        if self.backend.fault:
+            self.event("notice", message=f"cannot reset: {self.backend.fault}")
+            return False
+        self.event("notice", message="link re-established")
+        return True
 
     def cmd_manual(self, duty: list[float]) -> None:
         if self.refuse_when_stopped("manual actuation"):
@@ -483,15 +502,24 @@ class Controller:
         for j in range(self.n):
             error = abs(self.desired[j] - self.position[j])
             if error > self.ferror[j] and error > 0.9 * self.ferror_snapshot[j]:
-                joint = self.machine.joints[j]
-                message = (f"following error: {joint.name} is {error:.1f}{joint.symbol} from its "
-                           f"target (limit {self.ferror[j]:g}{joint.symbol}) and not closing; "
-                           "move aborted, holding")
-                self.end_move(f"fault: {message}")
-                self.hold_here()
-                self.event("fault", kind="following_error", joint=j, message=message)
+                self.following_error(j, error)
                 return
             self.ferror_snapshot[j] = error
+
+    def following_error(self, j: int, error: float) -> None:
+        """FERROR: abort a move into hold; a joint that cannot even hold gets its valves closed."""
+        joint = self.machine.joints[j]
+        where = (f"following error: {joint.name} is {error:.1f}{joint.symbol} from its target "
+                 f"(limit {self.ferror[j]:g}{joint.symbol}) and not closing")
+        if self.move is not None:
+            message = f"{where}; move aborted, holding"
+            self.end_move(f"fault: {message}")
+            self.hold_here()
+            self.event("fault", kind="following_error", joint=j, message=message)
+        else:
+            self.event("fault", kind="following_error", joint=j,
+                       message=f"{where} while holding; valves closed: check the joint, then reset")
+            self.latch_estop(f"{where} while holding")
 
     def latch_estop(self, reason: str) -> None:
         self.estop_latched = True
@@ -612,12 +640,20 @@ class Controller:
         self.outbox.append((name, payload))
 
     def flush_events(self) -> None:
-        """Send queued events, so a client that receives one already sees its status."""
-        while self.outbox:
-            message = self.outbox.pop(0)
-            if not self.conn_open:
-                continue
+        """Send queued events, so a client that receives one already sees its status.
+
+        Never blocks: a frozen client stops reading, and the loop must go on, so
+        events wait while the channel is full and the oldest are dropped past
+        ``OUTBOX_LIMIT``.
+        """
+        if not self.conn_open:
+            self.outbox.clear()
+            return
+        while self.outbox and self.writable.poll(0):
             try:
-                self.conn.send(message)
+                self.conn.send(self.outbox.pop(0))
             except (BrokenPipeError, OSError):
                 self.conn_open = False
+                self.outbox.clear()
+                return
+        del self.outbox[:-OUTBOX_LIMIT]
