@@ -1,0 +1,163 @@
+"""The loop's safety logic, ticked in-process against a scripted backend.
+
+The backend here is a stand-in for iron whose readings the test dictates, so
+the glitch filter, fail-safe and following-error rules can be driven exactly;
+the real subprocess on the real simulator is exercised in test_client.py.
+"""
+
+from __future__ import annotations
+
+import socket
+import time
+from collections.abc import Iterator
+from multiprocessing.connection import Connection
+
+import pytest
+
+from control import shm
+from control.layout import ControlLayout, Mode
+from control.loop import OUTBOX_LIMIT, Controller, LoopConfig
+from hw.backend import LinkCounters, StepClock
+from hw.gray import binary_to_gray
+from hw.machine import Machine, load_machine
+
+UNIMATE = load_machine("unimate2000b")
+HOME = [1500.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+
+
+class ScriptedBackend:
+    """Reports the positions the test sets (as Gray words), records what is written."""
+
+    def __init__(self, machine: Machine) -> None:
+        self.machine = machine
+        self.clock = StepClock()
+        self.counters = LinkCounters()
+        self.estop = False
+        self.fault = ""
+        self.positions = list(HOME)
+        self.written: list[float] = []
+        self.fail_reads = 0
+
+    def word(self, j: int) -> int:
+        cal = self.machine.joints[j].encoder
+        q = self.positions[j]
+        if cal.coupled_to is not None:
+            q -= cal.coupling * self.positions[cal.coupled_to]
+        return binary_to_gray(round((q - cal.constant) / cal.gradient))
+
+    def open(self) -> None: ...
+
+    def close(self) -> None: ...
+
+    def reconnect(self) -> None: ...
+
+    def read(self, raw: list[int]) -> None:
+        if self.fail_reads:
+            self.fail_reads -= 1
+            raise RuntimeError("scripted read failure")
+        raw[:] = [self.word(j) for j in range(self.machine.n_joints)]
+
+    def write(self, duty: list[float]) -> None:
+        self.written = list(duty)
+
+
+@pytest.fixture
+def rig() -> Iterator[tuple[Controller, ScriptedBackend, Connection]]:
+    backend = ScriptedBackend(UNIMATE)
+    ours, theirs = socket.socketpair()
+    layout = ControlLayout(UNIMATE.n_joints)
+    segment = shm.create("looptest", layout.size)
+    layout.write_header(segment.buf)
+    controller = Controller(UNIMATE, backend, Connection(theirs.detach()), segment.buf,
+                            LoopConfig(period_ns=1_000_000, heartbeat_timeout_ns=10**12))
+    controller.start()
+    client = Connection(ours.detach())
+    yield controller, backend, client
+    controller.release()
+    shm.release(segment, unlink=True)
+    client.close()
+
+
+def ticks(controller: Controller, backend: ScriptedBackend, n: int) -> None:
+    for _ in range(n):
+        backend.clock.sleep_until(backend.clock.now_ns() + 1_000_000)
+        controller.deadline = backend.clock.now_ns()
+        try:
+            controller.tick(backend.clock.now_ns())
+        except Exception as exc:
+            controller.fail_safe(exc)
+
+
+def events(client: Connection) -> list[tuple[str, dict]]:
+    out = []
+    while client.poll(0.05):
+        out.append(client.recv())
+    return out
+
+
+def test_events_never_block_a_client_that_stopped_reading(rig) -> None:
+    controller, backend, _client = rig
+    started = time.monotonic()
+    for i in range(20_000):
+        controller.event("notice", message=f"flood {i} " + "x" * 200)
+        controller.flush_events()
+    assert time.monotonic() - started < 30, "flushing waited on the reader"
+    assert len(controller.outbox) <= OUTBOX_LIMIT
+    ticks(controller, backend, 5)
+    assert controller.tick_count >= 5
+
+
+def test_a_glitch_is_rejected_and_counted_then_a_real_jump_is_believed(rig) -> None:
+    controller, backend, _client = rig
+    backend.positions[0] = HOME[0] + 500.0  # In/Out cannot move 500 mm in 1 ms
+    ticks(controller, backend, 1)
+    assert controller.position[0] == pytest.approx(HOME[0], abs=0.3)
+    assert controller.glitches[0] == 1
+    ticks(controller, backend, 5)  # still there after the resync count: it is real
+    assert controller.position[0] == pytest.approx(HOME[0] + 500.0, abs=0.3)
+    assert controller.glitches[0] == 5
+
+
+def test_a_plausible_move_is_never_a_glitch(rig) -> None:
+    controller, backend, _client = rig
+    for _ in range(100):
+        backend.positions[1] += 0.05  # 50°/s, inside Rotate's 60°/s
+        ticks(controller, backend, 1)
+    assert controller.glitches[1] == 0
+    assert controller.position[1] == pytest.approx(backend.positions[1], abs=0.05)
+
+
+def test_an_exception_in_a_tick_closes_the_valves_and_latches(rig) -> None:
+    controller, backend, client = rig
+    controller.cmd_manual([40.0] * 6)
+    ticks(controller, backend, 2)
+    assert all(backend.written)
+    backend.fail_reads = 1
+    ticks(controller, backend, 1)
+    assert backend.written == [0.0] * 6
+    assert controller.estop_latched and "scripted read failure" in controller.fault
+    ticks(controller, backend, 3)
+    assert backend.written == [0.0] * 6
+    assert any(name == "estop" for name, _ in events(client))
+
+
+def test_following_error_while_holding_closes_the_valves(rig) -> None:
+    controller, backend, client = rig
+    controller.hold_target[3] = 80.0  # Bend told to hold 80° but it sits at 0° and won't move
+    ticks(controller, backend, 600)
+    assert controller.estop_latched and backend.written == [0.0] * 6
+    faults = [p for name, p in events(client) if name == "fault"]
+    assert faults[0]["kind"] == "following_error" and faults[0]["joint"] == 3
+    assert "while holding; valves closed" in faults[0]["message"]
+    assert controller.mode == Mode.HOLD
+
+
+def test_stop_at_limits_in_manual(rig) -> None:
+    controller, backend, client = rig
+    backend.positions[2] = 29.99  # Up/Down one count below its 30° limit
+    ticks(controller, backend, 6)
+    controller.cmd_manual([0.0, 0.0, 50.0, 0.0, 0.0, -50.0])
+    ticks(controller, backend, 2)
+    assert controller.duty[2] == 0.0 and controller.duty[5] == -50.0
+    (limit,) = [p for name, p in events(client) if name == "fault"]
+    assert limit["kind"] == "limit" and limit["joint"] == 2
