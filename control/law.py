@@ -44,6 +44,7 @@ class _JointGains:
     neg_scale: float  # 1 − nmin/100
     nmin: float
     duty_limit: float
+    kv: float  # velocity feed-forward, % per joint unit/s
 
 
 class _JointState:
@@ -108,8 +109,11 @@ class DifferenceLaw:
         s = self._states[j]
         return LawState(tuple(s.e), tuple(s.u), s.integral)
 
-    def update(self, j: int, error: float) -> float:
-        """u(k+1) in % for joint ``j`` from e(k) = desired − actual in mm or degrees."""
+    def update(self, j: int, error: float, velocity: float = 0.0) -> float:
+        """u(k+1) in % for joint ``j`` from e(k) = desired − actual in mm or degrees.
+
+        ``velocity`` is the desired velocity (units/s) for the feed-forward ``kv``.
+        """
         g = self._gains[j]
         s = self._states[j]
         e = error / g.gain_unit  # error in gain units, errata #18
@@ -126,7 +130,7 @@ class DifferenceLaw:
         elif integral < -g.integral_limit:
             integral = -g.integral_limit
         s.integral = integral
-        u += integral
+        u += integral + g.kv * velocity  # velocity feed-forward (chapter 6)
         if u > SATURATION:
             u = SATURATION
         elif u < -SATURATION:
@@ -210,6 +214,7 @@ def _prepare(joint: Joint, c: Coefficients, j: int, dt: float) -> _JointGains:
         neg_scale=1.0 - joint.min_pwm_neg / 100.0,
         nmin=joint.min_pwm_neg,
         duty_limit=c.duty_limit,
+        kv=c.kv[j] if c.kv else 0.0,
     )
 
 

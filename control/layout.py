@@ -134,7 +134,7 @@ class CoefficientLayout:
 
     def __init__(self, n: int) -> None:
         self.n = n
-        joint = f"{MAX_TAPS}di{MAX_TAPS}didd"
+        joint = f"{MAX_TAPS}di{MAX_TAPS}diddd"
         self.struct = struct.Struct("<" + joint * n + f"{MAX_TAPS}diddd")
 
     def encode(self, c: Coefficients) -> tuple:
@@ -142,25 +142,27 @@ class CoefficientLayout:
         for j in range(self.n):
             values += [*_padded(c.kp[j], f"kp[{j}]"), len(c.kp[j])]
             values += [*_padded(c.w[j], f"w[{j}]"), len(c.w[j])]
-            values += [c.ki[j], c.kd[j]]
+            values += [c.ki[j], c.kd[j], c.kv[j] if c.kv else 0.0]
         values += [*_padded(c.filter, "filter"), len(c.filter)]
         values += [c.filter_divisor, c.integral_limit, c.duty_limit]
         return tuple(values)
 
     def decode(self, values: tuple, name: str) -> Coefficients:
-        per_joint = 2 * MAX_TAPS + 4
-        kp, w, ki, kd = [], [], [], []
+        per_joint = 2 * MAX_TAPS + 5
+        kp, w, ki, kd, kv = [], [], [], [], []
         for j in range(self.n):
             v = values[j * per_joint:(j + 1) * per_joint]
             kp.append(tuple(v[:v[MAX_TAPS]]))
             w.append(tuple(v[MAX_TAPS + 1:MAX_TAPS + 1 + v[2 * MAX_TAPS + 1]]))
             ki.append(v[2 * MAX_TAPS + 2])
             kd.append(v[2 * MAX_TAPS + 3])
+            kv.append(v[2 * MAX_TAPS + 4])
         tail = values[self.n * per_joint:]
         return Coefficients(
             name=name, note=name, kp=tuple(kp), ki=tuple(ki), kd=tuple(kd), w=tuple(w),
             filter=tuple(tail[:tail[MAX_TAPS]]), filter_divisor=tail[MAX_TAPS + 1],
             integral_limit=tail[MAX_TAPS + 2], duty_limit=tail[MAX_TAPS + 3],
+            kv=tuple(kv) if any(kv) else (),
         )
 
 

@@ -115,6 +115,8 @@ class Controller:
         self.duty = [0.0] * n
         self.valve = [0.0] * n
         self.manual = [0.0] * n
+        self.velocity = [0.0] * n
+        self.dt = config.period_ns / 1e9
         self.hold_target = [0.0] * n
         self.glitches = [0] * n
         self.rejects = [config.glitch_resync] * n  # believe the first reading
@@ -399,11 +401,12 @@ class Controller:
         else:
             self.initialise()
 
-    def closed_loop(self, target: list[float]) -> None:
+    def closed_loop(self, target: list[float], velocity: list[float] | None = None) -> None:
         law = self.law
         for j in range(self.n):
             self.desired[j] = target[j]
-            self.duty[j] = law.update(j, target[j] - self.position[j])
+            v = velocity[j] if velocity is not None else 0.0
+            self.duty[j] = law.update(j, target[j] - self.position[j], v)
 
     def open_loop(self, duty: list[float]) -> None:
         for j in range(self.n):
@@ -412,10 +415,15 @@ class Controller:
 
     def follow_track(self) -> None:
         move = self.move
-        row = move.layout.desired_offset // 8 + move.index * self.n
-        for j in range(self.n):
+        n, k, last = self.n, move.index, move.layout.samples - 1
+        row = move.layout.desired_offset // 8 + k * n
+        before = row - n if k > 0 else row  # central difference, one-sided at the ends
+        after = row + n if k < last else row
+        span = max((after - before) // n, 1) * self.dt
+        for j in range(n):
             self.desired[j] = self.clamp(j, move.cells[row + j])
-        self.closed_loop(self.desired)
+            self.velocity[j] = (move.cells[after + j] - move.cells[before + j]) / span
+        self.closed_loop(self.desired, self.velocity)
         self.record()
 
     def tracking_actuate(self) -> None:

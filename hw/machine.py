@@ -89,7 +89,9 @@ class Coefficients:
     Taps are newest first: ``kp[j][0]`` multiplies e(k), ``w[j][0]`` multiplies
     u(k), ``filter[0]`` multiplies e(k). The derivative is
     ``kd * sum(filter[i] * e(k-i)) / (filter_divisor * dt)``; eq. 3.3 is
-    filter (11, -18, 9, -2) with divisor 6.
+    filter (11, -18, 9, -2) with divisor 6. ``kv`` is the velocity feed-forward
+    (% per joint unit/s of desired velocity, chapter 6's "feed-forward"); empty
+    means none.
     """
 
     name: str
@@ -102,6 +104,7 @@ class Coefficients:
     filter_divisor: float
     integral_limit: float
     duty_limit: float = 100.0
+    kv: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -374,7 +377,7 @@ class _Reader:
         if not isinstance(doc, dict):
             raise self.fail(key, "must be a table")
         self.only(doc, key, {"note", "kp", "ki", "kd", "w", "filter", "filter_divisor",
-                             "integral_limit", "duty_limit"})
+                             "integral_limit", "duty_limit", "kv"})
         return Coefficients(
             name=name,
             note=self.string(doc, key, "note", default=name),
@@ -387,6 +390,7 @@ class _Reader:
             integral_limit=self.number(doc, key, "integral_limit", low=0),
             duty_limit=self.number(doc, key, "duty_limit", 100.0, low=0, high=100,
                                    strict_low=True),
+            kv=self.numbers(doc["kv"], f"{key}.kv", n) if "kv" in doc else (),
         )
 
     def taps(self, value: Any, full: str, n: int) -> tuple[tuple[float, ...], ...]:

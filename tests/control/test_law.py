@@ -213,3 +213,13 @@ def test_output_is_zero_or_between_min_pwm_and_the_limit(errors: list[float], j:
     for e in errors:
         u = law.update(j, e)
         assert u == 0.0 or joint.min_pwm_pos <= u <= 100.0 or -100.0 <= u <= -joint.min_pwm_neg
+
+
+def test_velocity_feed_forward_adds_kv_times_the_desired_velocity() -> None:
+    machine = load_machine("rig")
+    base = pid(machine, 0.0, 0.0, 0.0)
+    with_ff = Coefficients(**{**base.__dict__, "kv": (0.05,)})
+    law = DifferenceLaw(machine, with_ff, 0.001)
+    assert law.update(0, 0.0, velocity=200.0) == pytest.approx(10.0)  # 0.05 %/(mm/s) x 200 mm/s
+    assert law.update(0, 0.0, velocity=0.0) == 0.0
+    assert DifferenceLaw(machine, base, 0.001).update(0, 0.0, velocity=200.0) == 0.0

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -25,6 +27,14 @@ def test_every_coefficient_set_round_trips(name: str) -> None:
         assert (back.kp, back.w, back.ki, back.kd) == (c.kp, c.w, c.ki, c.kd)
         assert (back.filter, back.filter_divisor, back.integral_limit, back.duty_limit) == (
             c.filter, c.filter_divisor, c.integral_limit, c.duty_limit)
+
+
+def test_feed_forward_gains_round_trip() -> None:
+    machine = load_machine("unimate2000b")
+    layout = CoefficientLayout(6)
+    c = replace(machine.track, kv=(0.25, 1.0, 2.0, 0.5, 0.5, 0.4))
+    back = layout.decode(layout.struct.unpack(layout.struct.pack(*layout.encode(c))), "track")
+    assert back.kv == c.kv
 
 
 def test_too_many_taps_is_a_clear_error() -> None:

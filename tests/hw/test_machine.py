@@ -105,6 +105,15 @@ def test_bad_file_names_file_key_and_problem(edit: tuple[str, str], message: str
         parse_machine(text, MACHINES / "unimate2000b.toml")
 
 
+def test_feed_forward_gains_are_optional_and_checked() -> None:
+    assert load_machine("unimate2000b").track.kv == ()
+    text = UNIMATE_TEXT.replace('note = "option.c track_coeff"',
+                                'note = "option.c track_coeff"\nkv = [0.2, 1, 2, 0.5, 0.5, 0.4]')
+    assert parse_machine(text, Path("ff.toml")).track.kv == (0.2, 1, 2, 0.5, 0.5, 0.4)
+    with pytest.raises(MachineError, match=r"coefficients\.track\.kv: must have 6 entries"):
+        parse_machine(text.replace("kv = [0.2, 1, 2,", "kv = [0.2,"), Path("ff.toml"))
+
+
 def test_check_targets_names_the_joint() -> None:
     m = load_machine("unimate2000b")
     with pytest.raises(ValueError, match=r"Up/Down target 35° is outside -27…30° "
