@@ -111,9 +111,10 @@ def compare_rtb(model: unimate.Unimate2000B, q: np.ndarray, ours_us: float) -> N
     times_us, solved = [], 0
     for t in targets:
         start = time.perf_counter_ns()
-        _, success, *_ = robot.ik_LM(t)
+        solution = robot.ik_LM(t)
         times_us.append((time.perf_counter_ns() - start) / 1e3)
-        solved += bool(success)
+        # rtb >= 1.2 returns an IKSolution, older versions a tuple
+        solved += bool(solution.success if hasattr(solution, "success") else solution[1])
     median_us = statistics.median(times_us)
     print(f"rtb ik_LM     {median_us:>12.1f} µs/pose  median over {len(targets):,} poses, "
           f"success {100 * solved / len(targets):.1f} %: {median_us / ours_us:.0f}× the "
