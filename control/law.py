@@ -202,17 +202,30 @@ def preset(name: str, machine: Machine) -> Coefficients:
                        f"(it has: {have})") from None
 
 
+def output_min_pwm(joint: Joint) -> tuple[float, float]:
+    """Minimum PWM (%) for a positive and for a negative output u.
+
+    Section 5.4.1 measured the minimums per valve side, and the valve duty is
+    polarity·u (errata #27), so on a joint with polarity −1 a positive u opens
+    the valve's negative side.
+    """
+    if joint.polarity > 0:
+        return joint.min_pwm_pos, joint.min_pwm_neg
+    return joint.min_pwm_neg, joint.min_pwm_pos
+
+
 def _prepare(joint: Joint, c: Coefficients, j: int, dt: float) -> _JointGains:
+    up, down = output_min_pwm(joint)
     return _JointGains(
         gain_unit=joint.gain_unit,
         w=tuple(c.w[j]),
         b=_error_taps(c.kp[j], c.kd[j], c.filter, c.filter_divisor, dt),
         ki_dt=c.ki[j] * dt,
         integral_limit=c.integral_limit,
-        pos_scale=1.0 - joint.min_pwm_pos / 100.0,
-        pmin=joint.min_pwm_pos,
-        neg_scale=1.0 - joint.min_pwm_neg / 100.0,
-        nmin=joint.min_pwm_neg,
+        pos_scale=1.0 - up / 100.0,
+        pmin=up,
+        neg_scale=1.0 - down / 100.0,
+        nmin=down,
         duty_limit=c.duty_limit,
         kv=c.kv[j] if c.kv else 0.0,
     )

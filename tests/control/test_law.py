@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from control.law import DifferenceLaw, pi, pid, preset, valve_duty
+from control.law import DifferenceLaw, output_min_pwm, pi, pid, preset, valve_duty
 from hw.machine import Coefficients, Machine, load_machine
 
 RIG = load_machine("rig")
@@ -93,18 +93,28 @@ def test_observer_as_printed_latches_at_full_duty() -> None:
     assert run(law, [-1.0] * 5) == [100.0] * 5
 
 
-def test_minimum_pwm_maps_onto_the_starting_duty() -> None:
+def test_minimum_pwm_maps_onto_the_starting_duty_of_the_valve_side() -> None:
     law = DifferenceLaw(UNIMATE, pi(UNIMATE, 1.0, 0.0), UNIMATE.sample_time_s)
-    inout = UNIMATE.joints[0]  # section 5.4.1: moves from +26 % / −17 %
+    inout = UNIMATE.joints[0]  # section 5.4.1: the valve moves it from +26 % / −17 %
     assert (inout.min_pwm_pos, inout.min_pwm_neg) == (26.0, 17.0)
+    assert inout.polarity == -1  # so a positive output u is negative valve duty: −17 % side
     assert law.update(0, 0.0) == 0.0  # exactly 0 stays 0 (no chatter at rest)
-    assert law.update(0, 1e-9) == pytest.approx(26.0)  # tiny positive → pmin
-    assert law.update(0, -1e-9) == pytest.approx(-17.0)
-    assert law.update(0, 50.0) == pytest.approx(0.74 * 50 + 26)  # (1 − 26/100)·u + 26 = 63
-    assert law.update(0, -50.0) == pytest.approx(0.83 * -50 - 17)  # −58.5
+    assert law.update(0, 1e-9) == pytest.approx(17.0)  # tiny positive → that side's minimum
+    assert law.update(0, -1e-9) == pytest.approx(-26.0)
+    assert law.update(0, 50.0) == pytest.approx(0.83 * 50 + 17)  # (1 − 17/100)·u + 17 = 58.5
+    assert law.update(0, -50.0) == pytest.approx(0.74 * -50 - 26)  # −63
     assert law.update(0, 100.0) == pytest.approx(100.0)
     assert law.update(0, 1e6) == pytest.approx(100.0)  # saturated first, then mapped: 100
     assert law.update(0, -1e6) == pytest.approx(-100.0)
+    rig = DifferenceLaw(RIG, pi(RIG, 1.0, 0.0), RIG.sample_time_s)
+    assert output_min_pwm(RIG.joints[0]) == (0.0, 0.0) and rig.update(0, 1e-9) > 0
+
+
+def test_output_min_pwm_follows_polarity() -> None:
+    for joint in UNIMATE.joints:
+        up, down = output_min_pwm(joint)
+        assert valve_duty(joint, up) in (joint.min_pwm_pos, -joint.min_pwm_neg)
+        assert (up if joint.polarity < 0 else down) == joint.min_pwm_neg
 
 
 def test_duty_limit_after_saturation() -> None:
@@ -170,8 +180,9 @@ def test_valve_duty_scales_downward_output_then_applies_polarity() -> None:
 
 def test_unimate_hold_acts_per_joint() -> None:
     law = DifferenceLaw(UNIMATE, UNIMATE.hold, UNIMATE.sample_time_s)
-    # Up/Down hold: Kp 11, Ki 100; 1° error: 11 + 100·1·0.001 = 11.1, then (1 − 14/100)·11.1 + 14
-    assert law.update(2, 1.0) == pytest.approx(0.86 * 11.1 + 14)
+    # Up/Down hold: Kp 11, Ki 100; 1° error: 11 + 100·1·0.001 = 11.1; polarity −1, so the
+    # valve's negative side (26 %, section 5.4.1) starts it: (1 − 26/100)·11.1 + 26
+    assert law.update(2, 1.0) == pytest.approx(0.74 * 11.1 + 26)
     assert law.state(0).integral == 0.0  # other joints untouched
 
 
@@ -210,9 +221,10 @@ def test_pid_pi_and_preset_build_coefficient_sets() -> None:
 def test_output_is_zero_or_between_min_pwm_and_the_limit(errors: list[float], j: int) -> None:
     law = DifferenceLaw(UNIMATE, UNIMATE.track, UNIMATE.sample_time_s)
     joint = UNIMATE.joints[j]
+    up, down = output_min_pwm(joint)
     for e in errors:
         u = law.update(j, e)
-        assert u == 0.0 or joint.min_pwm_pos <= u <= 100.0 or -100.0 <= u <= -joint.min_pwm_neg
+        assert u == 0.0 or up <= u <= 100.0 or -100.0 <= u <= -down
 
 
 def test_velocity_feed_forward_adds_kv_times_the_desired_velocity() -> None:
