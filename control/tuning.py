@@ -1,0 +1,412 @@
+"""Controller tuning from identified joint models (thesis sections 5.4, 6.3) and feed-forward.
+
+Loop model. The eq. 5.1 law (``control.law``) turns error e (gain units) into
+output u; min-PWM compensation maps u onto the valve beyond ``pmin`` (section
+5.4.1); the valve and joint are the identified ``sysid.DeadbandModel``. With
+compensation matching the deadband, the joint sees u through the slope
+``K± = k±·(1 − p±/100)``, so for design the plant from u to position is::
+
+    P(s) = K · ωn² / (s·(s² + 2ζωn·s + ωn²)) · e^(−s·delay),   K = max(K₊, K₋)
+
+discretised with a zero-order hold at the loop's sample time, plus
+``LOOP_DELAY_SAMPLES`` (an encoder word up to one scan old and the PWM
+written at the next valve period). The larger slope is the stability worst
+case. ``p±`` are the minimums **the law adds** (``control.law.output_min_pwm``), whichever
+they are.
+
+PI design (``design_pi``): maximise the integral gain ki subject to the
+closed loop being stable and its peak sensitivity ``max|1/(1 + C·P)|`` ≤ ``ms``
+(the MIGO design of Åström and Hägglund, *Advanced PID Control*, ch. 7): for
+every kp on a grid the largest admissible ki is found by bisection. For a
+loop that already integrates (the joint), the integral of the error after a
+ramp starts is ``v/(K·ki)``, so the largest ki is the best ramp tracker the
+robustness bound allows; ``ms`` = 2 is the textbook's aggressive end (1.4 for
+a hold set that must never ring). The result is an eq. 5.1 set (``kp`` one
+tap, ``ki``, no derivative, no ``w``) that the operator applies to the hold or
+the track set with ``ControlClient.set_coefficients``. Its integrator clamp is
+the duty limit, not the thesis's 50 (section 3.6.1): at a steady speed the
+error of a P.I. loop around an integrating joint goes to zero, so the
+integrator alone holds the duty that speed needs, and a clamp at 50 % leaves
+a following error wherever the path asks for more (the Unimate's In/Out at
+200 mm/s needs about 60 %).
+
+Prediction (``simulate``): the law itself (``DifferenceLaw``, so saturation,
+the integrator clamp and min-PWM compensation are all there) closed around
+the identified models, with the valve's duty quantisation.
+
+Feed-forward (``feed_forward``): the duty that gives the desired velocity on
+the identified line, expressed as an addition to the law's output u *before*
+min-PWM compensation: ``u_ff = kv±·v + offset±`` with ``kv± = 1/K±`` %/(unit/s)
+and ``offset± = (d± − p±)/(1 − p±/100)`` %, the deadband the compensation
+leaves (negative when it over-compensates; then speeds below ``k±·(p± − d±)``
+cannot be reached with that sign of u and ``u_ff`` is held at 0).
+``feed_forward_path`` emulates it with today's loop, which has no kv yet:
+the law is linear below its clamps, so shifting the desired path by δ with
+``Σ b_i·δ(k−i) + ki·Δt·Σ δ = u_ff`` makes the law emit exactly u_fb + u_ff.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numpy.typing import ArrayLike
+from scipy import signal
+
+from control.law import DifferenceLaw, output_min_pwm, valve_duty
+from control.sysid import DeadbandModel
+from hw.machine import Coefficients, Joint, Machine
+
+DEFAULT_MS = 2.0
+LOOP_DELAY_SAMPLES = 1
+FREQUENCIES = 1500  # log-spaced points from 0.01 Hz to Nyquist for the sensitivity peak
+KP_GRID = 150  # loop gains K·kp tried, log-spaced from 0.5 rad/s to a quarter of Nyquist
+BISECTIONS = 40
+REST_SPEED = 1e-9  # units/s below which a desired velocity counts as standing still
+
+
+@dataclass(frozen=True)
+class Margins:
+    """Robustness of one joint's loop: peak sensitivity, gain crossover, phase margin."""
+
+    stable: bool
+    ms: float
+    crossover_hz: float
+    phase_margin_deg: float
+
+
+@dataclass(frozen=True)
+class Design:
+    """A P.I. design for one joint: ``kp`` %/unit, ``ki`` %/(unit·s) (gain units), its margins."""
+
+    joint: str
+    kp: float
+    ki: float
+    margins: Margins
+
+
+@dataclass(frozen=True)
+class Proposal:
+    """Proposed coefficients and the design of each joint (None: kept from ``base``)."""
+
+    coefficients: Coefficients
+    designs: tuple[Design | None, ...]
+
+
+@dataclass(frozen=True)
+class FeedForward:
+    """Velocity feed-forward of one joint (module docstring): ``kv_pos``, ``kv_neg`` in
+    %/(unit/s) and ``offset_pos``, ``offset_neg`` in % (signed), to add to the law's output
+    before min-PWM compensation; ``gain_pos``, ``gain_neg`` = 1/k± %/(unit/s) and
+    ``deadband_pos``, ``deadband_neg`` = d± % are the same line for adding to the valve duty
+    after it."""
+
+    joint: str
+    unit: str
+    kv_pos: float
+    kv_neg: float
+    offset_pos: float
+    offset_neg: float
+    gain_pos: float
+    gain_neg: float
+    deadband_pos: float
+    deadband_neg: float
+
+    def duty(self, velocity: ArrayLike) -> np.ndarray:
+        """``u_ff`` (%) for desired velocities (units/s), never against their sign."""
+        v = np.asarray(velocity, dtype=float)
+        up = np.maximum(self.kv_pos * v + self.offset_pos, 0.0)
+        down = np.minimum(self.kv_neg * v - self.offset_neg, 0.0)
+        return np.where(v > REST_SPEED, up, np.where(v < -REST_SPEED, down, 0.0))
+
+
+@dataclass(frozen=True)
+class ClosedLoop:
+    """A predicted (or recorded) closed-loop response: ``t (N,)`` s, ``desired``,
+    ``position`` ``(N, J)`` mm/deg, ``duty (N, J)`` % controller output."""
+
+    t: np.ndarray
+    desired: np.ndarray
+    position: np.ndarray
+    duty: np.ndarray
+
+    def rms_error(self) -> np.ndarray:
+        """RMS of desired − position per joint ``(J,)``."""
+        return np.sqrt(np.mean((self.desired - self.position) ** 2, axis=0))
+
+
+def slopes(model: DeadbandModel, joint: Joint) -> tuple[float, float]:
+    """``K₊, K₋``: joint units/s per % of law output u, through the law's compensation."""
+    p_pos, p_neg = output_min_pwm(joint)
+    return model.k_pos * (1.0 - p_pos / 100.0), model.k_neg * (1.0 - p_neg / 100.0)
+
+
+def loop_plant(model: DeadbandModel, joint: Joint, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """The design plant from law output u to the error's units, discrete at ``dt``:
+    ``(num, den)`` polynomials in z (highest power first)."""
+    gain = max(slopes(model, joint)) / joint.gain_unit  # the law sees error / gain_unit
+    wn, zeta = model.wn, model.zeta
+    num, den, _ = signal.cont2discrete(
+        ([gain * wn * wn], [1.0, 2.0 * zeta * wn, wn * wn, 0.0]), dt, "zoh")
+    num = np.trim_zeros(np.ravel(num), "f")
+    lag = round(model.delay_s / dt) + LOOP_DELAY_SAMPLES
+    return num, np.concatenate([np.ravel(den), np.zeros(lag)])
+
+
+def controller(coefficients: Coefficients, j: int, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """Joint ``j``'s eq. 5.1 law as ``(num, den)`` polynomials in z, linear part only:
+    ``(Σ b_i z⁻ⁱ + ki·Δt / (1 − z⁻¹)) / (1 − Σ w_i z^−(i+1))``."""
+    b = np.array(error_taps(coefficients, j, dt))
+    w = np.array(coefficients.w[j], dtype=float)
+    ki_dt = coefficients.ki[j] * dt
+    # coefficients of z⁰, z⁻¹, …: numerator B·(1 − z⁻¹) + ki·Δt, denominator
+    # (1 − z⁻¹)·(1 − Σ w_i z^−(i+1)); padded to one length they read as polynomials in z,
+    # highest power first, with the same ratio
+    num = np.convolve(b, [1.0, -1.0])
+    num[0] += ki_dt
+    den = np.convolve([1.0, -1.0], np.concatenate([[1.0], -w]))
+    size = max(len(num), len(den))
+    return np.pad(num, (0, size - len(num))), np.pad(den, (0, size - len(den)))
+
+
+def error_taps(coefficients: Coefficients, j: int, dt: float) -> tuple[float, ...]:
+    """The taps on e(k), e(k−1), … of eq. 5.1: ``kp[i] + kd·filter[i] / (divisor·Δt)``."""
+    kp = list(coefficients.kp[j])
+    kd = coefficients.kd[j]
+    d = [kd * f / (coefficients.filter_divisor * dt) for f in coefficients.filter] if kd else []
+    n = max(len(kp), len(d), 1)
+    kp += [0.0] * (n - len(kp))
+    d += [0.0] * (n - len(d))
+    return tuple(p + q for p, q in zip(kp, d, strict=True))
+
+
+def margins(plant: tuple[np.ndarray, np.ndarray], ctrl: tuple[np.ndarray, np.ndarray],
+            dt: float) -> Margins:
+    """Stability (closed-loop poles), peak sensitivity, crossover and phase margin."""
+    pn, pd = plant
+    cn, cd = ctrl
+    char = np.polyadd(np.polymul(cd, pd), np.polymul(cn, pn))
+    stable = bool(np.all(np.abs(np.roots(char)) < 1.0))
+    w, loop = _loop_response(plant, ctrl, dt)
+    ms = float(np.max(np.abs(1.0 / (1.0 + loop))))
+    above = np.abs(loop) >= 1.0
+    cross = int(np.flatnonzero(above)[-1]) if above.any() else 0
+    pm = float(180.0 + np.degrees(np.angle(loop[cross])))
+    return Margins(stable, ms if stable else math.inf, float(w[cross] / (2 * math.pi)), pm)
+
+
+def design_pi(model: DeadbandModel, joint: Joint, dt: float, ms: float = DEFAULT_MS) -> Design:
+    """The P.I. gains with the largest ki whose loop is stable with peak sensitivity ≤ ``ms``."""
+    if ms <= 1.0:
+        raise ValueError(f"the peak sensitivity bound must exceed 1, got {ms:g}")
+    plant = loop_plant(model, joint, dt)
+    w, response = _plant_response(plant, dt)
+    gain = max(slopes(model, joint)) / joint.gain_unit
+    best: tuple[float, float] | None = None
+    for kp in np.geomspace(0.5, 0.25 * math.pi / dt, KP_GRID) / gain:
+        if not _admissible(plant, response, w, dt, kp, 0.0, ms):
+            continue
+        lo, hi = 0.0, 1e3 * kp / dt
+        for _ in range(BISECTIONS):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if _admissible(plant, response, w, dt, kp, mid, ms) else (lo, mid)
+        if best is None or lo > best[1]:
+            best = (float(kp), lo)
+    if best is None:
+        raise ValueError(f"{joint.name}: no P.I. gains keep the peak sensitivity under {ms:g} "
+                         "on the identified model; allow a larger ms or check the model")
+    kp, ki = best
+    return Design(joint.name, kp, ki, margins(plant, _pi(kp, ki, dt), dt))
+
+
+def propose(models: Sequence[DeadbandModel | None], machine: Machine, base: Coefficients, *,
+            ms: float = DEFAULT_MS, name: str = "proposed", dt: float | None = None) -> Proposal:
+    """A P.I. set from the identified ``models`` (one per joint; None keeps ``base``'s gains),
+    with ``base``'s filter and duty limit, and the integrator clamped at the duty limit."""
+    if len(models) != machine.n_joints:
+        raise ValueError(f"need one model (or None) per joint, {machine.n_joints}, got "
+                         f"{len(models)}")
+    step = machine.sample_time_s if dt is None else dt
+    designs = tuple(None if m is None else design_pi(m, joint, step, ms)
+                    for m, joint in zip(models, machine.joints, strict=True))
+    kp = tuple(base.kp[j] if d is None else (d.kp,) for j, d in enumerate(designs))
+    ki = tuple(base.ki[j] if d is None else d.ki for j, d in enumerate(designs))
+    kd = tuple(base.kd[j] if d is None else 0.0 for j, d in enumerate(designs))
+    w = tuple(base.w[j] if d is None else () for j, d in enumerate(designs))
+    shown = ", ".join(f"{d.joint} {d.kp:.3g}/{d.ki:.3g}" for d in designs if d is not None)
+    note = f"P.I. (Kp/Ki) by max ki with Ms ≤ {ms:g} on identified models: {shown}"
+    coefficients = replace(base, name=name, note=note, kp=kp, ki=ki, kd=kd, w=w,
+                           integral_limit=base.duty_limit)
+    return Proposal(coefficients, designs)
+
+
+def feed_forward(model: DeadbandModel, joint: Joint) -> FeedForward:
+    """The joint's velocity feed-forward from its identified line (module docstring)."""
+    p_pos, p_neg = output_min_pwm(joint)
+    k_pos, k_neg = slopes(model, joint)
+    return FeedForward(
+        joint=joint.name, unit=joint.unit,
+        kv_pos=float(1.0 / k_pos), kv_neg=float(1.0 / k_neg),
+        offset_pos=float((model.d_pos - p_pos) / (1.0 - p_pos / 100.0)),
+        offset_neg=float((model.d_neg - p_neg) / (1.0 - p_neg / 100.0)),
+        gain_pos=float(1.0 / model.k_pos), gain_neg=float(1.0 / model.k_neg),
+        deadband_pos=float(model.d_pos), deadband_neg=float(model.d_neg),
+    )
+
+
+def feed_forward_duty(ffs: Sequence[FeedForward | None], velocity: ArrayLike,
+                      machine: Machine) -> np.ndarray:
+    """``u_ff (N, J)`` % for desired reading velocities ``(N, J)`` (units/s); None joints get
+    0. A coupled reading's velocity is turned into its actuator's (the Yaw reading moves with
+    Bend, rtshare.h ``joint_dep``): the valve drives the actuator."""
+    v = np.asarray(velocity, dtype=float)
+    out = np.zeros_like(v)
+    for j, (ff, joint) in enumerate(zip(ffs, machine.joints, strict=True)):
+        if ff is None:
+            continue
+        enc = joint.encoder
+        own = v[:, j] if enc.coupled_to is None else v[:, j] - enc.coupling * v[:, enc.coupled_to]
+        out[:, j] = ff.duty(own)
+    return out
+
+
+def feed_forward_path(desired: ArrayLike, u_ff: ArrayLike, coefficients: Coefficients,
+                      machine: Machine, dt: float | None = None) -> np.ndarray:
+    """The desired path ``(N, J)`` shifted so today's law (no kv) adds ``u_ff (N, J)`` % to its
+    output: δ solves ``Σ b_i·δ(k−i) + ki·Δt·Σ_{m≤k} δ(m) = u_ff(k)`` per joint (module
+    docstring). Exact while the law stays below its saturation and integrator clamp."""
+    d = np.asarray(desired, dtype=float)
+    ff = np.asarray(u_ff, dtype=float)
+    step = machine.sample_time_s if dt is None else dt
+    shifted = d.copy()
+    for j, joint in enumerate(machine.joints):
+        if not np.any(ff[:, j]):
+            continue
+        if coefficients.w[j]:
+            raise ValueError(f"{joint.name}: feed-forward emulation needs a law without w taps")
+        b = np.array(error_taps(coefficients, j, step))
+        ki_dt = coefficients.ki[j] * step
+        num, _ = controller(coefficients, j, step)
+        if np.any(np.abs(np.roots(num)) >= 1.0):
+            raise ValueError(f"{joint.name}: the law's zeros are not inside the unit circle, so "
+                             "its inverse (the path shift) would grow without bound")
+        shifted[:, j] += joint.gain_unit * _law_inverse(ff[:, j], b, ki_dt)
+    return shifted
+
+
+def simulate(models: Sequence[DeadbandModel | None], machine: Machine,
+             coefficients: Coefficients, desired: ArrayLike, *,
+             initial: ArrayLike | None = None, dt: float | None = None) -> ClosedLoop:
+    """The eq. 5.1 law (``DifferenceLaw``) closed around the identified models, following
+    ``desired (N, J)`` from rest at the readings ``initial (J,)`` (default: its first row);
+    joints without a model follow exactly. The models move actuators; the law sees
+    readings, a coupled one including its partner (the Yaw reading includes Bend, rtshare.h
+    ``joint_dep``)."""
+    d = np.asarray(desired, dtype=float)
+    q0 = d[0] if initial is None else np.asarray(initial, dtype=float)
+    step = machine.sample_time_s if dt is None else dt
+    law = DifferenceLaw(machine, coefficients, step)
+    couplings = [(j.encoder.coupled_to, j.encoder.coupling) for j in machine.joints]
+    start = [float(q0[j]) - (0.0 if c is None else k * float(q0[c]))
+             for j, (c, k) in enumerate(couplings)]
+    plants = [None if m is None else _Plant(m, joint, step, machine.valve_resolution_pct, q)
+              for m, joint, q in zip(models, machine.joints, start, strict=True)]
+    order = sorted(range(machine.n_joints), key=lambda j: couplings[j][0] is not None)
+    position = d.copy()
+    duty = np.zeros_like(d)
+    for k in range(len(d)):
+        for j in order:
+            plant, (c, gain) = plants[j], couplings[j]
+            own = d[k, j] if plant is None else plant.position
+            position[k, j] = own if c is None or plant is None else own + gain * position[k, c]
+        for j, plant in enumerate(plants):
+            if plant is not None:
+                duty[k, j] = law.update(j, d[k, j] - position[k, j])
+                plant.step(duty[k, j])
+    return ClosedLoop(np.arange(len(d)) * step, d, position, duty)
+
+
+class _Plant:
+    """One identified joint advanced tick by tick: quantised valve, line, dynamics, integral."""
+
+    def __init__(self, model: DeadbandModel, joint: Joint, dt: float, resolution: float,
+                 start: float) -> None:
+        self.model = model
+        self.joint = joint
+        self.dt = dt
+        self.resolution = resolution
+        num, den = _second_order(model, dt)
+        self.b1, self.b2 = float(num[1]), float(num[2])
+        self.a1, self.a2 = float(den[1]), float(den[2])
+        self.lag = [0.0] * (round(model.delay_s / dt) + 2)  # w(k−delay−1), w(k−delay−2)
+        self.v = [0.0, 0.0]
+        self.position = start
+
+    def step(self, u: float) -> None:
+        """Apply law output ``u`` (%) for one tick."""
+        valve = valve_duty(self.joint, u)
+        applied = math.trunc(valve / self.resolution) * self.resolution  # UPP truncation
+        u_applied = applied * self.joint.polarity
+        if u_applied < 0.0:
+            u_applied /= self.joint.down_scale
+        self.lag.insert(0, float(self.model.steady(u_applied)))
+        self.lag.pop()
+        w1, w2 = self.lag[-2], self.lag[-1]
+        v = self.b1 * w1 + self.b2 * w2 - self.a1 * self.v[0] - self.a2 * self.v[1]
+        self.position += 0.5 * (v + self.v[0]) * self.dt
+        self.v = [v, self.v[0]]
+
+
+def _second_order(model: DeadbandModel, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    wn, zeta = model.wn, model.zeta
+    num, den, _ = signal.cont2discrete(([wn * wn], [1.0, 2.0 * zeta * wn, wn * wn]), dt, "zoh")
+    return np.ravel(num), np.ravel(den)
+
+
+def _law_inverse(u: np.ndarray, b: np.ndarray, ki_dt: float) -> np.ndarray:
+    """δ (gain units) with ``Σ b_i·δ(k−i) + ki_dt·Σ_{m≤k} δ(m) = u(k)`` for every k."""
+    delta = np.zeros_like(u)
+    lead = b[0] + ki_dt
+    total = 0.0
+    for k in range(len(u)):
+        past = sum(b[i] * delta[k - i] for i in range(1, min(len(b), k + 1)))
+        delta[k] = (u[k] - past - ki_dt * total) / lead
+        total += delta[k]
+    return delta
+
+
+def _pi(kp: float, ki: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """A P.I. law ``kp + ki·Δt·z/(z − 1)`` as (num, den) in z."""
+    return np.array([kp + ki * dt, -kp]), np.array([1.0, -1.0])
+
+
+def _frequencies(dt: float) -> np.ndarray:
+    return 2 * math.pi * np.geomspace(0.01, 0.5 / dt, FREQUENCIES)
+
+
+def _plant_response(plant: tuple[np.ndarray, np.ndarray],
+                    dt: float) -> tuple[np.ndarray, np.ndarray]:
+    w = _frequencies(dt)
+    z = np.exp(1j * w * dt)
+    return w, np.polyval(plant[0], z) / np.polyval(plant[1], z)
+
+
+def _loop_response(plant: tuple[np.ndarray, np.ndarray], ctrl: tuple[np.ndarray, np.ndarray],
+                   dt: float) -> tuple[np.ndarray, np.ndarray]:
+    w, p = _plant_response(plant, dt)
+    z = np.exp(1j * w * dt)
+    return w, p * np.polyval(ctrl[0], z) / np.polyval(ctrl[1], z)
+
+
+def _admissible(plant: tuple[np.ndarray, np.ndarray], response: np.ndarray, w: np.ndarray,
+                dt: float, kp: float, ki: float, ms: float) -> bool:
+    """Whether P.I. (kp, ki) gives a stable loop with peak sensitivity ≤ ms."""
+    cn, cd = _pi(kp, ki, dt)
+    char = np.polyadd(np.polymul(cd, plant[1]), np.polymul(cn, plant[0]))
+    if np.any(np.abs(np.roots(char)) >= 1.0):
+        return False
+    z = np.exp(1j * w * dt)
+    loop = response * np.polyval(cn, z) / np.polyval(cd, z)
+    return bool(np.max(np.abs(1.0 / (1.0 + loop))) <= ms)
