@@ -18,11 +18,8 @@ simulator).
    seconds to settle, and a lockstep hold lasts as long as the script takes to
    send the next move).
 
-Feed-forward: the loop has no kv yet, so the third column is emulated by
-shifting the desired path through the inverse of the law's linear part
-(``tuning.feed_forward_path``); the law then emits its feedback plus exactly
-the feed-forward while it stays below its clamps. Errors are always against
-the unshifted path.
+Feed-forward: the third column adds ``kv·v_desired`` in the loop, with kv
+from the identified models (``tuning.with_feed_forward``).
 """
 
 from __future__ import annotations
@@ -71,22 +68,16 @@ def main() -> None:
         print_feed_forward(ffs)
         desired = np.vstack([path.q, np.repeat(path.q[-1:], round(SETTLE_S / machine.sample_time_s),
                                                axis=0)])
-        velocity = np.gradient(desired, machine.sample_time_s, axis=0)
-        shifted = tuning.feed_forward_path(
-            desired, tuning.feed_forward_duty(ffs, velocity, machine), proposal.coefficients,
-            machine)
+        feed_forward = tuning.with_feed_forward(proposal.coefficients, ffs)
         columns = {
             "thesis P.I. (5.4.2)": follow(robot, machine, machine.coefficients["thesis_pi"],
                                           desired, proposal.coefficients),
             "identified P.I.": follow(robot, machine, proposal.coefficients, desired,
                                       proposal.coefficients),
-            "identified + feed-forward*": follow(robot, machine, proposal.coefficients, shifted,
-                                                 proposal.coefficients),
+            "identified + feed-forward": follow(robot, machine, feed_forward, desired,
+                                                proposal.coefficients),
         }
     print_errors(machine, desired, columns)
-    print("* feed-forward emulated: the loop has no kv yet, so the desired path was shifted "
-          "through the\n  inverse of the law's linear part (tuning.feed_forward_path); errors "
-          "are against the unshifted path.")
 
 
 def go_to(robot: ControlClient, machine: Machine, target: np.ndarray) -> None:

@@ -423,6 +423,9 @@ class Controller:
         for j in range(n):
             self.desired[j] = self.clamp(j, move.cells[row + j])
             self.velocity[j] = (move.cells[after + j] - move.cells[before + j]) / span
+        for j in range(n):  # feed-forward drives the actuator: the Yaw reading includes Bend
+            if self.coupled[j] >= 0:
+                self.velocity[j] -= self.coupling[j] * self.velocity[self.coupled[j]]
         self.closed_loop(self.desired, self.velocity)
         self.record()
 

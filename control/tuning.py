@@ -40,9 +40,11 @@ min-PWM compensation: ``u_ff = kv±·v + offset±`` with ``kv± = 1/K±`` %/(uni
 and ``offset± = (d± − p±)/(1 − p±/100)`` %, the deadband the compensation
 leaves (negative when it over-compensates; then speeds below ``k±·(p± − d±)``
 cannot be reached with that sign of u and ``u_ff`` is held at 0).
-``feed_forward_path`` emulates it with today's loop, which has no kv yet:
-the law is linear below its clamps, so shifting the desired path by δ with
-``Σ b_i·δ(k−i) + ki·Δt·Σ δ = u_ff`` makes the law emit exactly u_fb + u_ff.
+``with_feed_forward`` puts the mean of kv± into a coefficient set's ``kv``:
+the loop adds ``kv·v`` with ``v`` the desired velocity of the joint's actuator
+(for Yaw, the reading's velocity less Bend's, rtshare.h ``joint_dep``). Since
+min-PWM compensation takes the valve side the output opens (errata #27), the
+identified offsets are near zero and one gain per joint suffices.
 """
 
 from __future__ import annotations
@@ -256,44 +258,11 @@ def feed_forward(model: DeadbandModel, joint: Joint) -> FeedForward:
     )
 
 
-def feed_forward_duty(ffs: Sequence[FeedForward | None], velocity: ArrayLike,
-                      machine: Machine) -> np.ndarray:
-    """``u_ff (N, J)`` % for desired reading velocities ``(N, J)`` (units/s); None joints get
-    0. A coupled reading's velocity is turned into its actuator's (the Yaw reading moves with
-    Bend, rtshare.h ``joint_dep``): the valve drives the actuator."""
-    v = np.asarray(velocity, dtype=float)
-    out = np.zeros_like(v)
-    for j, (ff, joint) in enumerate(zip(ffs, machine.joints, strict=True)):
-        if ff is None:
-            continue
-        enc = joint.encoder
-        own = v[:, j] if enc.coupled_to is None else v[:, j] - enc.coupling * v[:, enc.coupled_to]
-        out[:, j] = ff.duty(own)
-    return out
-
-
-def feed_forward_path(desired: ArrayLike, u_ff: ArrayLike, coefficients: Coefficients,
-                      machine: Machine, dt: float | None = None) -> np.ndarray:
-    """The desired path ``(N, J)`` shifted so today's law (no kv) adds ``u_ff (N, J)`` % to its
-    output: δ solves ``Σ b_i·δ(k−i) + ki·Δt·Σ_{m≤k} δ(m) = u_ff(k)`` per joint (module
-    docstring). Exact while the law stays below its saturation and integrator clamp."""
-    d = np.asarray(desired, dtype=float)
-    ff = np.asarray(u_ff, dtype=float)
-    step = machine.sample_time_s if dt is None else dt
-    shifted = d.copy()
-    for j, joint in enumerate(machine.joints):
-        if not np.any(ff[:, j]):
-            continue
-        if coefficients.w[j]:
-            raise ValueError(f"{joint.name}: feed-forward emulation needs a law without w taps")
-        b = np.array(error_taps(coefficients, j, step))
-        ki_dt = coefficients.ki[j] * step
-        num, _ = controller(coefficients, j, step)
-        if np.any(np.abs(np.roots(num)) >= 1.0):
-            raise ValueError(f"{joint.name}: the law's zeros are not inside the unit circle, so "
-                             "its inverse (the path shift) would grow without bound")
-        shifted[:, j] += joint.gain_unit * _law_inverse(ff[:, j], b, ki_dt)
-    return shifted
+def with_feed_forward(coefficients: Coefficients,
+                      ffs: Sequence[FeedForward | None]) -> Coefficients:
+    """``coefficients`` with velocity feed-forward ``kv`` = mean of kv± per joint (0 for None)."""
+    kv = tuple(0.0 if ff is None else (ff.kv_pos + ff.kv_neg) / 2 for ff in ffs)
+    return replace(coefficients, kv=kv)
 
 
 def simulate(models: Sequence[DeadbandModel | None], machine: Machine,
@@ -363,18 +332,6 @@ def _second_order(model: DeadbandModel, dt: float) -> tuple[np.ndarray, np.ndarr
     wn, zeta = model.wn, model.zeta
     num, den, _ = signal.cont2discrete(([wn * wn], [1.0, 2.0 * zeta * wn, wn * wn]), dt, "zoh")
     return np.ravel(num), np.ravel(den)
-
-
-def _law_inverse(u: np.ndarray, b: np.ndarray, ki_dt: float) -> np.ndarray:
-    """δ (gain units) with ``Σ b_i·δ(k−i) + ki_dt·Σ_{m≤k} δ(m) = u(k)`` for every k."""
-    delta = np.zeros_like(u)
-    lead = b[0] + ki_dt
-    total = 0.0
-    for k in range(len(u)):
-        past = sum(b[i] * delta[k - i] for i in range(1, min(len(b), k + 1)))
-        delta[k] = (u[k] - past - ki_dt * total) / lead
-        total += delta[k]
-    return delta
 
 
 def _pi(kp: float, ki: float, dt: float) -> tuple[np.ndarray, np.ndarray]:

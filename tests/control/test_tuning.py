@@ -102,28 +102,12 @@ def test_feed_forward_inverts_the_identified_line_through_the_compensation() -> 
     assert ROTATE.steady(duty) == pytest.approx(20.0)
 
 
-def test_feed_forward_drives_a_coupled_joints_actuator() -> None:
+def test_with_feed_forward_sets_kv_per_joint() -> None:
     ffs = [tuning.feed_forward(m, j) for m, j in zip(MODELS, UNIMATE.joints, strict=True)]
-    velocity = np.zeros((3, 6))
-    velocity[:, 3] = 30.0  # Bend turns
-    velocity[:, 4] = 30.0  # and the Yaw reading with it: the Yaw actuator stands still
-    u = tuning.feed_forward_duty(ffs, velocity, UNIMATE)
-    assert np.all(u[:, 3] > 0.0) and not u[:, 4].any()
-
-
-def test_the_shifted_path_makes_todays_law_add_the_feed_forward() -> None:
-    plain = linear(UNIMATE)
-    c = pi(plain, [20.0] * 6, [300.0] * 6, integral_limit=1e9)
-    rng = np.random.default_rng(1)
-    desired = np.cumsum(rng.normal(0, 0.01, (400, 6)), axis=0)
-    actual = desired + rng.normal(0, 0.05, desired.shape)
-    u_ff = rng.uniform(-30, 30, desired.shape)
-    shifted = tuning.feed_forward_path(desired, u_ff, c, plain)
-    with_ff = law_outputs(plain, c, shifted - actual)
-    without = law_outputs(plain, c, desired - actual)
-    np.testing.assert_allclose(with_ff, without + u_ff, atol=1e-9)
-    with pytest.raises(ValueError, match="without w taps"):
-        tuning.feed_forward_path(desired, u_ff, replace(c, w=((0.5,),) * 6), plain)
+    ffs[5] = None
+    c = tuning.with_feed_forward(THESIS, ffs)
+    assert c.kv[1] == pytest.approx((ffs[1].kv_pos + ffs[1].kv_neg) / 2) and c.kv[5] == 0.0
+    assert (c.kp, c.ki) == (THESIS.kp, THESIS.ki)
 
 
 def test_simulate_closes_the_law_around_the_models() -> None:
