@@ -40,6 +40,7 @@ from hw.machine import Coefficients, Machine, load_machine
 
 HEARTBEAT_S = 0.05
 DEATH_S = 0.25
+SPIN_US = 150.0  # spin before each deadline: keeps the core and its caches (benchmarks/loop.py)
 
 
 class ControllerError(RuntimeError):
@@ -101,7 +102,7 @@ class ControlClient:
     def __init__(self, machine: str | Path | Machine = "unimate2000b", backend: str = "sim", *,
                  port: str | None = None, seed: int = 0, lockstep: bool = False,
                  data_dir: str | Path | None = None, period_s: float | None = None,
-                 realtime: bool = True, spin_us: float = 0.0,
+                 realtime: bool = True, spin_us: float = SPIN_US,
                  heartbeat_timeout_s: float = DEATH_S, orphan_timeout_s: float = 5.0,
                  start_timeout_s: float = 30.0, sim_options: dict | None = None,
                  on_event: Callable[[Event], None] | None = None) -> None:

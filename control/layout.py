@@ -79,6 +79,7 @@ class Status:
     compute_last_us: float
     compute_max_us: float
     compute_total_s: float
+    io_total_s: float
     position: tuple[float, ...]
     desired: tuple[float, ...]
     duty: tuple[float, ...]
@@ -107,22 +108,22 @@ class StatusLayout:
     def __init__(self, n: int) -> None:
         self.n = n
         self.struct = struct.Struct(
-            f"<qqqiiqqqqqqqqq{n}d{n}d{n}d{n}d{n}q{n}q{len(LINK_FIELDS)}q{FAULT_TEXT}s"
+            f"<qqqiiqqqqqqqqqq{n}d{n}d{n}d{n}d{n}q{n}q{len(LINK_FIELDS)}q{FAULT_TEXT}s"
         )
 
     def decode(self, values: tuple) -> Status:
         n = self.n
         (tick, time_ns, wall_ns, mode, flags, move_id, done, total,
-         late_last, late_max, overruns, comp_last, comp_max, comp_total) = values[:14]
-        arrays = values[14:14 + 6 * n]
-        link = values[14 + 6 * n:14 + 6 * n + len(LINK_FIELDS)]
+         late_last, late_max, overruns, comp_last, comp_max, comp_total, io_total) = values[:15]
+        arrays = values[15:15 + 6 * n]
+        link = values[15 + 6 * n:15 + 6 * n + len(LINK_FIELDS)]
         fault = values[-1].rstrip(b"\0").decode("utf-8", "replace")
         return Status(
             tick=tick, time_s=time_ns / 1e9, wall_ns=wall_ns, mode=Mode(mode), flags=Flag(flags),
             move_id=move_id, move_done=done, move_total=total,
             late_last_us=late_last / 1e3, late_max_us=late_max / 1e3, overruns=overruns,
             compute_last_us=comp_last / 1e3, compute_max_us=comp_max / 1e3,
-            compute_total_s=comp_total / 1e9,
+            compute_total_s=comp_total / 1e9, io_total_s=io_total / 1e9,
             position=arrays[0:n], desired=arrays[n:2 * n], duty=arrays[2 * n:3 * n],
             valve=arrays[3 * n:4 * n], raw=arrays[4 * n:5 * n], glitches=arrays[5 * n:6 * n],
             link=dict(zip(LINK_FIELDS, link, strict=True)), fault=fault,

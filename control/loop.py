@@ -140,6 +140,7 @@ class Controller:
         self.compute_ns = 0
         self.compute_max_ns = 0
         self.compute_total_ns = 0
+        self.io_total_ns = 0  # time inside backend.read/write, part of compute
         self.next_ferror_ns = 0
         self.init_started_ns = 0
         self.init_reference = (0.0, 0)
@@ -222,8 +223,10 @@ class Controller:
     # -- read: encoders to joint units, with the glitch filter (section 6.2) ----
 
     def read(self) -> None:
+        before = self.clock.now_ns()
         self.backend.read(self.raw)
         now = self.clock.now_ns()
+        self.io_total_ns += now - before
         for j in range(self.n):
             count = gray_to_binary(self.raw[j]) if self.gray else self.raw[j] - self.offset[j]
             q = self.gradient[j] * count + self.constant[j]
@@ -546,7 +549,9 @@ class Controller:
         joints = self.machine.joints
         for j in range(self.n):
             self.valve[j] = 0.0 if self.estop_latched else valve_duty(joints[j], self.duty[j])
+        before = self.clock.now_ns()
         self.backend.write(self.valve)
+        self.io_total_ns += self.clock.now_ns() - before
 
     def zero_duty(self) -> None:
         for j in range(self.n):
@@ -574,7 +579,7 @@ class Controller:
             move.move_id if move else 0, move.index if move else 0,
             move.layout.samples if move else 0,
             self.late_ns, self.late_max_ns, self.overruns, self.compute_ns, self.compute_max_ns,
-            self.compute_total_ns,
+            self.compute_total_ns, self.io_total_ns,
             *self.position, *self.desired, *self.duty, *self.valve, *self.raw, *self.glitches,
             *[getattr(counters, name) for name in LINK_FIELDS], self.fault.encode()[:160])
 

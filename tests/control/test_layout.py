@@ -47,7 +47,8 @@ def test_too_many_taps_is_a_clear_error() -> None:
 
 def test_status_decodes_what_was_packed() -> None:
     layout = ControlLayout(6).status
-    values = [7, 2_000_000_000, 123, 1, 4 | 64, 3, 10, 100, 5000, 9000, 2, 1500, 4000, 10**9]
+    values = [7, 2_000_000_000, 123, 1, 4 | 64, 3, 10, 100, 5000, 9000, 2, 1500, 4000, 10**9,
+              5 * 10**8]
     values += [float(i) for i in range(24)] + list(range(6)) + [0, 1, 0, 2, 0, 0] + list(range(8))
     values += [b"link lost"]
     status = layout.decode(layout.struct.unpack(layout.struct.pack(*values)))
@@ -57,7 +58,7 @@ def test_status_decodes_what_was_packed() -> None:
     assert status.glitches == (0, 1, 0, 2, 0, 0)
     assert status.link["crc_errors"] == 2 and status.fault == "link lost"
     assert status.late_last_us == 5.0 and status.compute_max_us == 4.0
-    assert status.compute_total_s == 1.0
+    assert status.compute_total_s == 1.0 and status.io_total_s == 0.5
 
 
 def test_move_layout_sizes_follow_the_move() -> None:
