@@ -29,11 +29,11 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     # SUPPRESS: an unset subcommand option must not hide the global --machine
     p.add_argument("--machine", default=argparse.SUPPRESS,
                    help=f"built-in machine or a machine TOML path (default {DEFAULT_MACHINE})")
-    p.add_argument("--tcp", type=int, metavar="PORT",
+    p.add_argument("--tcp", type=_port, metavar="PORT",
                    help="serve one TCP client on 127.0.0.1:PORT (0: any free port) "
                         "instead of a pseudo-terminal")
     p.add_argument("--seed", type=int, default=0, help="simulator and fault-injection seed")
-    p.add_argument("--glitch-scale", type=float, default=1.0, metavar="X",
+    p.add_argument("--glitch-scale", type=_scale, default=1.0, metavar="X",
                    help="multiplies the simulated encoders' wrong-reading rate (0: none)")
     p.add_argument("--corrupt-rate", type=_rate, default=0.0, metavar="R",
                    help="probability that a board-to-host frame has one bit flipped")
@@ -41,7 +41,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                    help="probability that a host-to-board frame has one bit flipped on arrival")
     p.add_argument("--drop-rate", type=_rate, default=0.0, metavar="R",
                    help="probability that a board-to-host frame is never sent")
-    p.add_argument("--silent-after", type=float, metavar="S",
+    p.add_argument("--silent-after", type=_seconds, metavar="S",
                    help="stop answering S seconds after the first configuration (a hung board)")
     p.set_defaults(func=run)
 
@@ -85,8 +85,30 @@ def main(argv: list[str] | None = None) -> int:
     return args.func(args)
 
 
-def _rate(text: str) -> float:
-    value = float(text)
-    if not 0.0 <= value <= 1.0:
-        raise argparse.ArgumentTypeError(f"{text} is not a probability in 0…1")
+def _number(text: str, low: float, high: float, what: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not low <= value <= high:  # also refuses NaN
+        raise argparse.ArgumentTypeError(f"{text} is not {what}")
     return value
+
+
+def _rate(text: str) -> float:
+    return _number(text, 0.0, 1.0, "a probability in 0…1")
+
+
+def _port(text: str) -> int:
+    value = _number(text, 0, 65535, "a TCP port in 0…65535")
+    if value != int(value):
+        raise argparse.ArgumentTypeError(f"{text} is not a whole port number")
+    return int(value)
+
+
+def _scale(text: str) -> float:
+    return _number(text, 0.0, 1e6, "a scale in 0…1e6")
+
+
+def _seconds(text: str) -> float:
+    return _number(text, 0.0, 1e6, "a time in 0…1e6 s")

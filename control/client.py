@@ -40,6 +40,7 @@ from hw.machine import Coefficients, Machine, load_machine
 
 HEARTBEAT_S = 0.05
 DEATH_S = 0.25
+_SESSIONS = itertools.count(1)  # several clients in one process get their own segments
 SPIN_US = 150.0  # spin before each deadline: keeps the core and its caches (benchmarks/loop.py)
 
 
@@ -125,7 +126,7 @@ class ControlClient:
         self.coefficients = {"hold": self.machine.hold, "track": self.machine.track}
         shm.cleanup_orphans()
         self.layout = ControlLayout(self.machine.n_joints)
-        self._segment = shm.create("ctl", self.layout.size)
+        self._segment = shm.create(f"ctl{next(_SESSIONS)}", self.layout.size)
         buf = self._segment.buf
         self.layout.write_header(buf)
         self._status = SeqlockReader(buf, self.layout.status_offset, self.layout.status.struct)
@@ -446,7 +447,17 @@ class ControlClient:
 
     def status(self) -> Status:
         """The controller's newest status snapshot (consistent: read under the seqlock)."""
-        return self.layout.status.decode(self._status.read())
+        try:
+            return self.layout.status.decode(self._status.read())
+        except TimeoutError:  # the writer died mid-record: the last status is torn
+            if self.dead or not self.alive:
+                raise ControllerError(self.dead or "the control process has exited") from None
+            raise
+
+    @property
+    def segment_name(self) -> str:
+        """The control segment's name in /dev/shm."""
+        return self._segment.name
 
     def histogram(self) -> LatencyHistogram:
         """The loop's wake-up lateness histogram in 5 µs bins, as Table 2.1."""

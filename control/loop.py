@@ -190,6 +190,8 @@ class Controller:
         self.watch_heartbeat()
         self.control()
         self.guard()
+        if self.move is not None:
+            self.record()  # after guard: the run holds the duty the valves really get
         self.write()
         self.compute_ns = self.clock.now_ns() - woke
         self.compute_max_ns = max(self.compute_max_ns, self.compute_ns)
@@ -225,8 +227,8 @@ class Controller:
     def read(self) -> None:
         before = self.clock.now_ns()
         self.backend.read(self.raw)
-        now = self.clock.now_ns()
-        self.io_total_ns += now - before
+        self.io_total_ns += self.clock.now_ns() - before
+        now = self.backend.sample_ns  # a late serial reply re-reads old words: time them so
         for j in range(self.n):
             count = gray_to_binary(self.raw[j]) if self.gray else self.raw[j] - self.offset[j]
             q = self.gradient[j] * count + self.constant[j]
@@ -293,8 +295,14 @@ class Controller:
         self.estop_latched = False
         self.fault = ""
         self.law.reset()
+        self.resync()
         self.hold_here()
         self.event("estop", latched=False, reason="reset by operator")
+
+    def resync(self) -> None:
+        """Believe the next reading outright: the joints may have moved while nobody watched."""
+        self.rejects = [self.config.glitch_resync] * self.n
+        self.read()
 
     def reconnect(self) -> bool:
         """Reopen a faulted link on the operator's reset; the valves stay closed meanwhile.
@@ -430,7 +438,6 @@ class Controller:
             if self.coupled[j] >= 0:
                 self.velocity[j] -= self.coupling[j] * self.velocity[self.coupled[j]]
         self.closed_loop(self.desired, self.velocity)
-        self.record()
 
     def tracking_actuate(self) -> None:
         move = self.move
@@ -438,7 +445,6 @@ class Controller:
         for j in range(self.n):
             self.desired[j] = math.nan
             self.duty[j] = move.cells[row + j]
-        self.record()
 
     def record(self) -> None:
         """Append this tick to the move's record; finish the move after its last sample."""

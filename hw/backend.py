@@ -91,6 +91,8 @@ class Backend(Protocol):
     machine: Machine
     clock: Clock
     counters: LinkCounters
+    sample_ns: int
+    """When the words the last ``read`` returned were sampled, on ``clock``."""
 
     def open(self) -> None:
         """Connect and bring every valve to closed (0 % duty)."""

@@ -90,6 +90,7 @@ class SerialBackend:
         n = machine.n_joints
         self._n = n
         self._words: Sequence[int] = (0,) * n
+        self.sample_ns = 0  # when the newest words arrived (monotonic ns): a late reply is old
         self._units = [0] * n
         self._port: serial.SerialBase | None = None
         self._reader = MessageReader(self.counters, BOARD_TO_HOST, resync=(MsgType.CONFIG_ACK,))
@@ -209,9 +210,16 @@ class SerialBackend:
     def _disconnect(self) -> None:
         port, self._port = self._port, None
         self._awaiting = False
-        if port is not None:
-            with contextlib.suppress(OSError, serial.SerialException):
+        if port is None:
+            return
+        with contextlib.suppress(OSError, serial.SerialException):
+            sock = getattr(port, "_socket", None)
+            if sock is None:
                 port.close()
+                return
+            sock.close()  # pyserial's socket:// close() sleeps 0.3 s; the control loop can't
+            port._socket = None
+            port.is_open = False
 
     def _request(self, message: Config | Heartbeat) -> ConfigAck | Report:
         """Send ``message`` until the board answers it, resending every ``RESEND_S``."""
@@ -322,6 +330,7 @@ class SerialBackend:
         self.last_report = report
         bits = self._count_bits
         self._words = report.words if not bits else tuple(_signed(w, bits) for w in report.words)
+        self.sample_ns = now
         if not report.flags & Flag.UNSOLICITED and report.echo_seq == self._writer.seq:
             self._awaiting = False
             self.rtt_ns = now - self._sent_ns

@@ -50,6 +50,7 @@ class SimBackend:
         self._period_ns = round(machine.valve_period_us * 1e3)
         self._resolution = machine.valve_resolution_pct
         self._t_ns = self.clock.now_ns()
+        self.sample_ns = self._t_ns
         self._a_prev = [0.0] * n
         self._a_now = [0.0] * n
         self.plant.actuator_positions(self._a_now)
@@ -81,6 +82,7 @@ class SimBackend:
     def read(self, raw: list[int]) -> None:
         """Fill ``raw`` with the encoder words: Gray words (Unimate) or signed counts (rig)."""
         self._advance()
+        self.sample_ns = self._t_ns
         if self._board is not None:
             words = self._board.words
             for i in range(self._n):

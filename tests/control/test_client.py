@@ -163,6 +163,15 @@ def test_coefficients_change_during_a_move(lockstep: ControlClient) -> None:
     assert lockstep.wait(move, timeout=10).status == "aborted by operator"
 
 
+def test_two_clients_in_one_process_have_their_own_segments(tmp_path: Path) -> None:
+    with ControlClient("rig", lockstep=True, data_dir=tmp_path, heartbeat_timeout_s=3.0) as one, \
+            ControlClient("unimate2000b", lockstep=True, data_dir=tmp_path,
+                          heartbeat_timeout_s=3.0) as two:
+        assert one.segment_name != two.segment_name
+        assert len(one.status().position) == 1 and len(two.status().position) == 6
+    assert our_segments(os.getpid()) == []
+
+
 def test_bad_paths_are_refused_before_anything_starts(lockstep: ControlClient) -> None:
     start = np.array(lockstep.status().position)
     path = np.tile(start, (100, 1))
@@ -175,7 +184,7 @@ def test_bad_paths_are_refused_before_anything_starts(lockstep: ControlClient) -
         lockstep.move(path)
     with pytest.raises(ValueError, match=r"a path is \(N, 6\)"):
         lockstep.move(path[:, :3])
-    assert our_segments(os.getpid()) == [shm.segment_name("ctl")]
+    assert our_segments(os.getpid()) == [lockstep.segment_name]
     assert lockstep.status().mode == Mode.HOLD
 
 
@@ -218,7 +227,7 @@ CLIENT_SCRIPT = textwrap.dedent("""
     client = ControlClient("unimate2000b", data_dir=sys.argv[1], orphan_timeout_s=1.5)
     client.jog([30.0] * 6)
     time.sleep(0.3)
-    print(client.pid, flush=True)
+    print(client.pid, client.segment_name, flush=True)
     time.sleep(60)
 """)
 
@@ -227,8 +236,8 @@ def test_killing_the_client_makes_the_controller_hold_then_clean_up(tmp_path: Pa
     script = subprocess.Popen([sys.executable, "-c", CLIENT_SCRIPT, str(tmp_path)],
                               stdout=subprocess.PIPE, text=True)
     try:
-        controller_pid = int(script.stdout.readline())
-        name = shm.segment_name("ctl", pid=script.pid)
+        pid, name = script.stdout.readline().split()
+        controller_pid = int(pid)
         segment = shm.attach(name)
         layout = ControlLayout(6)
         reader = SeqlockReader(segment.buf, layout.status_offset, layout.status.struct)

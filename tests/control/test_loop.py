@@ -38,6 +38,10 @@ class ScriptedBackend:
         self.written: list[float] = []
         self.fail_reads = 0
 
+    @property
+    def sample_ns(self) -> int:
+        return self.clock.now_ns()
+
     def word(self, j: int) -> int:
         cal = self.machine.joints[j].encoder
         q = self.positions[j]
