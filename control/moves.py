@@ -280,8 +280,16 @@ def _vector(values: Sequence[float] | np.ndarray, name: str, machine: Machine | 
 
 def _start(start: Sequence[float] | np.ndarray, machine: Machine | None,
            what: str = "start") -> np.ndarray:
+    """The pose a move begins from. A joint resting within its tolerance beyond a limit (the
+    rig on its bottom stop reads −0.1 mm) starts on the limit; further out is an error."""
     n = machine.n_joints if machine is not None else None
-    return _targets(_vector(np.atleast_1d(start), what, machine, n), machine, what)
+    q = _vector(np.atleast_1d(start), what, machine, n)
+    if machine is not None:
+        slack = np.array([j.tolerance for j in machine.joints])
+        lower, upper = np.array(machine.lower), np.array(machine.upper)
+        near = (q >= lower - slack) & (q <= upper + slack)
+        q = np.where(near, np.clip(q, lower, upper), q)
+    return _targets(q, machine, what)
 
 
 def _targets(q: np.ndarray, machine: Machine | None, what: str = "") -> np.ndarray:

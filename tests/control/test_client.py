@@ -261,7 +261,7 @@ def test_killing_the_client_makes_the_controller_hold_then_clean_up(tmp_path: Pa
 
 def test_the_rig_refuses_moves_until_initialised_then_steps(tmp_path: Path) -> None:
     rig = load_machine("rig")
-    with ControlClient(rig, lockstep=True, data_dir=tmp_path,
+    with ControlClient(rig, lockstep=True, data_dir=tmp_path, heartbeat_timeout_s=3.0,
                        sim_options={"initial": [400.0]}) as client:
         assert not client.status().homed
         path = moves.step(client.status().position, 0, 100.0, duration=2.0, dt=client.dt)

@@ -238,3 +238,11 @@ def test_a_response_that_never_settles_says_so() -> None:
 def test_summary_checks_shapes() -> None:
     with pytest.raises(ValueError, match=r"desired and actual \(N, 6\)"):
         summary(moves.times(3, DT), np.zeros((3, 1)), np.zeros((3, 1)), UNIMATE.joints)
+
+
+def test_a_start_resting_just_past_a_limit_begins_on_it() -> None:
+    rig = load_machine("rig")
+    path = moves.step([-0.1], 0, 100.0, 2.0, machine=rig)  # on the bottom stop after Initialise
+    assert path[0, 0] == 0.0 and path[-1, 0] == 100.0
+    with pytest.raises(ValueError, match="start: Ram target -5mm is outside 0…1200mm"):
+        moves.step([-5.0], 0, 100.0, 2.0, machine=rig)

@@ -25,8 +25,8 @@ VIAS = np.array([
 
 def sampled_speed_and_accel(q: np.ndarray, dt: float = DT) -> tuple[np.ndarray, np.ndarray]:
     """Peak |Δq|/dt and |Δ²q|/dt² per joint of a sampled path: what the loop is asked to do."""
-    return (np.abs(np.diff(q, axis=0)).max(axis=0) / dt,
-            np.abs(np.diff(q, n=2, axis=0)).max(axis=0) / dt**2)
+    return (np.abs(np.diff(q, axis=0)).max(axis=0, initial=0.0) / dt,
+            np.abs(np.diff(q, n=2, axis=0)).max(axis=0, initial=0.0) / dt**2)  # ≥ 3 samples
 
 
 def test_passes_through_every_via_point_on_a_sample() -> None:
