@@ -1,6 +1,6 @@
 """The ``servodesk`` command line: one entry point, a subcommand per job.
 
-With no subcommand it will open the TUI; today it prints the commands.
+With no subcommand it opens the TUI on the chosen machine and backend.
 """
 
 from __future__ import annotations

@@ -32,7 +32,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--tcp", type=_port, metavar="PORT",
                    help="serve one TCP client on 127.0.0.1:PORT (0: any free port) "
                         "instead of a pseudo-terminal")
-    p.add_argument("--seed", type=int, default=0, help="simulator and fault-injection seed")
+    p.add_argument("--seed", type=int, default=argparse.SUPPRESS,
+                   help="simulator and fault-injection seed (default: the global --seed, 0)")
     p.add_argument("--glitch-scale", type=_scale, default=1.0, metavar="X",
                    help="multiplies the simulated encoders' wrong-reading rate (0: none)")
     p.add_argument("--corrupt-rate", type=_rate, default=0.0, metavar="R",
@@ -51,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
 
     try:
         machine = load_machine(getattr(args, "machine", DEFAULT_MACHINE))
-        plant = SimBackend(machine, seed=args.seed, lockstep=False,
+        plant = SimBackend(machine, seed=getattr(args, "seed", 0), lockstep=False,
                            glitch_scale=args.glitch_scale)
     except (MachineError, ValueError) as exc:
         print(f"servodesk: {exc}", file=sys.stderr)
@@ -59,7 +60,7 @@ def run(args: argparse.Namespace) -> int:
     faults = Faults(corrupt_rate=args.corrupt_rate, corrupt_rx_rate=args.corrupt_rx_rate,
                     drop_rate=args.drop_rate, silent_after_s=args.silent_after)
     try:
-        emulator = Emulator(plant, tcp_port=args.tcp, faults=faults, seed=args.seed)
+        emulator = Emulator(plant, tcp_port=args.tcp, faults=faults, seed=getattr(args, "seed", 0))
     except OSError as exc:
         print(f"servodesk: cannot serve the emulator: {exc}", file=sys.stderr)
         return 2

@@ -2,10 +2,10 @@
 
 Python 3.11's resource tracker unlinks a segment when *any* process that
 attached to it exits, and cleans up nothing after ``kill -9`` of the creator.
-So every segment is taken out of the tracker at once and servodesk owns its
-cleanup: names carry the creating process's pid (``sd_<pid>_<tag>``), the
-creator unlinks on every exit path, and ``cleanup_orphans`` removes segments
-whose creator is dead at the next start.
+So no segment is ever registered with it (3.13's ``track=False``, done by
+hand) and servodesk owns its cleanup: names carry the creating process's
+pid (``sd_<pid>_<tag>``), the creator unlinks on every exit path, and
+``cleanup_orphans`` removes segments whose creator is dead at the next start.
 """
 
 from __future__ import annotations
@@ -13,6 +13,8 @@ from __future__ import annotations
 import _posixshmem
 import contextlib
 import os
+import threading
+from collections.abc import Iterator
 from multiprocessing import resource_tracker, shared_memory
 from pathlib import Path
 
@@ -26,16 +28,14 @@ def segment_name(tag: str, pid: int | None = None) -> str:
 
 def create(tag: str, size: int) -> shared_memory.SharedMemory:
     """Create a zero-filled segment named for this process and ``tag``."""
-    shm = shared_memory.SharedMemory(segment_name(tag), create=True, size=max(size, 8))
-    _untrack(shm)
-    return shm
+    with _untracked():
+        return shared_memory.SharedMemory(segment_name(tag), create=True, size=max(size, 8))
 
 
 def attach(name: str) -> shared_memory.SharedMemory:
     """Attach to an existing segment without letting the resource tracker adopt it."""
-    shm = shared_memory.SharedMemory(name)
-    _untrack(shm)
-    return shm
+    with _untracked():
+        return shared_memory.SharedMemory(name)
 
 
 def release(shm: shared_memory.SharedMemory, unlink: bool) -> None:
@@ -83,6 +83,20 @@ def cleanup_orphans() -> list[str]:
     return removed
 
 
-def _untrack(shm: shared_memory.SharedMemory) -> None:
-    with contextlib.suppress(Exception):
-        resource_tracker.unregister(shm._name, "shared_memory")  # type: ignore[attr-defined]
+_TRACKER_LOCK = threading.Lock()
+
+
+@contextlib.contextmanager
+def _untracked() -> Iterator[None]:
+    """Keep ``SharedMemory`` from registering with the resource tracker (3.13's track=False).
+
+    Registering would also start the tracker process, which needs a real stderr
+    (a Textual app has none) and would unlink segments behind our back.
+    """
+    with _TRACKER_LOCK:
+        register = resource_tracker.register
+        resource_tracker.register = lambda name, rtype: None
+        try:
+            yield
+        finally:
+            resource_tracker.register = register

@@ -198,6 +198,15 @@ def parse_machine(text: str, path: Path) -> Machine:
     return _Reader(path.name).machine(doc, path)
 
 
+def parse_coefficient_tables(doc: Mapping[str, Any], filename: str,
+                             n_joints: int) -> Mapping[str, Coefficients]:
+    """The ``[coefficients.NAME]`` sets of a parsed coefficient file (nothing else allowed),
+    validated as a machine file's are; errors name ``filename`` and the key."""
+    reader = _Reader(filename)
+    reader.only(doc, "", {"coefficients"})
+    return reader.coefficient_sets(doc, n_joints, required=())
+
+
 class _Reader:
     """Typed access to a parsed TOML document that reports file and key on every error."""
 
@@ -363,11 +372,15 @@ class _Reader:
             coupling=self.number(doc, key, "coupling", 0.0 if coupled is None else None),
         )
 
-    def coefficient_sets(self, doc: Mapping[str, Any], n: int) -> Mapping[str, Coefficients]:
+    def coefficient_sets(self, doc: Mapping[str, Any], n: int,
+                         required: tuple[str, ...] = ("hold", "track")
+                         ) -> Mapping[str, Coefficients]:
         sets = self.table(doc, "", "coefficients")
-        for required in ("hold", "track"):
-            if required not in sets:
-                raise self.fail(f"coefficients.{required}", "missing coefficient set")
+        if not sets:
+            raise self.fail("coefficients", "no [coefficients.NAME] table")
+        for name in required:
+            if name not in sets:
+                raise self.fail(f"coefficients.{name}", "missing coefficient set")
         return MappingProxyType(
             {name: self.coefficients(body, f"coefficients.{name}", name, n)
              for name, body in sets.items()}

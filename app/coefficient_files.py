@@ -1,0 +1,130 @@
+"""Coefficient files: controller sets saved and loaded as TOML, in the machine file's schema.
+
+A coefficient file holds only ``[coefficients.NAME]`` tables, exactly as in a
+machine description (``docs/machines.md``), so a set tuned in the TUI can be
+pasted into a machine file and a machine file's sets can be loaded here. It is
+read with the machine loader's own reader, so every error names the file and
+the key, and checked against the shared-memory layout (at most ``MAX_TAPS``
+taps).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+import tomllib
+from collections.abc import Mapping
+from pathlib import Path
+
+from control.layout import MAX_TAPS
+from hw.machine import Coefficients, Machine, MachineError, parse_coefficient_tables
+
+SUFFIX = ".toml"
+
+
+class CoefficientFileError(ValueError):
+    """A coefficient file cannot be read or written; the message names file and key."""
+
+
+def parse_coefficients(text: str, machine: Machine, filename: str = "<text>"
+                       ) -> dict[str, Coefficients]:
+    """Every ``[coefficients.NAME]`` set in ``text`` for ``machine``'s joints, in file order."""
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise CoefficientFileError(f"{filename}: not valid TOML: {exc}") from None
+    try:
+        out = dict(parse_coefficient_tables(doc, filename, machine.n_joints))
+    except MachineError as exc:
+        raise CoefficientFileError(str(exc)) from None
+    for name, c in out.items():
+        _check_taps(c, f"{filename}: coefficients.{name}")
+    return out
+
+
+def load_coefficients(path: str | Path, machine: Machine) -> dict[str, Coefficients]:
+    """Read a coefficient file; CoefficientFileError names the file and key on any problem."""
+    path = Path(path).expanduser()
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise CoefficientFileError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    return parse_coefficients(text, machine, str(path))
+
+
+def dump_coefficients(sets: Mapping[str, Coefficients], machine: Machine) -> str:
+    """TOML text of ``sets`` in the machine file's ``[coefficients.NAME]`` schema."""
+    lines = [f"# Coefficient sets for {machine.title} ({machine.name}), one entry per joint:",
+             f"# {', '.join(j.name for j in machine.joints)}. Schema: docs/machines.md.", ""]
+    for name, c in sets.items():
+        _check_taps(c, f"coefficients.{name}")
+        lines += [
+            f"[coefficients.{_key(name)}]",
+            f"note = {_string(c.note)}",
+            f"kp = {_taps(c.kp)}",
+            f"ki = {_numbers(c.ki)}",
+            f"kd = {_numbers(c.kd)}",
+            f"w = {_taps(c.w)}",
+            f"filter = {_numbers(c.filter)}",
+            f"filter_divisor = {_number(c.filter_divisor)}",
+            f"integral_limit = {_number(c.integral_limit)}",
+            f"duty_limit = {_number(c.duty_limit)}",
+            *([f"kv = {_numbers(c.kv)}"] if c.kv else []),
+            "",
+        ]
+    return "\n".join(lines)
+
+
+def save_coefficients(path: str | Path, sets: Mapping[str, Coefficients],
+                      machine: Machine) -> Path:
+    """Write ``sets`` to ``path`` atomically (temporary file, then rename); return the path."""
+    path = Path(path).expanduser()
+    if path.suffix != SUFFIX:
+        path = path.with_name(path.name + SUFFIX)
+    text = dump_coefficients(sets, machine)
+    parse_coefficients(text, machine, str(path))  # what we write must load back
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    except OSError as exc:
+        raise CoefficientFileError(f"{path}: cannot write: {exc.strerror or exc}") from None
+    return path
+
+
+def _check_taps(c: Coefficients, where: str) -> None:
+    for label, taps in (("kp", c.kp), ("w", c.w)):
+        for j, t in enumerate(taps):
+            if len(t) > MAX_TAPS:
+                raise CoefficientFileError(f"{where}.{label}[{j}]: {len(t)} taps; the controller "
+                                           f"takes at most {MAX_TAPS}")
+    if len(c.filter) > MAX_TAPS:
+        raise CoefficientFileError(f"{where}.filter: {len(c.filter)} taps; the controller takes "
+                                   f"at most {MAX_TAPS}")
+
+
+def _key(name: str) -> str:
+    bare = name.replace("_", "").replace("-", "").isalnum() and name.isascii()
+    return name if bare else _string(name)
+
+
+def _string(text: str) -> str:
+    escaped = text.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n")
+    return f'"{escaped}"'
+
+
+def _number(v: float) -> str:
+    if not math.isfinite(v):
+        raise CoefficientFileError(f"coefficient {v} is not a finite number")
+    return repr(float(v))
+
+
+def _numbers(values: tuple[float, ...]) -> str:
+    return "[" + ", ".join(_number(v) for v in values) + "]"
+
+
+def _taps(taps: tuple[tuple[float, ...], ...]) -> str:
+    return "[" + ", ".join(_numbers(t) for t in taps) + "]"

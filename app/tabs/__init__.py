@@ -1,0 +1,1 @@
+"""The TUI's tabs, one module each: jog, moves, scope, status, tuning, runs, latency."""

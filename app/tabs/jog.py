@@ -1,0 +1,312 @@
+"""Jog: the thesis's manual control (option.c Manual()), plus hold-to-move and position jog.
+
+Three modes, cycled with ``m``:
+
+- **duty** — as option.c: a/z s/x d/c f/v g/b h/n add or take the increment
+  (1–9 %) from the duty of In/Out, Rotate, Up/Down, Bend, Yaw, Swivel; the
+  joint keeps moving until its duty is changed back or space zeroes all. On
+  the rig, as function.c Manual(): Up/Down arrows ±10 %, space closes the valve.
+- **hold-to-move** — a joint moves at 10 × increment % only while its key is
+  held. Terminals send no key-up event, so a held key is recognised by its
+  auto-repeat and a release by the silence after it (``KeyRepeat``), the way
+  keyboard teleop tools do it.
+- **position** — closed loop: each press moves the joint's hold target by the
+  step chosen with 1–9 (0.1 … 50 mm or degrees).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+from rich.table import Table
+from rich.text import Text
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.reactive import reactive
+from textual.widget import Widget
+from textual.widgets import Static
+
+from app.tabs.tab import TabPage
+from app.widgets.limit_bar import LimitBar
+from app.widgets.live_text import LiveText
+from control.layout import Mode, Status
+
+JOG_KEYS = (("a", "z"), ("s", "x"), ("d", "c"), ("f", "v"), ("g", "b"), ("h", "n"))
+MODES = ("duty", "hold-to-move", "position")
+RIG_ARROW_STEP = 10.0  # function.c Manual(): each arrow press changes the duty by 10 %
+HOLD_DUTY_PER_STEP = 10.0  # hold-to-move duty is 10 × increment %
+POSITION_STEPS = (0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0)  # mm or deg, keys 1-9
+RELEASE_CHECK_S = 0.01
+MODE_HELP = {
+    "duty": "each press adds ± increment % to the joint's duty; space zeroes all (option.c)",
+    "hold-to-move": "a joint moves at 10 × increment % only while its key is held",
+    "position": "closed loop: each press moves the joint's hold target by the step",
+}
+
+
+@dataclass
+class KeyRepeat:
+    """Key-up events from auto-repeat: a key is held while it repeats; silence is a release.
+
+    The first repeat comes after the terminal's initial delay (250–600 ms
+    typically), the next ones every 30–50 ms. A key is taken as released when
+    no repeat arrived within ``first_timeout`` of the first press or
+    ``repeat_timeout`` of the last repeat; both adapt to the delays observed,
+    so a release after a hold is seen within ``repeat_timeout`` (≤ 110 ms).
+    A short tap moves for up to the initial delay: use position mode to nudge.
+    """
+
+    first_timeout: float = 0.55
+    repeat_timeout: float = 0.11
+    _pressed_at: dict[int, float] = field(default_factory=dict)
+    _last: dict[int, float] = field(default_factory=dict)
+    _repeats: dict[int, int] = field(default_factory=dict)
+    interval: float = 0.04
+
+    def press(self, key: int, now: float) -> bool:
+        """Record a key event; True if it starts a hold (not a repeat of one)."""
+        last = self._last.get(key)
+        if last is None or now - last > self.timeout(key):
+            self._pressed_at[key] = self._last[key] = now
+            self._repeats[key] = 0
+            return True
+        gap = now - last
+        if self._repeats[key] == 0:
+            self.first_timeout = min(0.8, max(0.15, gap + 0.08))  # learn the initial delay
+        else:
+            self.interval = 0.8 * self.interval + 0.2 * gap
+            self.repeat_timeout = min(0.11, max(0.06, 2.5 * self.interval))
+        self._repeats[key] += 1
+        self._last[key] = now
+        return False
+
+    def timeout(self, key: int) -> float:
+        return self.first_timeout if self._repeats.get(key, 0) == 0 else self.repeat_timeout
+
+    def released(self, now: float) -> list[int]:
+        """Keys whose repeats stopped; they are forgotten."""
+        gone = [k for k, last in self._last.items() if now - last > self.timeout(k)]
+        for k in gone:
+            self.forget(k)
+        return gone
+
+    def forget(self, key: int | None = None) -> None:
+        keys = list(self._last) if key is None else [key]
+        for k in keys:
+            self._last.pop(k, None)
+            self._pressed_at.pop(k, None)
+            self._repeats.pop(k, None)
+
+    @property
+    def held(self) -> bool:
+        return bool(self._last)
+
+
+def _jog_bindings() -> list[Binding]:
+    out = []
+    for j, (plus, minus) in enumerate(JOG_KEYS):
+        first = j == 0
+        out.append(Binding(plus, f"jog({j}, 1)", "jog joint + / −" if first else f"joint {j} +",
+                           show=first, key_display="a/z…h/n" if first else None))
+        out.append(Binding(minus, f"jog({j}, -1)", f"joint {j} −", show=False))
+    for k in range(1, 10):
+        out.append(Binding(str(k), f"increment({k})", "increment" if k == 1 else f"step {k}",
+                           show=k == 1, key_display="1-9" if k == 1 else None))
+    return out
+
+
+class JogPad(Widget, can_focus=True):
+    """The focusable part of the Jog tab: its keys drive the joints."""
+
+    BINDINGS: ClassVar = [
+        *_jog_bindings(),
+        Binding("up", "arrow(1)", "rig +10 %", key_display="↑"),
+        Binding("down", "arrow(-1)", "rig −10 %", key_display="↓"),
+        Binding("space", "stop_all", "all duties 0", key_display="space"),
+        Binding("m", "mode", "mode"),
+        Binding("enter", "hold_here", "hold here"),
+    ]
+
+    mode: reactive[str] = reactive("duty")
+    increment: reactive[int] = reactive(5)
+
+    def __init__(self, n_joints: int, *, id: str | None = None) -> None:
+        super().__init__(id=id)
+        self.n = n_joints
+        self.duty = [0.0] * n_joints
+        self.repeat = KeyRepeat()
+
+    def render(self) -> Text:
+        step = POSITION_STEPS[self.increment - 1]
+        amount = {"duty": f"increment {self.increment} %",
+                  "hold-to-move": f"duty {HOLD_DUTY_PER_STEP * self.increment:g} % while held",
+                  "position": f"step {step:g} mm or °"}[self.mode]
+        return Text.assemble(("mode ", "dim"), (self.mode, "bold"), ("  ·  ", "dim"),
+                             (amount, "bold"), ("  ·  ", "dim"), MODE_HELP[self.mode])
+
+    def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
+        if not self.tab.visible_now:
+            return False  # a key must never move a joint the operator cannot see
+        if action == "jog":
+            return int(parameters[0]) < self.n  # type: ignore[arg-type]
+        if action == "arrow":
+            return self.n == 1
+        return True
+
+    @property
+    def tab(self) -> JogTab:
+        return self.query_ancestor(JogTab)
+
+    def action_increment(self, k: int) -> None:
+        self.increment = k
+
+    def action_mode(self) -> None:
+        self.stop(hold=False)
+        self.mode = MODES[(MODES.index(self.mode) + 1) % len(MODES)]
+
+    def action_jog(self, joint: int, sign: int) -> None:
+        if joint >= self.n:
+            return
+        if self.mode == "duty":
+            self.duty[joint] = max(-100.0, min(100.0, self.duty[joint] + sign * self.increment))
+            self.send()
+        elif self.mode == "hold-to-move":
+            self.hold_key(joint, sign * HOLD_DUTY_PER_STEP * self.increment)
+        else:
+            step = sign * POSITION_STEPS[self.increment - 1]
+            self.tab.command("position jog", "jog_position", joint, step)
+        self.tab.refresh_live()
+
+    def action_arrow(self, sign: int) -> None:
+        if self.mode == "duty":
+            self.duty[0] = max(-100.0, min(100.0, self.duty[0] + sign * RIG_ARROW_STEP))
+            self.send()
+            self.tab.refresh_live()
+        else:
+            self.action_jog(0, sign)
+
+    def action_stop_all(self) -> None:
+        self.repeat.forget()
+        self.duty = [0.0] * self.n
+        self.send()
+        self.tab.refresh_live()
+
+    def action_hold_here(self) -> None:
+        self.stop(hold=True)
+
+    def hold_key(self, joint: int, duty: float) -> None:
+        if self.repeat.press(joint, time.monotonic()) or self.duty[joint] != duty:
+            self.duty[joint] = duty
+            self.send()
+        self.tab.watch_release(True)
+
+    def released(self) -> None:
+        """Called every RELEASE_CHECK_S while a key is held: stop the joints let go."""
+        gone = self.repeat.released(time.monotonic())
+        if gone:
+            for j in gone:
+                self.duty[j] = 0.0
+            self.send()
+            self.tab.refresh_live()
+        if not self.repeat.held:
+            self.tab.watch_release(False)
+
+    def send(self) -> None:
+        self.tab.command("jog", "jog", list(self.duty))
+
+    def stop(self, hold: bool) -> None:
+        """Zero every duty and leave manual actuation for closed-loop hold (the thesis's
+        default mode); ``hold`` sends the hold even when not in manual."""
+        self.repeat.forget()
+        self.tab.watch_release(False)
+        self.duty = [0.0] * self.n
+        status = self.tab.status()
+        if hold or (status is not None and status.mode == Mode.MANUAL_ACTUATE):
+            self.tab.command("hold", "hold")
+
+    def forget_duties(self) -> None:
+        """The controller left manual mode (E-stop, a move, hold): start again from zero."""
+        if any(self.duty):
+            self.repeat.forget()
+            self.duty = [0.0] * self.n
+
+
+class JogTab(TabPage):
+    """Manual control of every joint from the keyboard."""
+
+    REFRESH_HZ = 10.0
+    TITLE = "Jog"
+    _was_manual = False
+
+    def compose(self) -> ComposeResult:
+        yield JogPad(self.machine.n_joints, id="jog-pad")
+        yield LiveText(id="jog-table")
+        yield Static(self._keys_help(), id="jog-help")
+
+    def on_mount(self) -> None:
+        self.query_one("#jog-table").styles.height = self.machine.n_joints + 1
+        self._release_timer = self.set_interval(RELEASE_CHECK_S, self._check_release, pause=True)
+
+    @property
+    def pad(self) -> JogPad:
+        return self.query_one(JogPad)
+
+    def focus_main(self) -> None:
+        self.pad.focus()
+
+    def watch_release(self, on: bool) -> None:
+        if on:
+            self._release_timer.resume()
+        else:
+            self._release_timer.pause()
+
+    def _check_release(self) -> None:
+        self.pad.released()
+
+    def hidden(self) -> None:
+        super().hidden()
+        self.pad.stop(hold=False)  # leaving the tab must not leave a joint moving
+
+    def refresh_live(self) -> None:
+        status = self.status()
+        if status is not None:
+            manual = status.mode == Mode.MANUAL_ACTUATE
+            if self._was_manual and not manual:  # E-stop, hold or a move ended manual mode
+                self.pad.forget_duties()
+            self._was_manual = manual
+        self.pad.refresh()
+        self.query_one("#jog-table", LiveText).show(self._table(status))
+
+    def _table(self, status: Status | None) -> Table:
+        table = Table(expand=True, box=None, padding=(0, 1), header_style="bold")
+        for name, justify in (("keys", "center"), ("joint", "left"), ("command %", "right"),
+                              ("controller %", "right"), ("valve %", "right"),
+                              ("position", "right"), ("target", "right")):
+            table.add_column(name, justify=justify, no_wrap=True)
+        table.add_column("within limits", ratio=1, no_wrap=True)
+        rig = self.machine.n_joints == 1
+        for j, joint in enumerate(self.machine.joints):
+            keys = "↑/↓  a/z" if rig else "/".join(JOG_KEYS[j])
+            command = self.pad.duty[j]
+            if status is None:
+                table.add_row(keys, joint.name, f"{command:+.0f}", "–", "–", "–", "–", "")
+                continue
+            q, d = status.position[j], status.desired[j]
+            table.add_row(
+                keys, joint.name, Text(f"{command:+.0f}", "bold" if command else "dim"),
+                f"{status.duty[j]:+6.1f}", f"{status.valve[j]:+6.1f}",
+                f"{q:9.2f} {joint.symbol}", "–" if d != d else f"{d:9.2f} {joint.symbol}",
+                LimitBar(q, joint.lower, joint.upper, d))
+        return table
+
+    def _keys_help(self) -> Text:
+        if self.machine.n_joints == 1:
+            pairs = "↑/↓ (or a/z) Ram ±"
+        else:
+            pairs = "  ".join(f"{p}/{m} {j.name}" for (p, m), j in
+                              zip(JOG_KEYS, self.machine.joints, strict=False))
+        return Text.assemble(("keys  ", "dim"), pairs,
+                             ("   1–9 increment · space all stop · m mode · enter hold here",
+                              "dim"))

@@ -1,0 +1,254 @@
+"""Runs: every saved move, newest first, and its plots as the thesis drew them in MATLAB.
+
+``plotsix.m`` (desired and actual position beside the duty, per joint; arm
+joints 1–3 then wrist joints 4–6) and ``plotdata.m`` (one joint's error,
+response, duty and estimated velocity). A plot is exported as text and SVG
+next to the runs. Runs the recorder could not save are kept in memory and
+listed first, so they can be saved elsewhere.
+"""
+
+from __future__ import annotations
+
+from datetime import datetime
+from pathlib import Path
+from typing import ClassVar
+
+from rich.text import Text
+from textual import work
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Horizontal, Vertical
+from textual.widgets import Button, DataTable, Input, Static
+from textual_plotext import PlotextPlot
+
+from app.tabs.tab import TabPage
+from app.widgets.run_plot import draw_joint, draw_overview, export, steady_velocity
+from control.recorder import RecorderError, Run, RunInfo, list_runs, load_run, save_run
+
+
+def local_time(iso: str) -> str:
+    try:
+        return datetime.fromisoformat(iso).astimezone().strftime("%Y-%m-%d %H:%M:%S")
+    except ValueError:
+        return iso or "?"
+
+
+class RunsTab(TabPage):
+    """The list of runs and the plot of the one opened."""
+
+    TITLE = "Runs"
+    BINDINGS: ClassVar = [
+        Binding("v", "next_view", "next plot"),
+        Binding("x", "export", "export plot"),
+        Binding("r", "reload", "refresh list"),
+        Binding("s", "save_unsaved", "save unsaved run", show=False),
+    ]
+
+    def __init__(self, *, id: str | None = None) -> None:
+        super().__init__(id=id)
+        self.infos: list[RunInfo] = []
+        self.unsaved: list[Run] = []
+        self.run: Run | None = None
+        self.run_name = ""
+        self.view = 0
+        self.stale = True
+
+    def compose(self) -> ComposeResult:
+        with Horizontal():
+            with Vertical(id="runs-left"):
+                yield DataTable(id="runs-table", cursor_type="row", zebra_stripes=True)
+                yield Static(id="runs-meta")
+                with Horizontal(id="runs-save"):
+                    yield Input(str(Path.home() / "servodesk-runs"), id="runs-save-dir",
+                                compact=True)
+                    yield Button("Save unsaved", id="runs-save-button")
+            with Vertical(id="runs-right"):
+                yield Static(id="runs-bar")
+                yield PlotextPlot(id="runs-plot")
+
+    def on_mount(self) -> None:
+        self.query_one("#runs-table", DataTable).add_columns("started", "kind", "status",
+                                                             "samples")
+        self.query_one("#runs-save").display = False
+
+    def focus_main(self) -> None:
+        self.query_one("#runs-table", DataTable).focus()
+
+    def shown(self) -> None:
+        super().shown()
+        if self.stale:
+            self.action_reload()
+
+    def mark_stale(self) -> None:
+        """A run was saved: list it now if visible, else when next shown."""
+        self.stale = True
+        if self.visible_now:
+            self.action_reload()
+
+    def keep_unsaved(self, run: Run) -> None:
+        self.unsaved.insert(0, run)
+        self.mark_stale()
+
+    # -- the list -------------------------------------------------------------------------
+
+    def action_reload(self) -> None:
+        self.stale = False
+        self._list()
+
+    @work(thread=True, exclusive=True, group="runs-list")
+    def _list(self) -> None:
+        infos = list_runs(self.servodesk.data_dir)
+        self.servodesk.later(self._show_list, infos)
+
+    def _show_list(self, infos: list[RunInfo]) -> None:
+        self.infos = infos
+        table = self.query_one("#runs-table", DataTable)
+        table.clear()
+        for i, run in enumerate(self.unsaved):
+            table.add_row(local_time(run.start_time), run.kind,
+                          Text("NOT SAVED", "bold red"), str(run.samples), key=f"unsaved-{i}")
+        for info in infos:
+            if info.damaged:
+                table.add_row("?", info.files.stem, Text("damaged", "red"), "", key=info.files.stem)
+                continue
+            style = "green" if info.status == "complete" else "yellow"
+            table.add_row(local_time(info.start_time), info.kind, Text(info.status[:28], style),
+                          str(info.samples), key=info.files.stem)
+        self.query_one("#runs-meta", Static).update(Text(
+            f"{len(infos)} run(s) in {self.servodesk.data_dir}" if infos or self.unsaved else
+            f"no runs yet in {self.servodesk.data_dir}: run a move from the Moves tab", "dim"))
+
+    def on_data_table_row_selected(self, event: DataTable.RowSelected) -> None:
+        event.stop()
+        key = event.row_key.value or ""
+        self.query_one("#runs-save").display = key.startswith("unsaved-")
+        if key.startswith("unsaved-"):
+            run = self.unsaved[int(key.split("-")[1])]
+            self._opened(run, f"unsaved {run.kind}")
+            return
+        info = next((i for i in self.infos if i.files.stem == key), None)
+        if info is None or info.damaged:
+            self.notify(f"{key}: {info.problem if info else 'not found'}; the files are left "
+                        "as they are", severity="error")
+            return
+        self._load(info)
+
+    @work(thread=True, exclusive=True, group="runs-load")
+    def _load(self, info: RunInfo) -> None:
+        try:
+            run = load_run(info.files.json)
+        except RecorderError as exc:
+            self.servodesk.later(self.notify, f"cannot open the run: {exc}",
+                                      severity="error")
+            return
+        self.servodesk.later(self._opened, run, info.files.stem)
+
+    def open_latest(self) -> None:
+        """Open the newest run (after the list was loaded)."""
+        table = self.query_one("#runs-table", DataTable)
+        if table.row_count:
+            table.move_cursor(row=0)
+            table.action_select_cursor()
+
+    # -- the plot -------------------------------------------------------------------------
+
+    def views(self) -> list[str]:
+        if self.run is None:
+            return []
+        n = len(self.run.joint_names)
+        groups = [f"plotsix {a + 1}–{min(n, a + 3)}" for a in range(0, n, 3)] if n > 1 else []
+        return groups + [f"plotdata {name}" for name in self.run.joint_names]
+
+    def _opened(self, run: Run, name: str) -> None:
+        self.run = run
+        self.run_name = name
+        self.view = 0
+        meta = run.meta
+        lines = [f"{name}", f"{run.machine} · {run.kind} · {run.status}",
+                 f"started {local_time(run.start_time)} · {run.samples} samples at "
+                 f"{run.sample_time_s * 1e3:g} ms"]
+        if "backend" in meta:
+            lines.append(f"backend {meta['backend']}")
+        for key in ("joint", "target", "targets", "ramp_time", "period", "duration", "file",
+                    "duty", "pose"):
+            if key in meta:
+                lines.append(f"{key}: {meta[key]}")
+        self.query_one("#runs-meta", Static).update("\n".join(lines))
+        self.draw()
+
+    def action_next_view(self) -> None:
+        if self.run is not None:
+            self.view = (self.view + 1) % len(self.views())
+            self.draw()
+
+    def draw(self) -> None:
+        run = self.run
+        if run is None:
+            return
+        plot = self.query_one("#runs-plot", PlotextPlot)
+        self._draw_on(plot.plt, plot.size.width)
+        plot.refresh()
+        view = self.views()[self.view]
+        extra = ""
+        if view.startswith("plotdata"):
+            j = run.joint_names.index(view.split(" ", 1)[1])
+            extra = (f" · steady velocity {steady_velocity(run.t, run.actual[:, j]):+.4g} "
+                     f"{run.joint_units[j]}/s")
+        self.query_one("#runs-bar", Static).update(Text.assemble(
+            (view, "bold"), extra, ("   v next plot · x export", "dim")))
+
+    def _draw_on(self, plt: object, width: int) -> None:
+        run = self.run
+        assert run is not None
+        view = self.views()[self.view]
+        if view.startswith("plotsix"):
+            first = int(view.split(" ")[1].split("–")[0]) - 1
+            joints = list(range(first, min(len(run.joint_names), first + 3)))
+            draw_overview(plt, run, joints, max(20, width // 2))  # type: ignore[arg-type]
+        else:
+            j = run.joint_names.index(view.split(" ", 1)[1])
+            draw_joint(plt, run, j, max(20, width // 2))  # type: ignore[arg-type]
+
+    def action_export(self) -> None:
+        if self.run is None:
+            self.notify("open a run first (Enter on the list)", severity="warning")
+            return
+        view = self.views()[self.view].replace(" ", "-").replace("–", "-").replace("/", "")
+        stem = self.run_name.replace(" ", "-")
+        self._export(self.servodesk.data_dir / "plots" / f"{stem}-{view}")
+
+    @work(thread=True, group="runs-export")
+    def _export(self, path: Path) -> None:
+        try:
+            written = export(path, lambda plt, width: self._draw_on(plt, width))
+        except OSError as exc:
+            self.servodesk.later(self.notify, f"cannot export to {path}: {exc}; check the "
+                                      "data directory is writable", severity="error")
+            return
+        self.servodesk.later(self.notify, "exported " + ", ".join(str(p) for p in written))
+
+    def on_button_pressed(self, event: Button.Pressed) -> None:
+        if event.button.id == "runs-save-button":
+            event.stop()
+            self.action_save_unsaved()
+
+    def action_save_unsaved(self) -> None:
+        if self.run is None or not any(r is self.run for r in self.unsaved):
+            self.notify("select a NOT SAVED run first", severity="warning")
+            return
+        self._save(self.run, Path(self.query_one("#runs-save-dir", Input).value).expanduser())
+
+    @work(thread=True, group="runs-save")
+    def _save(self, run: Run, directory: Path) -> None:
+        try:
+            files = save_run(run, directory)
+        except RecorderError as exc:
+            self.servodesk.later(self.notify, f"{exc}; choose another directory",
+                                      severity="error")
+            return
+        self.servodesk.later(self._saved, run, files.json)
+
+    def _saved(self, run: Run, where: Path) -> None:
+        self.unsaved = [r for r in self.unsaved if r is not run]
+        self.notify(f"saved to {where}")
+        self.action_reload()

@@ -1,0 +1,124 @@
+"""Status: the thesis's ``visual`` printer, better (section 5.1: position and PWM of each
+joint every 300 interrupts). Here every joint's position, desired, error, duty, valve,
+raw encoder word, glitch count and a limit bar; the end-effector pose from the forward
+kinematics; the loop's sample number, mode, lateness and the link counters."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from rich.console import Group
+from rich.table import Table
+from rich.text import Text
+from textual.app import ComposeResult
+from textual.containers import Horizontal
+
+from app.tabs.tab import TabPage
+from app.widgets.header import MODE_NAMES
+from app.widgets.limit_bar import LimitBar
+from app.widgets.live_text import LiveText
+from control.layout import Flag, Status
+from kinematics import unimate
+
+POSE_LABELS = (("x", "mm"), ("y", "mm"), ("z", "mm"), ("γ", "°"), ("β", "°"), ("α", "°"))
+
+
+class StatusTab(TabPage):
+    """Everything the controller publishes, ten times a second."""
+
+    REFRESH_HZ = 10.0
+    TITLE = "Status"
+
+    def compose(self) -> ComposeResult:
+        yield LiveText(id="status-joints")
+        with Horizontal(id="status-lower"):
+            yield LiveText(id="status-pose")
+            yield LiveText(id="status-loop")
+            yield LiveText(id="status-link")
+
+    def on_mount(self) -> None:
+        self.query_one("#status-joints").styles.height = self.machine.n_joints + 2
+
+    def refresh_live(self) -> None:
+        status = self.status()
+        if status is None:
+            self.query_one("#status-joints", LiveText).show(
+                Text("waiting for the controller…", "yellow"))
+            return
+        self.query_one("#status-joints", LiveText).show(self._joints(status))
+        self.query_one("#status-pose", LiveText).show(self._pose(status))
+        self.query_one("#status-loop", LiveText).show(self._loop(status))
+        self.query_one("#status-link", LiveText).show(self._link(status))
+
+    def _joints(self, status: Status) -> Table:
+        table = Table(expand=True, header_style="bold", box=None, padding=(0, 1),
+                      title="joints", title_justify="left", title_style="bold")
+        for name in ("joint", "position", "desired", "error", "duty %", "valve %", "raw",
+                     "glitches"):
+            table.add_column(name, justify="left" if name == "joint" else "right",
+                             no_wrap=True)
+        table.add_column("limits", ratio=1, no_wrap=True)
+        for j, joint in enumerate(self.machine.joints):
+            q, d = status.position[j], status.desired[j]
+            e = d - q if math.isfinite(d) else math.nan
+            table.add_row(
+                joint.name, f"{q:10.3f} {joint.symbol}", _num(d, joint.symbol),
+                _num(e, joint.symbol), f"{status.duty[j]:+7.1f}", f"{status.valve[j]:+7.1f}",
+                f"{status.raw[j]:#06x}",
+                Text(str(status.glitches[j]), "yellow" if status.glitches[j] else "dim"),
+                LimitBar(q, joint.lower, joint.upper, d))
+        return table
+
+    def _pose(self, status: Status) -> Group | Text:
+        if self.machine.kinematics_model != "unimate2000b":
+            return Text.assemble(("end effector\n", "bold"),
+                                 ("no kinematic model for this machine", "dim"))
+        pose = unimate.pose(np.asarray(status.position))
+        table = Table(box=None, padding=(0, 1), show_header=False)
+        table.add_column(justify="left")
+        table.add_column(justify="right")
+        for (name, unit), value in zip(POSE_LABELS, pose, strict=True):
+            table.add_row(name, f"{value:9.2f} {unit}")
+        return Group(Text("end effector (X-Y-Z fixed, eq. 4.04)", "bold"), table)
+
+    def _loop(self, status: Status) -> Group:
+        table = Table(box=None, padding=(0, 1), show_header=False)
+        table.add_column(justify="left")
+        table.add_column(justify="right")
+        progress = (f"{status.move_done}/{status.move_total} (move {status.move_id})"
+                    if status.move_total else "–")
+        flags = ", ".join(f.name.lower().replace("_", " ") for f in Flag
+                          if f in status.flags and f.name) or "–"
+        for name, value in (
+            ("sample", f"{status.tick}"),
+            ("controller time", f"{status.time_s:.3f} s"),
+            ("mode", MODE_NAMES.get(status.mode, str(status.mode))),
+            ("move", progress),
+            ("lateness", f"{status.late_last_us:.1f} µs (max {status.late_max_us:.1f})"),
+            ("compute", f"{status.compute_last_us:.1f} µs (max {status.compute_max_us:.1f})"),
+            ("loop CPU", _share(status.compute_total_s, status.tick * self.machine.sample_time_s)),
+            ("overruns", f"{status.overruns}"),
+            ("flags", flags),
+            ("fault", status.fault or "–"),
+        ):
+            table.add_row(name, value)
+        return Group(Text("loop", "bold"), table)
+
+    def _link(self, status: Status) -> Group:
+        table = Table(box=None, padding=(0, 1), show_header=False)
+        table.add_column(justify="left")
+        table.add_column(justify="right")
+        for name, value in status.link.items():
+            bad = value and name not in ("frames_tx", "frames_rx")
+            table.add_row(name.replace("_", " "), Text(str(value), "bold yellow" if bad else ""))
+        return Group(Text(f"link ({self.servodesk.backend})", "bold"), table)
+
+
+def _share(busy_s: float, elapsed_s: float) -> str:
+    """The share of the period the loop's work takes (the thesis: under half the CPU at 1 ms)."""
+    return f"{100.0 * busy_s / elapsed_s:.1f} % of the period" if elapsed_s > 0 else "–"
+
+
+def _num(value: float, unit: str) -> str:
+    return f"{value:10.3f} {unit}" if math.isfinite(value) else "–"

@@ -1,0 +1,96 @@
+"""What every tab shares: access to the app's client and machine, and a refresh timer that
+runs only while the tab is visible (hidden tabs cost nothing, and Pilot sees the app idle)."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, ClassVar
+
+from textual.containers import Container
+from textual.timer import Timer
+
+from control.client import ControlClient, ControllerError
+from control.layout import Status
+from hw.machine import Machine
+
+if TYPE_CHECKING:
+    from app.tui import ServodeskApp
+
+
+class TabPage(Container):
+    """A tab's content. ``REFRESH_HZ > 0`` calls ``refresh_live`` at that rate while shown."""
+
+    REFRESH_HZ: ClassVar[float] = 0.0
+    TITLE: ClassVar[str] = ""
+
+    def __init__(self, *, id: str | None = None) -> None:
+        super().__init__(id=id)
+        self._timer: Timer | None = None
+        self.visible_now = False
+
+    @property
+    def servodesk(self) -> ServodeskApp:
+        return self.app  # type: ignore[return-value]
+
+    @property
+    def machine(self) -> Machine:
+        return self.servodesk.machine
+
+    @property
+    def client(self) -> ControlClient | None:
+        client = self.servodesk.client
+        return client if client is not None and not client.dead else None
+
+    def status(self) -> Status | None:
+        """The controller's newest status, or None before it started or after it died."""
+        client = self.client
+        if client is None:
+            return None
+        try:
+            return client.status()
+        except (ValueError, TimeoutError):  # closed while we asked
+            return None
+
+    def command(self, what: str, method: str, *args: object) -> bool:
+        """Call ``client.<method>(*args)``; if the controller cannot take it, say why and what
+        to do instead of raising."""
+        client = self.client
+        if client is None:
+            self.notify(f"{what}: the controller is not running — "
+                        + (self.servodesk.client_problem or "wait for it to start"),
+                        severity="error")
+            return False
+        try:
+            getattr(client, method)(*args)
+        except (ControllerError, ValueError, OSError) as exc:
+            self.notify(f"{what}: {exc}", severity="error")
+            return False
+        return True
+
+    def on_mount(self) -> None:
+        if self.REFRESH_HZ > 0:
+            self._timer = self.set_interval(1.0 / self.REFRESH_HZ, self.refresh_live, pause=True)
+
+    def shown(self) -> None:
+        """The tab became the visible one."""
+        self.visible_now = True
+        if self._timer is not None:
+            self._timer.resume()
+        self.refresh_live()
+
+    def hidden(self) -> None:
+        """Another tab became visible; no key may reach this one's widgets any more."""
+        self.visible_now = False
+        if self._timer is not None:
+            self._timer.pause()
+        focused = self.app.focused
+        if focused is not None and self in focused.ancestors_with_self:
+            self.app.set_focus(None)
+
+    def client_ready(self) -> None:
+        """The controller is up (called once)."""
+
+    def refresh_live(self) -> None:
+        """Redraw from the controller's status (only while visible)."""
+
+    def focus_main(self) -> None:
+        """Put the keyboard focus where this tab's keys work."""

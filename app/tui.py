@@ -1,0 +1,434 @@
+"""The servodesk TUI: the thesis's ``option`` menu and ``visual`` printer as one Textual app.
+
+It talks to the robot only through ``control.ControlClient``, started in a
+worker so the screen is up at once, and closed on every way out (quit, an
+exception, the terminal going away). E-stop is bound with priority on every
+screen to Escape and to ctrl+e, which arrives as a single byte and so is not
+held back by the terminal's escape-sequence timeout (~100 ms for a lone Escape).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import gc
+import threading
+from collections.abc import Callable
+from dataclasses import replace
+from pathlib import Path
+from typing import ClassVar
+
+from textual.app import App, ComposeResult
+from textual.binding import Binding
+from textual.css.query import NoMatches
+from textual.screen import ModalScreen
+from textual.widgets import Footer, TabbedContent, TabPane
+
+from app.tabs.jog import JogTab
+from app.tabs.latency import LatencyTab
+from app.tabs.moves import MovesTab
+from app.tabs.runs import RunsTab
+from app.tabs.scope import ScopeTab
+from app.tabs.status import StatusTab
+from app.tabs.tab import TabPage
+from app.tabs.tuning import TuningTab
+from app.widgets.dialogs import ConfirmScreen
+from app.widgets.header import FaultBanner, StatusHeader
+from app.widgets.history import History, Sampler
+from app.widgets.messages import (
+    ClientFailed,
+    ClientReady,
+    ControllerEvent,
+    Deferred,
+    RunsChanged,
+)
+from control.client import ControlClient, ControllerError, Event
+from control.recorder import Run, default_data_dir
+from hw.machine import Machine, load_machine
+
+HEADER_HZ = 10.0
+SETTLE_S = 1.5  # after a tab's first frames its long-lived objects exist
+TABS: tuple[tuple[str, type[TabPage]], ...] = (
+    ("jog", JogTab), ("moves", MovesTab), ("scope", ScopeTab), ("status", StatusTab),
+    ("tuning", TuningTab), ("runs", RunsTab), ("latency", LatencyTab),
+)
+FAULT_ADVICE = {
+    "limit": "Drive it back with the opposite jog key, or run a move that stays inside the "
+             "limits.",
+    "following_error": "Check the hydraulic supply and the valve, slow the move down or raise "
+                       "the gains (Tuning), then run it again.",
+    "ui_lost": "The UI missed its heartbeat; it is back now. Run the move again.",
+    "crash": "Every valve is closed. Quit (^Q) and start servodesk again.",
+    "initialise": "Check that the ram can move down freely, then run Initialise again (Moves).",
+}
+
+
+def estop_advice(reason: str, port: str | None) -> str:
+    """What to do about a latched E-stop, by its reason."""
+    if reason.startswith("E-stop input"):
+        return "Release the E-stop button, then press ^R to release the latch."
+    if reason.startswith("link fault"):
+        where = f" ({port})" if port else ""
+        return f"Check the I/O board's cable and power{where}; when the link is back, press ^R."
+    if reason.startswith("controller error"):
+        return "A fault in the controller: quit (^Q), restart servodesk, and report the message."
+    return "Every valve is closed. When it is safe, press ^R to release (the joints then hold)."
+
+
+class ServodeskApp(App[None]):
+    """The operator's workstation for one machine and backend."""
+
+    CSS_PATH = "servodesk.tcss"
+    TITLE = "servodesk"
+    BINDINGS: ClassVar = [
+        Binding("escape,ctrl+e", "estop", "E-STOP", priority=True, key_display="Esc/^E"),
+        Binding("ctrl+r", "reset", "release E-stop…", priority=True),
+        Binding("ctrl+s", "run_move", "run move", priority=True),
+        Binding("ctrl+g", "hold", "hold", tooltip="abort any move, hold every joint where it is",
+                priority=True),
+        Binding("ctrl+l", "dismiss_fault", "dismiss fault", priority=True),
+        *[Binding(f"f{i + 1}", f"show_tab('{name}')", f"{cls.TITLE} tab", show=False,
+                  priority=True) for i, (name, cls) in enumerate(TABS)],
+        Binding("ctrl+q", "quit", "quit", priority=True),
+    ]
+
+    def __init__(self, machine: str | Path | Machine = "unimate2000b", backend: str = "sim",
+                 port: str | None = None, data_dir: str | Path | None = None,
+                 lockstep: bool = False, *, seed: int = 0, sim_options: dict | None = None,
+                 client_options: dict | None = None) -> None:
+        super().__init__()
+        self.machine = machine if isinstance(machine, Machine) else load_machine(machine)
+        self.backend = backend
+        self.port = port
+        self.data_dir = Path(data_dir) if data_dir is not None else default_data_dir()
+        self.lockstep = lockstep
+        self.seed = seed
+        self.sim_options = sim_options
+        self.client_options = client_options or {}
+        self.history = History(self.machine.n_joints)
+        self.client: ControlClient | None = None
+        self.client_problem = ""
+        self.sampler: Sampler | None = None
+        self._client_lock = threading.Lock()
+        self._client_closing = False
+        self._estop_pending = False
+        self._active: TabPage | None = None
+        self._settled: set[str] = set()
+        self._early: list[ClientReady | ClientFailed | ControllerEvent] | None = []
+        self.fault_kind = ""
+
+    # -- layout --------------------------------------------------------------------------------
+
+    def compose(self) -> ComposeResult:
+        backend = self.backend + (f" {self.port}" if self.port else "")
+        if self.lockstep:
+            backend += " (lockstep)"
+        yield StatusHeader(self.machine.title, backend, id="header")
+        yield FaultBanner(id="fault")
+        with TabbedContent(id="tabs"):
+            for i, (name, cls) in enumerate(TABS):
+                with TabPane(f"F{i + 1} {cls.TITLE}", id=f"pane-{name}"):
+                    yield cls(id=f"tab-{name}")
+        yield Footer()
+
+    def on_mount(self) -> None:
+        # kept, not queried: a controller event may still arrive while the screen is torn down
+        self.header = self.query_one(StatusHeader)
+        self.banner = self.query_one(FaultBanner)
+        self.banner.display = False
+        self.tabs = {name: self.query_one(f"#tab-{name}", TabPage) for name, _ in TABS}
+        gc.freeze()  # see _freeze_long_lived; no collection: the controller may be up already
+        self.set_interval(1.0 / HEADER_HZ, self._refresh_header)
+        self._activate("jog")
+        early, self._early = self._early or [], None
+        for message in early:  # the controller was quicker than the screen
+            self._dispatch_client_message(message)
+
+    def _held_back(self, message: ClientReady | ClientFailed | ControllerEvent) -> bool:
+        """Keep a message of the client that came before the screen was mounted."""
+        if self._early is None:
+            return False
+        self._early.append(message)
+        return True
+
+    def _dispatch_client_message(self, message: ClientReady | ClientFailed | ControllerEvent
+                                 ) -> None:
+        if isinstance(message, ClientReady):
+            self.on_client_ready(message)
+        elif isinstance(message, ClientFailed):
+            self.on_client_failed(message)
+        else:
+            self.on_controller_event(message)
+
+    def on_load(self) -> None:
+        self.start_client()  # the controller starts while the screen is built
+
+    def tab(self, name: str) -> TabPage:
+        return self.tabs[name]
+
+    # -- the client's life ---------------------------------------------------------------------
+
+    def _start_client_blocking(self) -> None:
+        try:
+            client = ControlClient(
+                self.machine, self.backend, port=self.port, seed=self.seed,
+                lockstep=self.lockstep, data_dir=self.data_dir, sim_options=self.sim_options,
+                on_event=self._event_from_thread, **self.client_options)
+        except Exception as exc:  # ControllerError, a bad port, no shared memory…
+            self._post(ClientFailed(self._startup_advice(exc)))
+            return
+        with self._client_lock:
+            if self._client_closing:
+                client.close()
+                return
+            self.client = client
+        self._post(ClientReady(client))
+
+    def start_client(self) -> None:
+        self.run_worker(self._start_client_blocking, thread=True, group="client",
+                        name="start controller")
+
+    def _startup_advice(self, exc: Exception) -> str:
+        text = f"{type(exc).__name__}: {exc}" if not isinstance(exc, ControllerError) else str(exc)
+        if self.backend == "serial":
+            return (f"{text}. Check --port (a device, the emulator's pty path or "
+                    "socket://HOST:PORT) and that the I/O board is powered; then restart.")
+        return f"{text}. Quit (^Q) and start servodesk again; if it repeats, report this message."
+
+    def _event_from_thread(self, event: Event) -> None:
+        self._post(ControllerEvent(event))
+
+    def _post(self, message: object) -> None:
+        """Post from any thread; a message after the app has closed is dropped."""
+        with contextlib.suppress(RuntimeError):
+            self.post_message(message)  # type: ignore[arg-type]
+
+    def later(self, callback: Callable[..., object], *args: object, **kwargs: object) -> None:
+        """Run ``callback(*args, **kwargs)`` on the UI thread, from any thread; dropped once
+        the app has closed."""
+        self._post(Deferred(callback, *args, **kwargs))
+
+    def on_deferred(self, message: Deferred) -> None:
+        if not self.is_running:
+            return
+        with contextlib.suppress(NoMatches):  # the widget went away with the screen
+            message.callback(*message.args, **message.kwargs)
+
+    def on_client_ready(self, message: ClientReady) -> None:
+        if self._held_back(message):
+            return
+        client = message.client
+        self.sampler = Sampler(client.status, self.history)
+        self.sampler.start()
+        self._link(state="live")
+        if self._estop_pending:
+            self._send_estop()
+        if client.notice:
+            self.notify(client.notice, title="controller", timeout=6)
+        for name, _ in TABS:
+            self.tab(name).client_ready()
+        if self._active is not None:
+            self._active.refresh_live()
+
+    def on_client_failed(self, message: ClientFailed) -> None:
+        if self._held_back(message):
+            return
+        self.client_problem = message.reason
+        self._link(state="failed", reason="controller did not start")
+        self._fault("start", f"The controller did not start: {message.reason}")
+
+    def shutdown_client(self) -> None:
+        """Stop sampling and close the client (valves closed, memory unlinked); idempotent."""
+        with self._client_lock:
+            self._client_closing = True
+            client, self.client = self.client, None
+        if self.sampler is not None:
+            self.sampler.stop()
+        if client is not None:
+            client.close()
+
+    def on_unmount(self) -> None:
+        self.shutdown_client()
+
+    # -- events from the controller ------------------------------------------------------------
+
+    def on_controller_event(self, message: ControllerEvent) -> None:
+        if not self.is_running:  # the events of closing the client arrive after the screen
+            return
+        if self._held_back(message):
+            return
+        event = message.event
+        kind, payload = event.kind, event.payload
+        if kind == "estop":
+            if payload.get("latched"):
+                reason = str(payload.get("reason", ""))
+                self._fault("estop", f"E-STOP latched: {reason}. "
+                                     f"{estop_advice(reason, self.port)}")
+            else:
+                self._link(estop_sent=False)
+                if self.fault_kind == "estop":
+                    self.action_dismiss_fault()
+                self.notify("E-stop released: every joint holds where it is")
+        elif kind == "fault":
+            fault = str(payload.get("kind", ""))
+            self._fault(fault, f"{event.message}. {FAULT_ADVICE.get(fault, '')}".strip())
+        elif kind == "died":
+            self._died()
+            self._fault("died", event.message)
+        elif kind == "notice":
+            self.notify(event.message, title="controller", timeout=6)
+        elif kind == "move_done" and int(payload.get("move_id", -1)) == 0:
+            status = str(payload.get("status", ""))
+            moves = self.tab("moves")
+            assert isinstance(moves, MovesTab)
+            moves.initialised(status)
+            self.notify(f"initialise: {status}")
+
+    def _fault(self, kind: str, message: str) -> None:
+        self.fault_kind = kind
+        self.banner.message = message
+        self.refresh_bindings()
+
+    def on_runs_changed(self, message: RunsChanged) -> None:
+        runs = self.tab("runs")
+        assert isinstance(runs, RunsTab)
+        runs.mark_stale()
+
+    def keep_unsaved(self, run: Run) -> None:
+        runs = self.tab("runs")
+        assert isinstance(runs, RunsTab)
+        runs.keep_unsaved(run)
+
+    def _freeze_long_lived(self) -> None:
+        """Exempt the widgets and caches built so far from full garbage collections.
+
+        A full collection holds the GIL while it scans every tracked object: with the
+        whole UI in view that is 0.1-0.4 s, long enough to starve the client's heartbeat
+        thread (the controller then aborts the move and holds). Done at start and once
+        after each tab's first frames, full collections scan only what is new since: a
+        few tens of ms. Frozen objects are still freed by reference counting.
+        """
+        gc.collect(1)
+        gc.freeze()
+
+    # -- header --------------------------------------------------------------------------------
+
+    def _died(self) -> None:
+        self.client_problem = "it died: quit (^Q) and start servodesk again"
+        self._link(state="dead", reason="controller died")
+
+    def _link(self, **changes: object) -> None:
+        self.header.link = replace(self.header.link, **changes)  # type: ignore[arg-type]
+
+    def _refresh_header(self) -> None:
+        if not self.header.is_mounted:
+            return
+        client = self.client
+        if client is not None and client.dead and self.header.link.state == "live":
+            self._died()
+        if self.sampler is not None and self.sampler.latest is not None:
+            self.header.status = self.sampler.latest
+
+    # -- tabs ----------------------------------------------------------------------------------
+
+    def on_tabbed_content_tab_activated(self, event: TabbedContent.TabActivated) -> None:
+        name = (event.pane.id or "pane-jog").removeprefix("pane-")
+        self._activate(name)
+        self.call_after_refresh(self._focus_active)
+
+    def _activate(self, name: str) -> None:
+        tab = self.tab(name)
+        if tab is self._active:
+            return
+        if self._active is not None:
+            self._active.hidden()
+        self._active = tab
+        tab.shown()
+        self.refresh_bindings()
+        self.call_after_refresh(self._focus_active)
+        if name not in self._settled:
+            self._settled.add(name)
+            self.set_timer(SETTLE_S, self._freeze_long_lived)
+
+    def _focus_active(self) -> None:
+        """Focus where the visible tab's keys work, once its pane is displayed (a hidden
+        widget cannot take the focus, and a late call must not focus a tab left since)."""
+        if self._active is not None and not isinstance(self.screen, ModalScreen):
+            self._active.focus_main()
+
+    def action_show_tab(self, name: str) -> None:
+        self.query_one("#tabs", TabbedContent).active = f"pane-{name}"
+        self._activate(name)
+
+    # -- safety actions ------------------------------------------------------------------------
+
+    def action_estop(self) -> None:
+        """Latch every valve closed, now. Works on every screen, dialogs included."""
+        self._send_estop()
+        self._link(estop_sent=True)
+        jog = self.tab("jog")
+        if isinstance(jog, JogTab):
+            jog.pad.forget_duties()
+        while isinstance(self.screen, ModalScreen):
+            self.pop_screen()
+
+    def _send_estop(self) -> None:
+        client = self.client
+        if client is None or client.dead:
+            self._estop_pending = client is None  # sent as soon as the controller is up
+            return
+        try:
+            client.estop()
+            self._estop_pending = False
+        except (ControllerError, OSError, ValueError):
+            self._estop_pending = False  # the controller is gone: the board's watchdog holds
+
+    def action_reset(self) -> None:
+        """Release the E-stop latch, after a deliberate confirmation."""
+        if isinstance(self.screen, ModalScreen):
+            return
+
+        def answer(yes: bool | None) -> None:
+            if not yes:
+                return
+            client = self.client
+            if client is None:
+                self.notify("no controller to release: it is not running", severity="error")
+                return
+            try:
+                client.reset()
+            except ControllerError as exc:
+                self.notify(str(exc), severity="error")
+                return
+            self._link(estop_sent=False)
+
+        self.push_screen(ConfirmScreen(
+            "Release the E-stop?",
+            "The valves open again and every joint holds where it is now. Make sure the "
+            "robot's envelope is clear.", "Release"), answer)
+
+    def action_hold(self) -> None:
+        """Abort any move and hold every joint where it is (the thesis's default mode)."""
+        client = self.client
+        if client is None:
+            return
+        try:
+            client.hold()
+        except ControllerError as exc:
+            self.notify(str(exc), severity="error")
+
+    def action_dismiss_fault(self) -> None:
+        self.fault_kind = ""
+        self.banner.message = ""
+        self.refresh_bindings()
+
+    def action_run_move(self) -> None:
+        """Run the move filled in on the Moves tab (whichever widget has the focus)."""
+        if isinstance(self._active, MovesTab) and not isinstance(self.screen, ModalScreen):
+            self._active.action_run()
+
+    def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
+        if action == "dismiss_fault":
+            return bool(self.fault_kind)
+        if action == "run_move":
+            return isinstance(self._active, MovesTab)
+        return True

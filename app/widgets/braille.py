@@ -1,0 +1,156 @@
+"""A braille-dot raster for live plots: numpy arrays in, one ``Strip`` per text row out.
+
+Each text cell holds a 2 × 4 grid of dots (Unicode U+2800–U+28FF), so a
+``cols × rows`` area is a ``2·cols × 4·rows`` pixel raster. A trace is reduced
+to one vertical span of pixels per pixel column (its min…max there, joined to
+the previous column's last value so the line stays connected), which makes the
+cost depend on the width of the plot, not on the number of samples: six joints
+× 2,000 points render in a few milliseconds (``benchmarks/ui.py``).
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from rich.segment import Segment
+from rich.style import Style
+from textual.strip import Strip
+
+BRAILLE_BASE = 0x2800
+# Dot bit of pixel (row within cell, column within cell), Unicode braille numbering.
+_DOT_BITS = np.array([[0x01, 0x08], [0x02, 0x10], [0x04, 0x20], [0x40, 0x80]], dtype=np.uint16)
+
+
+@dataclass(frozen=True)
+class Trace:
+    """One line of a plot: ``x: (N,)`` increasing, ``y: (N,)``; NaN in ``y`` breaks the line."""
+
+    x: np.ndarray
+    y: np.ndarray
+    style: Style
+
+
+def columns(x: np.ndarray, y: np.ndarray, x_range: tuple[float, float],
+            y_range: tuple[float, float], width_px: int, height_px: int
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """Pixel rows ``(low, high)`` covered by a trace in each pixel column, ``(width_px,)`` each.
+
+    Row 0 is the top. A column the trace does not reach has ``low > high``.
+    """
+    x0, x1 = x_range
+    y0, y1 = y_range
+    low = np.full(width_px, height_px, dtype=np.int64)
+    high = np.full(width_px, -1, dtype=np.int64)
+    if len(x) == 0 or x1 <= x0 or y1 <= y0:
+        return low, high
+    x_scale = width_px / (x1 - x0)
+    if len(x) < 2 * width_px:
+        # Sparse: sample the line at every pixel column, so gaps between samples are drawn.
+        centres = x0 + (np.arange(width_px) + 0.5) / x_scale
+        inside = (centres >= x[0]) & (centres <= x[-1])
+        values = np.full(width_px, np.nan)
+        values[inside] = np.interp(centres[inside], x, y)
+        first = last = _rows(values, y0, y1, height_px)
+    else:
+        col = np.floor((x - x0) * x_scale).astype(np.int64)
+        keep = (col >= 0) & (col < width_px) & np.isfinite(y)
+        col, values = col[keep], y[keep]
+        if len(col) == 0:
+            return low, high
+        rows = _rows(values, y0, y1, height_px)
+        starts = np.flatnonzero(np.r_[True, col[1:] != col[:-1]])
+        cols = col[starts]
+        ends = np.r_[starts[1:], len(col)] - 1
+        low[cols] = np.minimum.reduceat(rows, starts)
+        high[cols] = np.maximum.reduceat(rows, starts)
+        first = np.full(width_px, np.nan)
+        last = np.full(width_px, np.nan)
+        first[cols] = rows[starts]
+        last[cols] = rows[ends]
+    present = np.isfinite(first)
+    previous = np.r_[np.nan, last[:-1]]
+    join = present & np.isfinite(previous)
+    with np.errstate(invalid="ignore"):
+        span_low = np.where(present, np.fmin(first, previous), np.nan)
+        span_high = np.where(present, np.fmax(first, previous), np.nan)
+    span_low = np.where(join, span_low, first)
+    span_high = np.where(join, span_high, first)
+    low[present] = np.minimum(low[present], span_low[present].astype(np.int64))
+    high[present] = np.maximum(high[present], span_high[present].astype(np.int64))
+    return low, high
+
+
+def _rows(values: np.ndarray, y0: float, y1: float, height_px: int) -> np.ndarray:
+    """Pixel row of each value (top row 0), clipped onto the plot; NaN stays NaN."""
+    with np.errstate(invalid="ignore"):
+        rows = np.floor((y1 - values) * (height_px / (y1 - y0)))
+    return np.clip(rows, 0, height_px - 1)
+
+
+def raster(trace: Trace, x_range: tuple[float, float], y_range: tuple[float, float],
+           cols: int, rows: int) -> np.ndarray:
+    """Braille dot bits of one trace, ``(rows, cols)`` uint16 (0: empty cell)."""
+    height_px = 4 * rows
+    low, high = columns(trace.x, trace.y, x_range, y_range, 2 * cols, height_px)
+    pixel_rows = np.arange(height_px)[:, None]
+    mask = (pixel_rows >= low[None, :]) & (pixel_rows <= high[None, :])
+    cells = mask.reshape(rows, 4, cols, 2).astype(np.uint16) * _DOT_BITS[None, :, None, :]
+    return cells.sum(axis=(1, 3), dtype=np.uint16)
+
+
+def hline(y: float, y_range: tuple[float, float], cols: int, rows: int) -> np.ndarray:
+    """Dot bits of a dotted horizontal line at ``y`` (a zero line), ``(rows, cols)``."""
+    out = np.zeros((rows, cols), dtype=np.uint16)
+    y0, y1 = y_range
+    if not y0 <= y <= y1 or rows == 0:
+        return out
+    row = int(min(4 * rows - 1, np.floor((y1 - y) * 4 * rows / (y1 - y0))))
+    out[row // 4, ::2] = _DOT_BITS[row % 4, 0]
+    return out
+
+
+def render(traces: Sequence[Trace], x_range: tuple[float, float],
+           y_range: tuple[float, float], cols: int, rows: int,
+           guide: Style | None = None, guide_y: float | None = None) -> list[Strip]:
+    """Draw ``traces`` (later ones on top) into ``rows`` strips of ``cols`` cells.
+
+    A cell shared by several traces shows the dots of all of them in the colour
+    of the topmost. ``guide_y`` draws a dotted line (a zero line) in ``guide``.
+    """
+    if cols <= 0 or rows <= 0:
+        return [Strip.blank(max(cols, 0)) for _ in range(max(rows, 0))]
+    codes = np.zeros((rows, cols), dtype=np.uint16)
+    owner = np.full((rows, cols), -1, dtype=np.int16)
+    styles: list[Style] = [t.style for t in traces]
+    if guide_y is not None:
+        bits = hline(guide_y, y_range, cols, rows)
+        codes |= bits
+        owner[bits > 0] = len(styles)
+        styles.append(guide or Style(dim=True))
+    for index, trace in enumerate(traces):
+        bits = raster(trace, x_range, y_range, cols, rows)
+        codes |= bits
+        owner[bits > 0] = index
+    return strips(codes, owner, styles)
+
+
+def strips(codes: np.ndarray, owner: np.ndarray, styles: Sequence[Style]) -> list[Strip]:
+    """Turn dot bits and the owning style index of each cell into one Strip per row."""
+    chars = np.where(codes > 0, codes.astype(np.uint32) + BRAILLE_BASE, ord(" "))
+    text = chars.astype("<u4").tobytes().decode("utf-32-le")
+    cols = codes.shape[1]
+    out = []
+    for r in range(codes.shape[0]):
+        line = text[r * cols:(r + 1) * cols]
+        who = owner[r]
+        cuts = np.flatnonzero(who[1:] != who[:-1]) + 1
+        bounds = [0, *cuts.tolist(), cols]
+        segments = []
+        for a, b in itertools.pairwise(bounds):
+            index = int(who[a])
+            segments.append(Segment(line[a:b], styles[index] if index >= 0 else None))
+        out.append(Strip(segments, cols))
+    return out

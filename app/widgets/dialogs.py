@@ -1,0 +1,111 @@
+"""Small modal dialogs: a deliberate confirmation, and one validated value to edit.
+
+Escape is the E-stop on every screen, so a dialog is cancelled with ``n`` or
+its Cancel button; the E-stop also closes any dialog that is open.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import ClassVar
+
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Horizontal, Vertical
+from textual.screen import ModalScreen
+from textual.validation import ValidationResult, Validator
+from textual.widgets import Button, Input, Label, Static
+
+
+class ConfirmScreen(ModalScreen[bool]):
+    """Ask once more before something that matters; ``y`` or Enter confirms, ``n`` cancels."""
+
+    BINDINGS: ClassVar = [
+        Binding("y", "answer(True)", "yes"),
+        Binding("n", "answer(False)", "no"),
+    ]
+
+    def __init__(self, question: str, detail: str, confirm: str = "Confirm") -> None:
+        super().__init__(classes="dialog-screen")
+        self.question = question
+        self.detail = detail
+        self.confirm = confirm
+
+    def compose(self) -> ComposeResult:
+        with Vertical(classes="dialog"):
+            yield Label(self.question, classes="dialog-title")
+            yield Static(self.detail, classes="dialog-detail")
+            with Horizontal(classes="dialog-buttons"):
+                yield Button(f"{self.confirm} (y)", id="confirm", variant="error")
+                yield Button("Cancel (n)", id="cancel")
+
+    def on_mount(self) -> None:
+        self.query_one("#confirm", Button).focus()
+
+    def on_button_pressed(self, event: Button.Pressed) -> None:
+        event.stop()
+        self.dismiss(event.button.id == "confirm")
+
+    def action_answer(self, yes: bool) -> None:
+        self.dismiss(yes)
+
+
+class _Check(Validator):
+    def __init__(self, parse: Callable[[str], object]) -> None:
+        super().__init__()
+        self.parse = parse
+
+    def validate(self, value: str) -> ValidationResult:
+        try:
+            self.parse(value)
+        except ValueError as exc:
+            return self.failure(str(exc))
+        return self.success()
+
+
+class EditValueScreen(ModalScreen[str | None]):
+    """Edit one value; ``parse`` raises ValueError with the fix. Returns the text, or None."""
+
+    def __init__(self, title: str, value: str, parse: Callable[[str], object],
+                 hint: str = "") -> None:
+        super().__init__(classes="dialog-screen")
+        self.title_text = title
+        self.value = value
+        self.parse = parse
+        self.hint = hint
+
+    def compose(self) -> ComposeResult:
+        with Vertical(classes="dialog"):
+            yield Label(self.title_text, classes="dialog-title")
+            yield Static(self.hint, classes="dialog-detail")
+            yield Input(self.value, validators=[_Check(self.parse)], id="edit-value",
+                        validate_on=["changed", "submitted"])
+            yield Static("", classes="dialog-error", id="edit-error")
+            with Horizontal(classes="dialog-buttons"):
+                yield Button("Apply (Enter)", id="apply", variant="primary")
+                yield Button("Cancel", id="cancel")
+
+    def on_input_changed(self, event: Input.Changed) -> None:
+        result = event.validation_result
+        self.query_one("#edit-error", Static).update(
+            "" if result is None or result.is_valid else result.failure_descriptions[0])
+
+    def on_input_submitted(self, event: Input.Submitted) -> None:
+        event.stop()
+        self._apply()
+
+    def on_button_pressed(self, event: Button.Pressed) -> None:
+        event.stop()
+        if event.button.id == "apply":
+            self._apply()
+        else:
+            self.dismiss(None)
+
+    def _apply(self) -> None:
+        text = self.query_one(Input).value
+        try:
+            self.parse(text)
+        except ValueError as exc:
+            self.query_one("#edit-error", Static).update(str(exc))
+            return
+        self.dismiss(text)

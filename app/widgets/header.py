@@ -1,0 +1,157 @@
+"""The always-visible top of the screen: who and how the controller is, a large E-stop lamp,
+and the fault banner that says what happened and what to do."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+from rich.text import Text
+from textual.app import ComposeResult
+from textual.containers import Horizontal, Vertical
+from textual.reactive import reactive
+from textual.widgets import Static
+
+from app.widgets.live_text import LiveText
+from control.layout import Flag, Mode, Status
+
+MODE_NAMES = {
+    Mode.HOLD: "HOLD",
+    Mode.FOLLOW_TRACK: "FOLLOW TRACK",
+    Mode.MANUAL_ACTUATE: "MANUAL",
+    Mode.TRACKING_ACTUATE: "TRACKING ACTUATE",
+    Mode.INITIALISE: "INITIALISE",
+}
+STALE_S = 0.5  # a status older than this means the controller stopped publishing
+LATE_WARN_US = 100.0
+
+
+@dataclass(frozen=True)
+class Link:
+    """What the header knows about the controller besides its status."""
+
+    state: str = "starting"  # starting, live, dead, failed
+    reason: str = ""
+    estop_sent: bool = False
+
+
+class EStopLamp(LiveText):
+    """A large lamp: green RUN, red E-STOP LATCHED, yellow STARTING, red CONTROLLER DOWN."""
+
+    def light(self, title: str, hint: str, lamp: str) -> None:
+        if not self.has_class(lamp):
+            self.set_classes(lamp)
+        self.show(Text.assemble((title, "bold"), "\n", hint, justify="center"))
+
+
+class StatusHeader(Horizontal):
+    """Machine, backend, link health, control mode, loop lateness and the E-stop lamp."""
+
+    status: reactive[Status | None] = reactive(None, always_update=True)
+    link: reactive[Link] = reactive(Link)
+
+    def __init__(self, machine_title: str, backend: str, *, id: str | None = None) -> None:
+        super().__init__(id=id)
+        self.machine_title = machine_title
+        self.backend = backend
+        self._lines: tuple[LiveText, LiveText, EStopLamp] | None = None  # once mounted
+
+    def compose(self) -> ComposeResult:
+        with Vertical(id="header-text"):
+            yield Static(Text.assemble(("servodesk", "bold"), f"  {self.machine_title}  ·  ",
+                                       ("backend ", "dim"), self.backend), id="header-identity")
+            yield LiveText(id="header-health")
+            yield LiveText(id="header-loop")
+        yield EStopLamp(id="estop-lamp")
+
+    def on_mount(self) -> None:
+        self._lines = (self.query_one("#header-health", LiveText),
+                       self.query_one("#header-loop", LiveText), self.query_one(EStopLamp))
+        self._show()
+
+    def watch_status(self) -> None:
+        self._show()
+
+    def watch_link(self) -> None:
+        self._show()
+
+    def _show(self) -> None:
+        if self._lines is None:
+            return
+        health, loop, lamp = self._lines
+        status, link = self.status, self.link
+        health.show(self._health(status, link))
+        loop.show(self._loop(status))
+        self._lamp(lamp, status, link)
+
+    def _lamp(self, lamp: EStopLamp, status: Status | None, link: Link) -> None:
+        if link.state in ("dead", "failed"):
+            lamp.light("CONTROLLER DOWN", "valves closed · restart", "lamp-down")
+        elif status is not None and status.estop:
+            lamp.light("E-STOP LATCHED", "^R to release", "lamp-estop")
+        elif link.estop_sent:
+            lamp.light("E-STOP SENT", "waiting for the controller", "lamp-estop")
+        elif status is None:
+            lamp.light("STARTING", "Esc/^E: E-STOP", "lamp-starting")
+        else:
+            lamp.light("RUN", "Esc/^E: E-STOP", "lamp-run")
+
+    def _health(self, status: Status | None, link: Link) -> Text:
+        text = Text("link ", style="dim")
+        if link.state == "starting":
+            text.append("starting the controller…", "yellow")
+            return text
+        if link.state in ("dead", "failed"):
+            text.append("DOWN", "bold red")
+            text.append(f"  {link.reason}", "red")
+            return text
+        if status is None:
+            text.append("waiting for the first status", "yellow")
+            return text
+        age = time.monotonic() - status.wall_ns / 1e9
+        if status.flags & Flag.LINK_FAULT:
+            text.append("FAULT", "bold red")
+        elif age > STALE_S:
+            text.append(f"STALLED {age:.1f} s", "bold red")
+        elif status.flags & Flag.UI_LOST:
+            text.append("controller lost the UI's heartbeat", "bold yellow")
+        else:
+            text.append("ok", "bold green")
+        counters = status.link
+        if counters.get("frames_rx"):
+            errors = sum(counters.get(k, 0) for k in
+                         ("crc_errors", "truncated", "out_of_order", "link_lost"))
+            text.append(f"  rx {counters['frames_rx']} · errors {errors}",
+                        "yellow" if errors else "dim")
+        text.append("   mode ", "dim")
+        text.append(MODE_NAMES.get(status.mode, str(status.mode)), "bold cyan")
+        if status.move_total:
+            pct = 100.0 * status.move_done / status.move_total
+            text.append(f"  move {status.move_id} {pct:3.0f} %", "cyan")
+        if not status.homed:
+            text.append("   NOT INITIALISED", "bold yellow")
+        return text
+
+    def _loop(self, status: Status | None) -> Text:
+        text = Text("loop ", style="dim")
+        if status is None:
+            return text
+        late_style = "bold yellow" if status.late_max_us > LATE_WARN_US else ""
+        text.append(f"late {status.late_last_us:5.1f} µs", late_style)
+        text.append(f" (max {status.late_max_us:.0f})", "dim")
+        text.append(f"  compute {status.compute_last_us:5.1f} µs")
+        text.append(f"  overruns {status.overruns}", "bold red" if status.overruns else "")
+        text.append(f"  tick {status.tick}  t {status.time_s:8.2f} s", "dim")
+        if status.flags & Flag.REALTIME:
+            text.append("  SCHED_FIFO", "green")
+        return text
+
+
+class FaultBanner(Static):
+    """The latest fault in plain words: what happened, and what to do. Hidden when clear."""
+
+    message: reactive[str] = reactive("")
+
+    def watch_message(self, message: str) -> None:
+        self.display = bool(message)
+        self.update(Text.assemble(("⚠ ", "bold"), message, ("   (^L dismiss)", "dim")))

@@ -1,0 +1,52 @@
+"""Where a joint is within its limits, as one line of text: ``├───○──●──────┤``.
+
+``●`` is the position, ``○`` the desired position; the bar turns yellow in the
+outer ``WARN_FRACTION`` of the range and red at a limit. A Rich renderable, so
+it fits any table cell it is put in.
+"""
+
+from __future__ import annotations
+
+import math
+
+from rich.console import Console, ConsoleOptions, RenderResult
+from rich.measure import Measurement
+from rich.text import Text
+
+WARN_FRACTION = 0.05
+
+
+class LimitBar:
+    """``position`` (and ``desired``, NaN for none) between ``lower`` and ``upper``."""
+
+    def __init__(self, position: float, lower: float, upper: float,
+                 desired: float = math.nan, width: int | None = None) -> None:
+        self.position = position
+        self.lower = lower
+        self.upper = upper
+        self.desired = desired
+        self.width = width
+
+    def __rich_measure__(self, console: Console, options: ConsoleOptions) -> Measurement:
+        return Measurement(8, self.width or options.max_width)
+
+    def __rich_console__(self, console: Console, options: ConsoleOptions) -> RenderResult:
+        yield self.text(self.width or options.max_width)
+
+    def fraction(self, value: float) -> float:
+        return (value - self.lower) / (self.upper - self.lower)
+
+    def text(self, width: int) -> Text:
+        inner = max(2, width - 2)
+        cells = ["─"] * inner
+        if math.isfinite(self.desired):
+            cells[self._cell(self.desired, inner)] = "○"
+        if math.isfinite(self.position):
+            cells[self._cell(self.position, inner)] = "●"
+        f = self.fraction(self.position) if math.isfinite(self.position) else 0.5
+        style = ("bold red" if f <= 0 or f >= 1 else
+                 "yellow" if f < WARN_FRACTION or f > 1 - WARN_FRACTION else "green")
+        return Text.assemble(("├", "dim"), ("".join(cells), style), ("┤", "dim"))
+
+    def _cell(self, value: float, inner: int) -> int:
+        return min(inner - 1, max(0, int(self.fraction(value) * inner)))

@@ -1,0 +1,336 @@
+"""The TUI's figures: Scope frame time with six joints × 2,000 points, key response while
+the Scope draws, the controller's lateness with and without it, and key-press to
+duty-at-the-controller latency.
+
+Run: ``python benchmarks/ui.py`` (``--quick`` for fewer repeats). The
+app runs headless (Textual's test driver, 160 × 48) against a real-time simulated
+Unimate 2000B. Parts:
+
+1. renderers alone, the Scope tab's twelve plots (six joints, position and duty,
+   2 × 2,000 points each): the braille raster the tab uses, plotext through
+   textual-plotext (which needs plotext < 6) raw and decimated to ~2 points a column;
+2. the Scope tab in the app: its frame (copy the window and raster it) and the
+   screen update Textual makes of it, frames per second reached, and how long a
+   key waits while it draws;
+3. the controller's lateness over a few seconds with the Scope hidden and shown;
+4. key to duty: a Jog key posted to the app as the terminal driver posts it, until
+   the controller publishes the new valve duty (watched from another process);
+5. startup: ``python -m app`` in a tmux window until the live screen shows.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import multiprocessing as mp
+import os
+import shlex
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from multiprocessing.connection import Connection
+from pathlib import Path
+
+import numpy as np
+from rich.style import Style
+from textual import events
+from textual.screen import Screen
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # ahead of benchmarks/hw.py
+
+from app.tabs.latency import Lateness
+from app.tabs.scope import ScopeTab
+from app.tui import ServodeskApp
+from app.widgets.braille import Trace, render
+from app.widgets.run_plot import decimate
+from control import shm
+from control.layout import ControlLayout
+from control.seqlock import SeqlockReader
+
+ROOT = Path(__file__).resolve().parents[1]
+POINTS = 2_000
+WATCH_S = 0.0003  # the watcher polls the status this often (it is published every 1 ms)
+JOINTS = 6
+SIZE = (160, 48)
+PANEL = (70, 8, 3)  # columns, position rows, duty rows of one joint on a 160 × 48 screen
+
+
+def synthetic(points: int = POINTS, seconds: float = 10.0) -> tuple[np.ndarray, ...]:
+    """``t``, and position, desired, duty ``(points, 6)`` that look like step responses."""
+    t = np.linspace(0.0, seconds, points)
+    k = np.arange(JOINTS)
+    desired = np.where(t[:, None] > 2.0 + k * 0.5, 10.0 + k, 0.0)
+    position = desired - 10.0 * np.exp(-3.0 * np.maximum(t[:, None] - 2.0 - k * 0.5, 0)) * (
+        t[:, None] > 2.0 + k * 0.5) * np.cos(6 * t[:, None]) + 0.05 * np.sin(50 * t[:, None])
+    duty = 40.0 * np.sin(2.0 * t[:, None] + k)
+    return t, position, desired, duty
+
+
+def best_ms(fn, repeats: int) -> tuple[float, float]:
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        fn()
+        times.append((time.perf_counter() - start) * 1e3)
+    return min(times), statistics.median(times)
+
+
+def renderers(repeats: int) -> None:
+    from textual_plotext.plot import Plot
+
+    t, q, d, u = synthetic()
+    cols, rows, duty_rows = PANEL
+    red, cyan, yellow = Style(color="red"), Style(color="cyan"), Style(color="yellow")
+
+    def braille() -> None:
+        for j in range(JOINTS):
+            render([Trace(t, d[:, j], red), Trace(t, q[:, j], cyan)], (0, 10), (-2, 18),
+                   cols, rows)
+            render([Trace(t, u[:, j], yellow)], (0, 10), (-50, 50), cols, duty_rows,
+                   guide_y=0.0)
+
+    def plotext(points: int | None) -> None:
+        plt = Plot()
+        plt.plotsize(SIZE[0], SIZE[1] - 6)
+        plt.subplots(JOINTS, 2)
+        for j in range(JOINTS):
+            for col, series in ((1, (d[:, j], q[:, j])), (2, (u[:, j],))):
+                sub = plt.subplot(j + 1, col)
+                for y in series:
+                    tt, yy = (t, y) if points is None else decimate(t, y, points)
+                    sub.plot(tt.tolist(), yy.tolist(), marker="braille")
+        plt.build()
+
+    print(f"1. renderers alone: {JOINTS} joints × ({POINTS} desired + {POINTS} actual + "
+          f"{POINTS} duty points), ms per frame (best, median of {repeats})")
+    for label, fn in (("braille raster (Scope tab)", braille),
+                      ("plotext raw", lambda: plotext(None)),
+                      ("plotext decimated, 2 points/column", lambda: plotext(2 * cols))):
+        best, median = best_ms(fn, repeats)
+        print(f"   {best:7.1f} {median:7.1f}  {label}")
+
+
+class FrameClock:
+    """Times ScopeTab.refresh_live (the frame) and Screen._compositor_refresh (the update)."""
+
+    def __init__(self) -> None:
+        self.frames: list[float] = []
+        self.updates: list[float] = []
+        self.frame_at: list[float] = []
+        self._frame = ScopeTab.refresh_live
+        self._update = Screen._compositor_refresh
+
+    def install(self) -> None:
+        clock = self
+
+        def frame(tab: ScopeTab, force: bool = False) -> None:
+            start = time.perf_counter()
+            clock._frame(tab, force)
+            clock.frames.append(time.perf_counter() - start)
+            clock.frame_at.append(start)
+
+        def update(screen: Screen) -> None:
+            start = time.perf_counter()
+            clock._update(screen)
+            clock.updates.append(time.perf_counter() - start)
+
+        ScopeTab.refresh_live = frame  # type: ignore[method-assign]
+        Screen._compositor_refresh = update  # type: ignore[method-assign]
+
+    def reset(self) -> None:
+        self.frames.clear()
+        self.updates.clear()
+        self.frame_at.clear()
+
+
+def post_key(app: ServodeskApp, key: str) -> None:
+    """A key as the terminal driver delivers it (no Pilot idle waits)."""
+    assert app._driver is not None
+    app._driver.send_message(events.Key(key, key if len(key) == 1 else None))
+
+
+async def ready(app: ServodeskApp, pilot: object) -> None:
+    deadline = time.monotonic() + 30
+    while (app.client is None or app.sampler is None or app.sampler.latest is None):
+        if time.monotonic() > deadline:
+            raise RuntimeError(f"controller did not start: {app.client_problem}")
+        await asyncio.sleep(0.05)
+
+
+def lateness(app: ServodeskApp, since: Lateness) -> str:
+    assert app.client is not None
+    now = Lateness.total(app.client.histogram()).since(since)
+    return (f"mean {now.mean_us:6.1f} µs, max ≤ {now.max_us:6.0f} µs, overruns {now.overruns}, "
+            f"{now.ticks} ticks")
+
+
+async def scope_and_keys(seconds: float, presses: int) -> None:
+    clock = FrameClock()
+    clock.install()
+    with tempfile.TemporaryDirectory() as data_dir:
+        app = ServodeskApp("unimate2000b", data_dir=data_dir)
+        async with app.run_test(size=SIZE) as pilot:
+            await ready(app, pilot)
+            assert app.client is not None
+            await pilot.press("f4")
+            await asyncio.sleep(1.0)
+            before = Lateness.total(app.client.histogram())
+            await asyncio.sleep(seconds)
+            hidden = lateness(app, before)
+
+            t, q, d, u = synthetic()
+            app.history.clear()
+            app.history.extend(t - t[-1] + app.history.latest_time, q, d, u)
+            app.sampler.stop()  # hold the window at exactly POINTS samples per joint
+            await pilot.press("f3")
+            await asyncio.sleep(1.0)
+            clock.reset()
+            before = Lateness.total(app.client.histogram())
+            key_waits = []
+            tab = app.query_one(ScopeTab)
+            original_zoom = ScopeTab.action_zoom
+            answered: list[float] = []
+
+            def zoom(self: ScopeTab, direction: int) -> None:
+                answered.append(time.perf_counter())
+                original_zoom(self, direction)
+
+            ScopeTab.action_zoom = zoom  # type: ignore[method-assign]
+            end = time.perf_counter() + seconds
+            while time.perf_counter() < end:
+                sent = time.perf_counter()
+                post_key(app, "plus" if len(answered) % 2 else "minus")
+                while len(answered) <= len(key_waits) and time.perf_counter() - sent < 1.0:
+                    await asyncio.sleep(0.001)
+                key_waits.append((answered[-1] - sent) * 1e3 if answered else 1e3)
+                await asyncio.sleep(0.2)
+            shown = lateness(app, before)
+            ScopeTab.action_zoom = original_zoom  # type: ignore[method-assign]
+            frames = [f * 1e3 for f in clock.frames]
+            updates = [u * 1e3 for u in clock.updates]
+            span = clock.frame_at[-1] - clock.frame_at[0] if len(clock.frame_at) > 1 else 1
+            window = app.history.window(tab.window_s)
+            print(f"\n2. Scope tab in the app ({SIZE[0]}×{SIZE[1]}, {JOINTS} joints × "
+                  f"{len(window)} points, {seconds:g} s)")
+            print(f"   frame (copy + raster)  median {statistics.median(frames):6.1f} ms, "
+                  f"p95 {np.percentile(frames, 95):6.1f} ms")
+            print(f"   screen update          median {statistics.median(updates):6.1f} ms, "
+                  f"p95 {np.percentile(updates, 95):6.1f} ms")
+            print(f"   frames per second      {(len(frames) - 1) / span:6.1f} "
+                  f"(timer asks {ScopeTab.REFRESH_HZ:g})")
+            print(f"   key answered after     median {statistics.median(key_waits):6.1f} ms, "
+                  f"max {max(key_waits):6.1f} ms ({len(key_waits)} keys)")
+            print(f"\n3. controller lateness, Status tab shown: {hidden}")
+            print(f"   controller lateness, Scope tab drawing: {shown}")
+
+            await pilot.press("f1")
+            await asyncio.sleep(0.5)
+            await key_to_duty(app, presses)
+
+
+def watch_valve(segment: str, joints: int, joint: int, conn: Connection) -> None:
+    """In its own process (no GIL shared with the UI): for each ``before`` value received,
+    poll the controller's status until valve ``joint`` differs; answer the controller's
+    publish time (monotonic ns) of the first snapshot seen with the new duty."""
+    memory = shm.attach(segment)
+    layout = ControlLayout(joints)
+    reader = SeqlockReader(memory.buf, layout.status_offset, layout.status.struct)
+    conn.send("ready")
+    try:
+        while (before := conn.recv()) is not None:
+            deadline = time.monotonic_ns() + 1_000_000_000
+            seen = 0
+            while time.monotonic_ns() < deadline:
+                status = layout.status.decode(reader.read())
+                if status.valve[joint] != before:
+                    seen = status.wall_ns
+                    break
+                time.sleep(WATCH_S)
+            conn.send(seen)
+    finally:
+        reader.release()
+        shm.release(memory, unlink=False)
+
+
+async def key_to_duty(app: ServodeskApp, presses: int) -> None:
+    client = app.client
+    assert client is not None
+    parent, child = mp.get_context("spawn").Pipe()
+    # the client's control segment: read-only from the watcher (benchmark only)
+    watcher = mp.get_context("spawn").Process(
+        target=watch_valve, args=(client.segment_name, app.machine.n_joints, 0, child),
+        daemon=True)
+    watcher.start()
+    if parent.recv() != "ready":
+        raise RuntimeError("the valve watcher did not start")
+    samples: list[float] = []
+    try:
+        for i in range(presses):
+            parent.send(client.status().valve[0])
+            await asyncio.sleep(0.02)  # the watcher is polling before the key goes
+            sent = time.monotonic_ns()
+            post_key(app, "a" if i % 2 == 0 else "z")
+            while not parent.poll():
+                await asyncio.sleep(0.0005)
+            seen = parent.recv()
+            if seen:
+                samples.append((seen - sent) / 1e6)
+            await asyncio.sleep(0.03)
+    finally:
+        parent.send(None)
+        watcher.join(timeout=2)
+    post_key(app, "space")
+    print(f"\n4. key to duty at the controller ({len(samples)} of {presses} presses, Jog tab, "
+          "duty mode: from posting the key to the controller publishing the new valve duty)")
+    if samples:
+        print(f"   median {statistics.median(samples):6.2f} ms, p95 "
+              f"{np.percentile(samples, 95):6.2f} ms, max {max(samples):6.2f} ms")
+
+
+def startup(repeats: int) -> None:
+    """Seconds from starting ``python -m app`` in a 160 × 48 tmux window to a live screen."""
+    tmux = shutil.which("tmux")
+    if tmux is None:
+        print("\n5. startup: skipped (no tmux)")
+        return
+    socket = f"servodesk-bench-{os.getpid()}"
+    times = []
+    with tempfile.TemporaryDirectory() as data_dir:
+        for k in range(repeats):
+            command = (f"cd {shlex.quote(str(ROOT))} && PYTHONPATH={shlex.quote(str(ROOT))} "
+                       f"{shlex.quote(sys.executable)} -m app --data-dir {data_dir}")
+            run = [tmux, "-L", socket, "-f", os.devnull]
+            started = time.monotonic()
+            subprocess.run([*run, "new-session", "-d", "-s", f"s{k}", "-x", "160", "-y", "48",
+                            command], check=True)
+            try:
+                while time.monotonic() - started < 30:
+                    screen = subprocess.run([*run, "capture-pane", "-p", "-t", f"s{k}"],
+                                            capture_output=True, text=True).stdout
+                    if " RUN" in screen and "mode HOLD" in screen:
+                        times.append(time.monotonic() - started)
+                        break
+                    time.sleep(0.02)
+                subprocess.run([*run, "send-keys", "-t", f"s{k}", "C-q"])
+                time.sleep(1.0)
+            finally:
+                subprocess.run([*run, "kill-server"], capture_output=True)
+    print(f"\n5. startup to a live screen (tmux 160×48, {len(times)} starts): median "
+          f"{statistics.median(times):.2f} s, max {max(times):.2f} s")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="fewer repeats, shorter runs")
+    args = parser.parse_args()
+    repeats, seconds, presses = (5, 3.0, 20) if args.quick else (20, 8.0, 60)
+    renderers(repeats)
+    asyncio.run(scope_and_keys(seconds, presses))
+    startup(3 if args.quick else 5)
+
+
+if __name__ == "__main__":
+    main()

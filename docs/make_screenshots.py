@@ -1,0 +1,130 @@
+"""Regenerate the screenshots of every tab in ``docs/screenshots/`` (SVG, from Textual).
+
+Run: ``python docs/make_screenshots.py`` (about half a minute). The app runs
+headless at 160 × 48 against the real-time simulated Unimate 2000B: it jogs a joint,
+runs an Up/Down step from the Moves tab (and watches it on the Scope), then saves each
+tab as the operator would see it. Runs go to a temporary directory; ``--rig`` adds the
+rig's Jog and Moves tabs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+from textual.widgets import OptionList
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from app.tabs.moves import MovesTab
+from app.tabs.runs import RunsTab
+from app.tui import ServodeskApp
+from app.widgets.fields import NumberField
+
+ROOT = Path(__file__).resolve().parents[1]
+OUT = ROOT / "docs" / "screenshots"
+SIZE = (160, 48)
+
+
+async def wait_for(condition: Callable[[], object], timeout: float = 30.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > deadline:
+            raise TimeoutError("the app did not get there in time")
+        await asyncio.sleep(0.05)
+
+
+def save(app: ServodeskApp, name: str) -> None:
+    path = app.save_screenshot(filename=f"{name}.svg", path=str(OUT))
+    print(f"wrote {Path(path).relative_to(ROOT)}")
+
+
+async def unimate(data_dir: str) -> None:
+    app = ServodeskApp("unimate2000b", data_dir=data_dir)
+    async with app.run_test(size=SIZE) as pilot:
+        await wait_for(lambda: app.sampler is not None and app.sampler.latest is not None)
+        await pilot.pause(1.0)
+        await pilot.press("3", "s", "s", "s", "s", "s", "s", "s", "s")  # Rotate at 24 %
+        await pilot.pause(1.5)
+        save(app, "jog")
+        await pilot.press("space", "enter")
+
+        await pilot.press("f2")
+        await pilot.pause(0.3)
+        app.query_one("#move-kinds", OptionList).highlighted = 0
+        await pilot.pause(0.3)
+        app.query_one("#form-step JointField Select").value = 2
+        position = app.client.status().position[2]
+        app.query_one("#form-step #target", NumberField).text = f"{position + 8:.1f}"
+        await pilot.pause(0.8)
+        moves = app.query_one(MovesTab)
+        await pilot.press("ctrl+s")
+        await wait_for(lambda: moves.handle is not None)
+        await pilot.pause(0.6)
+        save(app, "moves-running")
+        await pilot.press("f3")  # the step as it happens
+        await pilot.pause(1.5)
+        save(app, "scope")
+        await pilot.press("f2")
+        await wait_for(lambda: moves.handle is None)
+        await pilot.pause(0.5)
+        save(app, "moves")
+
+        await pilot.press("f4")
+        await pilot.pause(0.8)
+        save(app, "status")
+        await pilot.press("f5")
+        await pilot.pause(0.8)
+        save(app, "tuning")
+        await pilot.press("f6")
+        runs = app.query_one(RunsTab)
+        await wait_for(lambda: bool(runs.infos))
+        runs.open_latest()
+        await wait_for(lambda: runs.run is not None)
+        await pilot.press("v", "v", "v")  # plotdata of Up/Down
+        await pilot.pause(0.8)
+        save(app, "runs")
+        await pilot.press("f7")
+        await pilot.pause(1.0)
+        save(app, "latency")
+        await pilot.press("escape")
+        await pilot.pause(0.5)
+        save(app, "estop")
+
+
+async def rig(data_dir: str) -> None:
+    app = ServodeskApp("rig", data_dir=data_dir)
+    async with app.run_test(size=SIZE) as pilot:
+        await wait_for(lambda: app.sampler is not None and app.sampler.latest is not None)
+        await pilot.press("up", "up")
+        await pilot.pause(1.0)
+        save(app, "rig-jog")
+        await pilot.press("space", "f2")
+        await pilot.pause(0.3)
+        app.query_one("#move-kinds", OptionList).highlighted = 1  # the sequence
+        await pilot.pause(0.3)
+        for i, (position, dwell) in enumerate(((300, 2), (600, 2), (200, 3))):
+            app.query_one(f"#form-multi_step #pos{i}", NumberField).text = str(position)
+            app.query_one(f"#form-multi_step #dwell{i}", NumberField).text = str(dwell)
+        await pilot.pause(0.8)
+        save(app, "rig-moves")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--rig", action="store_true", help="also the rig's Jog and Moves tabs")
+    args = parser.parse_args()
+    OUT.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory() as data_dir:
+        asyncio.run(unimate(data_dir))
+        if args.rig:
+            asyncio.run(rig(data_dir))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,84 @@
+"""Shared pieces of the TUI tests: a private data directory, and driving the app.
+
+Every app in these tests runs a real control subprocess (the simulator) and
+saves its runs under ``tmp_path``, never in the user's data directory. Tests are
+plain functions that ``asyncio.run`` a scenario (no async plugin needed).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+from textual import events
+from textual.pilot import Pilot
+from textual.widget import Widget
+
+from app.tui import ServodeskApp
+from control.layout import Status
+
+START_S = 30.0  # a loaded machine can take a while to spawn the controller
+SIZE = (160, 48)
+
+
+class Tui:
+    """Build apps on the test's data directory and wait for things in them."""
+
+    def __init__(self, data_dir: Path) -> None:
+        self.data_dir = data_dir
+
+    def app(self, machine: str = "unimate2000b", lockstep: bool = True,
+            **options: object) -> ServodeskApp:
+        return ServodeskApp(machine, "sim", None, self.data_dir, lockstep=lockstep, **options)
+
+    @staticmethod
+    async def ready(app: ServodeskApp, pilot: Pilot) -> Status:
+        """Wait until the controller runs, the first status was sampled and the first tab
+        has the focus (its keys work); return the status."""
+        deadline = time.monotonic() + START_S
+        while (app.client is None or app.sampler is None or app.sampler.latest is None
+               or app.focused is None or app.tab("jog") not in app.focused.ancestors_with_self):
+            if app.client_problem:
+                pytest.fail(f"the controller did not start: {app.client_problem}")
+            if time.monotonic() > deadline:
+                pytest.fail(f"the controller did not start within {START_S:g} s")
+            await pilot.pause(0.05)
+        return app.client.status()
+
+    @staticmethod
+    async def until(condition: Callable[[], object], timeout: float = 10.0,
+                    what: str | Callable[[], str] = "") -> None:
+        """Wait (without Pilot's idle waits) until ``condition()`` is true; ``what`` (or
+        what it returns, when the wait fails) names it in the failure."""
+        deadline = time.monotonic() + timeout
+        while not condition():
+            if time.monotonic() > deadline:
+                detail = what() if callable(what) else what
+                pytest.fail(f"timed out after {timeout:g} s waiting for {detail or condition}")
+            await asyncio.sleep(0.01)
+
+    @staticmethod
+    def text(widget: Widget) -> str:
+        """What a widget shows, as plain text, line after line."""
+        return "\n".join(widget.render_line(y).text for y in range(widget.size.height))
+
+    @staticmethod
+    def post_key(app: ServodeskApp, key: str) -> None:
+        """Deliver a key the way the terminal driver does, without waiting for idle."""
+        assert app._driver is not None
+        app._driver.send_message(events.Key(key, key if len(key) == 1 else None))
+
+
+@pytest.fixture
+def data_dir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """Where the app saves runs; the user's data directory is pointed here too, just in case."""
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "xdg"))
+    return tmp_path / "runs"
+
+
+@pytest.fixture
+def tui(data_dir: Path) -> Tui:
+    return Tui(data_dir)

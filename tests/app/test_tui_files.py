@@ -1,0 +1,158 @@
+"""What the TUI reads and draws without a controller: coefficient files (the machine
+file's schema, errors naming file and key), path files (errors naming the line), the
+braille raster of the Scope tab and the decimation of the plotext plots."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rich.style import Style
+
+from app.coefficient_files import (
+    CoefficientFileError,
+    dump_coefficients,
+    load_coefficients,
+    parse_coefficients,
+    save_coefficients,
+)
+from app.path_files import PathFileError, parse_csv, parse_tsv, read_path, resample
+from app.widgets.braille import Trace, columns, render
+from app.widgets.run_plot import decimate, steady_velocity
+from hw.machine import load_machine
+
+UNIMATE = load_machine("unimate2000b")
+RIG = load_machine("rig")
+HERE = (1500.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+
+
+# -- coefficient files ---------------------------------------------------------------------
+
+@pytest.mark.parametrize("machine", [UNIMATE, RIG], ids=lambda m: m.name)
+def test_coefficient_sets_round_trip_through_a_file(machine, tmp_path: Path) -> None:
+    path = save_coefficients(tmp_path / "sets", dict(machine.coefficients), machine)
+    assert path.suffix == ".toml"
+    assert load_coefficients(path, machine) == dict(machine.coefficients)
+
+
+def test_velocity_feed_forward_is_saved_and_loaded() -> None:
+    tuned = replace(UNIMATE.track, name="tuned", kv=(0.5, 0.2, 0.3, 0.1, 0.1, 0.1))
+    text = dump_coefficients({"tuned": tuned}, UNIMATE)
+    assert "kv = [0.5, 0.2" in text
+    assert parse_coefficients(text, UNIMATE) == {"tuned": tuned}
+
+
+def test_a_path_lasting_longer_than_a_move_can_is_refused() -> None:
+    with pytest.raises(PathFileError, match="line 2: the path lasts 1e\\+15 s; a move lasts"):
+        parse_tsv("0\t100\n1e15\t200\n", RIG, (0.0,), "long.tsv")
+
+
+def test_a_machine_files_coefficient_tables_load_as_they_are() -> None:
+    text = UNIMATE.path.read_text()
+    tables = text[text.index("[coefficients.hold]"):]
+    assert parse_coefficients(tables, UNIMATE)["thesis_pi"] == UNIMATE.coefficients["thesis_pi"]
+
+
+@pytest.mark.parametrize(("text", "message"), [
+    ("[coefficients.x]\nkp = [[1.0]]\n", "f.toml: coefficients.x.kp: must be a list of 6"),
+    ("speed = 3\n", "f.toml: top level: unknown key(s) speed"),
+    ("[coefficients]\n", "f.toml: coefficients: no [coefficients.NAME] table"),
+    ('[coefficients.x]\nkp = [[1],[1],[1],[1],[1],[1]]\nki = [1,1,1,1,1,"a"]\n',
+     "f.toml: coefficients.x.ki[5]: must be a number"),
+    ("[coefficients.x\n", "f.toml: not valid TOML"),
+])
+def test_a_bad_coefficient_file_names_file_and_key(text: str, message: str) -> None:
+    with pytest.raises(CoefficientFileError) as raised:
+        parse_coefficients(text, UNIMATE, "f.toml")
+    assert message in str(raised.value)
+
+
+def test_too_many_taps_for_the_controller_are_refused() -> None:
+    text = dump_coefficients({"hold": UNIMATE.hold}, UNIMATE).replace(
+        "kp = [[10.0]", "kp = [[1, 2, 3, 4, 5, 6, 7, 8, 9]")
+    with pytest.raises(CoefficientFileError, match=r"coefficients.hold.kp\[0\]: 9 taps"):
+        parse_coefficients(text, UNIMATE, "f.toml")
+
+
+# -- path files ----------------------------------------------------------------------------
+
+def test_the_thesis_tsv_is_resampled_at_the_sample_time() -> None:
+    points = parse_tsv("# time\tposition\n0\t100\n1.0\t200\n\n2.0\t150\n", RIG, (0.0,))
+    assert points.lines == (2, 3, 5)
+    path = resample(points, RIG.sample_time_s)
+    assert path.shape == (2001, 1)
+    assert path[500, 0] == pytest.approx(150.0) and path[-1, 0] == 150.0
+
+
+def test_a_csv_names_its_joints_and_the_others_stay() -> None:
+    points = parse_csv("t,In/Out,updown [deg]\n0,1500,0\n2,1510,5\n", UNIMATE, HERE)
+    assert points.q.tolist() == [[1500, 0, 0, 0, 0, 0], [1510, 0, 5, 0, 0, 0]]
+
+
+def test_a_saved_run_plays_back_its_desired_columns() -> None:
+    header = ",".join(["t [s]"] + [f"{j.name} {r} [{j.unit}]" for j in UNIMATE.joints
+                                   for r in ("desired", "actual", "duty")])
+    row = ",".join(["0.0"] + ["1500", "1490", "3"] + ["0", "0", "0"] * 5)
+    points = parse_csv(f"{header}\n{row}\n", UNIMATE, HERE)
+    assert points.q[0, 0] == 1500.0
+
+
+@pytest.mark.parametrize(("text", "message"), [
+    ("0\t100\n1\tabc\n", "line 2: field 2 'abc' is not a number"),
+    ("0\t100\n0\t200\n", "line 2: time 0 s does not increase"),
+    ("0\t100\n0.01\t900\n", "line 2: Ram would move at 8e\\+04 mm/s, above its max_speed"),
+    ("0\t1300\n", "line 1: Ram target 1300mm is outside 0…1200mm"),
+    ("0\t100\t5\n", "line 1: 3 field\\(s\\), expected 2"),
+    ("0\tnan\n", "line 1: field 2 is nan"),
+])
+def test_a_bad_tsv_line_is_reported_with_its_number(text: str, message: str) -> None:
+    with pytest.raises(PathFileError, match=f"path.tsv: {message}"):
+        parse_tsv(text, RIG, (0.0,), "path.tsv")
+
+
+def test_a_bad_csv_header_lists_the_joints(tmp_path: Path) -> None:
+    path = tmp_path / "p.csv"
+    path.write_text("t,Elbow\n0,1\n")
+    with pytest.raises(PathFileError, match="column 2 'Elbow' is not a joint of unimate2000b"):
+        read_path(path, UNIMATE, HERE)
+    with pytest.raises(PathFileError, match="cannot read"):
+        read_path(tmp_path / "missing.csv", UNIMATE, HERE)
+
+
+# -- drawing -------------------------------------------------------------------------------
+
+def test_the_braille_raster_joins_a_step_into_one_line() -> None:
+    t = np.linspace(0.0, 1.0, 1000)
+    y = np.where(t < 0.5, 0.0, 1.0)
+    low, high = columns(t, y, (0.0, 1.0), (0.0, 1.0), 40, 40)
+    assert (low <= high).all(), "every column drawn"
+    jump = int(np.argmax(high - low))
+    assert low[jump] == 0 and high[jump] == 39  # the vertical of the step is drawn
+    strips = render([Trace(t, y, Style(color="red"))], (0.0, 1.0), (-0.1, 1.1), 20, 5)
+    assert len(strips) == 5 and all(s.cell_length == 20 for s in strips)
+    assert all(0x2800 <= ord(c) <= 0x28FF or c == " " for s in strips for c in s.text)
+
+
+def test_the_braille_raster_leaves_nan_gaps_and_sparse_data_joined() -> None:
+    t = np.linspace(0.0, 1.0, 2000)
+    y = np.where((t > 0.4) & (t < 0.6), np.nan, t)
+    low, high = columns(t, y, (0.0, 1.0), (0.0, 1.0), 100, 40)
+    assert (low[45:55] > high[45:55]).all()  # nothing drawn where desired is NaN
+    sparse_t, sparse_y = np.array([0.0, 1.0]), np.array([0.0, 1.0])
+    low, high = columns(sparse_t, sparse_y, (0.0, 1.0), (0.0, 1.0), 50, 50)
+    assert (low <= high).all()
+
+
+def test_decimation_keeps_every_peak() -> None:
+    t = np.linspace(0.0, 1.0, 20_000)
+    y = np.sin(40 * t)
+    y[12_345] = 5.0
+    tt, yy = decimate(t, y, 400)
+    assert len(tt) <= 400 and yy.max() == 5.0 and yy.min() == pytest.approx(-1.0, abs=1e-3)
+
+
+def test_steady_velocity_is_plotdatas_second_half_slope() -> None:
+    t = np.linspace(0.0, 2.0, 201)
+    assert steady_velocity(t, 3.0 * t + 1.0) == pytest.approx(3.0)

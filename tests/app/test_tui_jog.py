@@ -1,0 +1,124 @@
+"""Jog tab: the keys change the duty the controller receives (option.c Manual()), the
+hold-to-move mode stops a joint soon after its key is let go, the position jog moves
+the hold target, and the rig's arrows step its duty by 10 %."""
+
+from __future__ import annotations
+
+import asyncio
+import time
+
+from app.tabs.jog import KeyRepeat
+from control.layout import Mode
+
+SIZE = (160, 48)
+
+
+def test_duty_keys_set_the_duty_the_controller_receives(tui) -> None:
+    async def scenario() -> None:
+        app = tui.app()
+        async with app.run_test(size=SIZE) as pilot:
+            await tui.ready(app, pilot)
+            client = app.client
+            await pilot.press("5", "a", "a")
+            await tui.until(lambda: client.status().duty[0] == 10.0, what="In/Out duty 10 %")
+            status = client.status()
+            assert status.mode == Mode.MANUAL_ACTUATE
+            assert status.valve[0] == -10.0  # polarity -1: the valve sees the opposite sign
+            await pilot.press("z", "3", "s", "n")
+            await tui.until(lambda: client.status().duty[:2] == (5.0, 3.0)
+                            and client.status().duty[5] == -3.0, what="duties 5, 3, -3")
+            await pilot.press("space")
+            await tui.until(lambda: not any(client.status().valve), what="all valves closed")
+            await pilot.press("enter")
+            await tui.until(lambda: client.status().mode == Mode.HOLD, what="back to hold")
+
+    asyncio.run(scenario())
+
+
+def test_leaving_the_jog_tab_stops_the_joints(tui) -> None:
+    async def scenario() -> None:
+        app = tui.app()
+        async with app.run_test(size=SIZE) as pilot:
+            await tui.ready(app, pilot)
+            client = app.client
+            await pilot.press("9", "d")
+            await tui.until(lambda: client.status().duty[2] == 9.0)
+            await pilot.press("f4")
+            await tui.until(lambda: client.status().mode == Mode.HOLD, what="hold after leaving")
+            await pilot.press("a")  # the Status tab has no jog keys
+            await asyncio.sleep(0.1)
+            assert client.status().mode == Mode.HOLD
+
+    asyncio.run(scenario())
+
+
+def test_hold_to_move_stops_within_150_ms_of_release(tui) -> None:
+    async def scenario() -> None:
+        app = tui.app(lockstep=False)
+        async with app.run_test(size=SIZE) as pilot:
+            await tui.ready(app, pilot)
+            client = app.client
+            await pilot.press("m", "2")  # hold-to-move at 20 %
+            tui.post_key(app, "d")
+            await tui.until(lambda: client.status().duty[2] == 20.0, timeout=2,
+                            what="Up/Down moving while held")
+            await asyncio.sleep(0.3)  # the terminal's initial repeat delay
+            for _ in range(15):  # then auto-repeat every 30 ms
+                tui.post_key(app, "d")
+                await asyncio.sleep(0.03)
+            assert client.status().duty[2] == 20.0, "still held while the key repeats"
+            released = time.monotonic()
+            await tui.until(lambda: client.status().duty[2] == 0.0, timeout=1,
+                            what="Up/Down stopped after release")
+            assert time.monotonic() - released < 0.15
+
+    asyncio.run(scenario())
+
+
+def test_position_jog_moves_the_hold_target(tui) -> None:
+    async def scenario() -> None:
+        app = tui.app()
+        async with app.run_test(size=SIZE) as pilot:
+            before = await tui.ready(app, pilot)
+            client = app.client
+            await pilot.press("m", "m", "5")  # position mode, 2 mm or ° a press
+            await pilot.press("a", "a", "x")
+            await tui.until(lambda: abs(client.status().desired[0] - before.desired[0] - 4.0)
+                            < 1e-6 and abs(client.status().desired[1] - before.desired[1] + 2.0)
+                            < 1e-6, what="In/Out target +4 mm, Rotate −2°")
+            assert client.status().mode == Mode.HOLD
+
+    asyncio.run(scenario())
+
+
+def test_rig_arrows_step_the_duty_by_ten_percent(tui) -> None:
+    async def scenario() -> None:
+        app = tui.app("rig")
+        async with app.run_test(size=SIZE) as pilot:
+            await tui.ready(app, pilot)
+            client = app.client
+            await pilot.press("up", "up")
+            await tui.until(lambda: client.status().duty == (20.0,), what="ram duty 20 %")
+            await pilot.press("down")
+            await tui.until(lambda: client.status().duty == (10.0,), what="ram duty 10 %")
+            await pilot.press("space")
+            await tui.until(lambda: client.status().valve == (0.0,), what="valve closed")
+
+    asyncio.run(scenario())
+
+
+def test_key_repeat_learns_the_terminal_and_sees_the_release() -> None:
+    repeat = KeyRepeat()
+    assert repeat.press(2, 0.0) is True
+    assert repeat.released(0.4) == []  # waiting for the first repeat
+    assert repeat.press(2, 0.45) is False  # the first repeat: initial delay learned
+    assert repeat.first_timeout < 0.6
+    t = 0.45
+    for _ in range(20):
+        t += 0.033
+        assert repeat.press(2, t) is False
+    assert repeat.repeat_timeout <= 0.11
+    assert repeat.released(t + 0.05) == []
+    assert repeat.released(t + repeat.repeat_timeout + 0.001) == [2]
+    assert not repeat.held
+    assert repeat.press(2, t + 1.0) is True  # a new press after the release

@@ -1,0 +1,201 @@
+"""Moves tab: a step form runs a move on the simulator and its run appears in Runs; an
+invalid field shows its error and runs nothing; the end-point form lists every inverse
+solution; the rig initialises and runs its sequence of positions and dwell times; a
+path file is played, and a malformed one is reported with its line."""
+
+from __future__ import annotations
+
+import asyncio
+from pathlib import Path
+
+import numpy as np
+from textual.widgets import DataTable, OptionList
+
+from app.tabs.moves import POSE_FIELDS, EndPointForm, MovesTab
+from app.tabs.runs import RunsTab
+from app.widgets.fields import NumberField
+from control.layout import Mode
+from kinematics import unimate
+
+SIZE = (160, 48)
+
+
+async def choose(app, pilot, label: str) -> None:
+    kinds = app.query_one("#move-kinds", OptionList)
+    kinds.highlighted = next(i for i in range(kinds.option_count)
+                             if str(kinds.get_option_at_index(i).prompt) == label)
+    await pilot.pause()
+
+
+def field(app, form: str, name: str) -> NumberField:
+    return app.query_one(f"#form-{form} #{name}", NumberField)
+
+
+async def run_and_wait(tui, app, pilot) -> MovesTab:
+    tab = app.query_one(MovesTab)
+    await pilot.press("ctrl+s")
+    await tui.until(lambda: tab.handle is not None or tab.last_result is not None, timeout=5,
+                    what=f"the move to start ({app.query_one('#move-error').render()})")
+    await tui.until(lambda: tab.handle is None, timeout=60, what="the move to end")
+    await pilot.pause()
+    return tab
+
+
+def test_step_runs_on_the_simulator_and_appears_in_runs(tui, data_dir: Path) -> None:
+    async def scenario() -> None:
+        app = tui.app()
+        async with app.run_test(size=SIZE) as pilot:
+            start = await tui.ready(app, pilot)
+            await pilot.press("f2")
+            await choose(app, pilot, "Step")
+            target = round(start.position[2] + 5.0, 1)
+            app.query_one("#form-step JointField Select").value = 2  # Up/Down
+            field(app, "step", "target").text = str(target)
+            await pilot.pause(0.5)
+            assert "step Up/Down" in app.query_one("#move-preview-title").render().plain
+            tab = await run_and_wait(tui, app, pilot)
+            result = tab.last_result
+            assert result is not None and result.complete, result and result.status
+            assert abs(app.client.status().position[2] - target) < 1.0
+            rows = app.query_one("#move-result", DataTable)
+            assert rows.row_count >= 1 and rows.get_row_at(0)[0] == "Up/Down"
+            saved = sorted(data_dir.glob("*-step.json"))
+            assert len(saved) == 1 and result.files.json == saved[0]
+            await pilot.press("f6")
+            runs = app.query_one(RunsTab)
+            await tui.until(lambda: runs.infos, what="the run listed")
+            assert runs.infos[0].files.stem == saved[0].stem
+            runs.open_latest()
+            await tui.until(lambda: runs.run is not None, what="the run opened")
+            assert runs.run.kind == "step" and runs.run.samples == result.run.samples
+            await pilot.press("v")  # plotsix 4-6
+            await pilot.press("x")
+            await tui.until(lambda: list((data_dir / "plots").glob("*.svg")), what="export")
+            assert list((data_dir / "plots").glob("*.txt"))
+
+    asyncio.run(scenario())
+
+
+def test_an_invalid_field_shows_its_error_and_runs_nothing(tui, data_dir: Path) -> None:
+    async def scenario() -> None:
+        app = tui.app()
+        async with app.run_test(size=SIZE) as pilot:
+            await tui.ready(app, pilot)
+            await pilot.press("f2")
+            await choose(app, pilot, "Step")
+            target = field(app, "step", "target")
+            error = app.query_one("#move-error")
+            for text, expected in (("abc", "is not a number"), ("nan", "not a usable number"),
+                                   ("5000", "outside 976…2041mm")):
+                target.text = text
+                await pilot.pause()
+                shown = str(target.query_one(".field-error").render())
+                assert expected in shown, shown
+                await pilot.press("ctrl+s")
+                assert expected in str(error.render())
+            await asyncio.sleep(0.3)
+            assert app.query_one(MovesTab).handle is None
+            assert app.client.status().mode == Mode.HOLD
+            assert not list(data_dir.glob("*.json"))
+            await choose(app, pilot, "Sine")
+            field(app, "sine", "end").text = "2000"
+            field(app, "sine", "period").text = "0.5"  # far too fast for In/Out
+            await pilot.press("ctrl+s")
+            assert "max_speed" in str(error.render())
+            assert not list(data_dir.glob("*.json"))
+
+    asyncio.run(scenario())
+
+
+def test_end_point_lists_every_solution_and_runs_the_one_picked(tui) -> None:
+    # two in-limit branches: the wrist flipped (Yaw −62° or +62°, Swivel + 180°)
+    two_ways = np.array([1521.1, 99.1, -18.8, 98.7, -62.0, -27.6])
+
+    async def scenario() -> None:
+        app = tui.app()
+        async with app.run_test(size=SIZE) as pilot:
+            status = await tui.ready(app, pilot)
+            await pilot.press("f2")
+            await choose(app, pilot, "End point")
+            form = app.query_one(EndPointForm)
+            table = app.query_one("#ik-solutions", DataTable)
+            form.solve(np.array(status.position))  # the current pose, filled in
+            nearest = np.array([float(v) for v in table.get_row_at(0)[1:]])
+            assert np.allclose(nearest, status.position, atol=0.5)  # 3 decimals, Yaw near 0
+            for (_, _, key), value in zip(POSE_FIELDS, unimate.pose(two_ways), strict=True):
+                app.query_one(f"#form-end_point #pose-{key}", NumberField).text = f"{value:.4f}"
+            form.solve(np.array(status.position))
+            assert table.row_count == 2
+            solutions = [np.array([float(v) for v in table.get_row_at(k)[1:]]) for k in (0, 1)]
+            assert any(np.allclose(q, two_ways, atol=0.05) for q in solutions)
+            table.move_cursor(row=1)
+            tab = await run_and_wait(tui, app, pilot)
+            assert tab.last_result.complete, tab.last_result.status
+            assert tab.last_result.run.meta["solution_index"] == 1
+            final = np.array(app.client.status().position)
+            assert np.allclose(final, solutions[1], atol=2.0), final
+            app.query_one("#form-end_point #pose-x", NumberField).text = "9000"
+            form.solve(final)
+            assert "unreachable" in str(app.query_one("#ik-state").render())
+            assert table.row_count == 0
+            await pilot.press("ctrl+s")
+            assert "unreachable" in str(app.query_one("#move-error").render())
+
+    asyncio.run(scenario())
+
+
+def test_rig_initialises_then_runs_its_sequence(tui, data_dir: Path) -> None:
+    async def scenario() -> None:
+        app = tui.app("rig")
+        async with app.run_test(size=SIZE) as pilot:
+            await tui.ready(app, pilot)
+            assert not app.client.status().homed
+            await pilot.press("f2")
+            await choose(app, pilot, "Initialise")
+            await pilot.press("ctrl+s")
+            await tui.until(lambda: app.client.status().homed, timeout=30, what="homed")
+            await choose(app, pilot, "Multi-step")
+            field(app, "multi_step", "count").text = "2"
+            for i, (position, dwell) in enumerate(((150, 1.0), (60, 1.0))):
+                field(app, "multi_step", f"pos{i}").text = str(position)
+                field(app, "multi_step", f"dwell{i}").text = str(dwell)
+            tab = await run_and_wait(tui, app, pilot)
+            assert tab.last_result is not None and tab.last_result.complete
+            rows = app.query_one("#move-result", DataTable)
+            assert [rows.get_row_at(i)[0] for i in range(rows.row_count)] == [
+                "Ram step 1", "Ram step 2"]
+            assert abs(app.client.status().position[0] - 60) < 2.0
+            await choose(app, pilot, "Set pulse")
+            tab = await run_and_wait(tui, app, pilot)
+            assert tab.last_result.complete and tab.last_result.run.kind == "set_pulse"
+
+    asyncio.run(scenario())
+
+
+def test_path_file_plays_and_a_bad_line_is_reported(tui, tmp_path: Path) -> None:
+    good = tmp_path / "wave.csv"
+    bad = tmp_path / "bad.csv"
+
+    async def scenario() -> None:
+        app = tui.app()
+        async with app.run_test(size=SIZE) as pilot:
+            status = await tui.ready(app, pilot)
+            q = status.position[3]
+            good.write_text(f"t,Bend\n0,{q}\n0.5,{q + 5}\n1.0,{q}\n")
+            bad.write_text(f"t,Bend\n0,{q}\n0.5,{q}+5\n")
+            await pilot.press("f2")
+            await choose(app, pilot, "Path file")
+            path_input = app.query_one("#path-file")
+            path_input.focus()
+            path_input.value = str(bad)
+            await pilot.press("enter")
+            state = app.query_one("#path-state")
+            await tui.until(lambda: "line 3" in str(state.render()), what="the bad line")
+            path_input.value = str(good)
+            await pilot.press("enter")
+            await tui.until(lambda: "3 points" in str(state.render()), what="the file loaded")
+            tab = await run_and_wait(tui, app, pilot)
+            assert tab.last_result.complete, tab.last_result.status
+            assert tab.last_result.run.meta["file"] == str(good.resolve())
+
+    asyncio.run(scenario())

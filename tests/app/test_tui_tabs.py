@@ -1,0 +1,133 @@
+"""Scope, Status, Tuning and Latency tabs: each one's main flow against the simulator."""
+
+from __future__ import annotations
+
+import asyncio
+import re
+from pathlib import Path
+
+import numpy as np
+from textual.widgets import DataTable, Input
+
+from app.coefficient_files import load_coefficients
+from app.tabs.latency import LatencyTab
+from app.tabs.scope import JointScope, ScopeTab
+from app.widgets.dialogs import EditValueScreen
+from app.widgets.live_text import LiveText
+from app.widgets.scope import ScopePlot
+from kinematics import unimate
+
+SIZE = (160, 48)
+BRAILLE = range(0x2801, 0x2900)
+
+
+def test_scope_draws_live_traces_and_answers_its_keys(tui) -> None:
+    async def scenario() -> None:
+        app = tui.app(lockstep=False)
+        async with app.run_test(size=SIZE) as pilot:
+            await tui.ready(app, pilot)
+            tui.post_key(app, "f3")
+            scope = app.query_one(ScopeTab)
+            await tui.until(lambda: scope.visible_now and len(app.history) > 50,
+                            what="samples in the scope")
+            first = app.query_one("#scope-joint-0 .scope-position", ScopePlot)
+            await tui.until(lambda: "In/Out [mm]" in tui.text(first), what="the first frame")
+            assert any(ord(c) in BRAILLE for c in tui.text(first)), "no trace drawn"
+            tui.post_key(app, "2")  # hide Rotate
+            await tui.until(lambda: not app.query_one("#scope-joint-1", JointScope).display)
+            tui.post_key(app, "p")
+            await tui.until(lambda: scope.paused)
+            frozen = tui.text(first)
+            await asyncio.sleep(0.3)
+            assert tui.text(first) == frozen
+            tui.post_key(app, "e")
+            await tui.until(lambda: "error" in tui.text(first))
+            tui.post_key(app, "minus")
+            await tui.until(lambda: scope.window_s == 20.0)
+            assert "PAUSED" in app.query_one("#scope-bar", LiveText).text
+
+    asyncio.run(scenario())
+
+
+def test_status_shows_joints_pose_loop_and_link(tui) -> None:
+    async def scenario() -> None:
+        app = tui.app()
+        async with app.run_test(size=SIZE) as pilot:
+            await tui.ready(app, pilot)
+            await pilot.press("f4")
+            joints = app.query_one("#status-joints", LiveText)
+            await tui.until(lambda: "Swivel" in tui.text(joints), what="the joints table")
+            for joint in app.machine.joints:
+                assert joint.name in tui.text(joints)
+            pose = tui.text(app.query_one("#status-pose", LiveText))
+            x = unimate.pose(np.array(app.client.status().position))[0]
+            shown = float(re.search(r"^ *x +(-?[\d.]+) mm", pose, re.MULTILINE).group(1))
+            assert "end effector" in pose and abs(shown - x) < 1.0  # eq. 4.11 of the reading
+            loop = tui.text(app.query_one("#status-loop", LiveText))
+            assert "sample" in loop and "lateness" in loop and "HOLD" in loop
+            assert "crc errors" in tui.text(app.query_one("#status-link", LiveText))
+
+    asyncio.run(scenario())
+
+
+def test_tuning_edits_apply_live_and_files_round_trip(tui, tmp_path: Path) -> None:
+    async def scenario() -> None:
+        app = tui.app()
+        async with app.run_test(size=SIZE) as pilot:
+            await tui.ready(app, pilot)
+            await pilot.press("f5")
+            table = app.query_one("#tuning-joints", DataTable)
+            await tui.until(lambda: app.focused is table,
+                            what=lambda: f"the table focused, not {app.focused}")
+            table.move_cursor(row=2, column=1)  # Up/Down kp of the track set
+            await pilot.press("enter")
+            assert isinstance(app.screen, EditValueScreen)
+            edit = app.screen.query_one(Input)
+            edit.value = "abc"
+            await pilot.press("enter")
+            assert isinstance(app.screen, EditValueScreen)  # refused, says why
+            assert "numbers separated by commas" in str(app.screen.query_one("#edit-error")
+                                                        .render())
+            edit.value = "42, -3"
+            await pilot.press("enter")
+            assert not isinstance(app.screen, EditValueScreen)
+            assert app.client.coefficients["track"].kp[2] == (42.0, -3.0)
+            app.query_one("#tuning-preset").value = "thesis_pi"
+            await pilot.click("#tuning-apply-preset")
+            assert app.client.coefficients["track"].kp[0] == (20.0,)
+            assert app.client.coefficients["track"].ki[1] == 20.0  # section 5.4.2 Rotate
+            path = tmp_path / "tuned.toml"
+            app.query_one("#tuning-path", Input).value = str(path)
+            await pilot.click("#tuning-save")
+            await tui.until(path.exists, what="the file saved")
+            saved = load_coefficients(path, app.machine)
+            assert saved["track"].ki == app.client.coefficients["track"].ki
+            path.write_text(path.read_text().replace("[coefficients.hold]",
+                                                     "[coefficients.mine]"))
+            await pilot.click("#tuning-load")
+            await tui.until(lambda: "tuned:mine" in app.query_one("#tab-tuning").presets,
+                            what="the loaded set offered as a preset")
+
+    asyncio.run(scenario())
+
+
+def test_latency_tab_shows_table_2_1_and_runs_a_fresh_test(tui, monkeypatch) -> None:
+    monkeypatch.setattr("app.tabs.latency.TEST_S", 0.5)
+
+    async def scenario() -> None:
+        app = tui.app(lockstep=False)
+        async with app.run_test(size=SIZE) as pilot:
+            await tui.ready(app, pilot)
+            await pilot.press("f7")
+            total = app.query_one("#latency-total")
+            await tui.until(lambda: "since the controller started" in tui.text(total),
+                            what="Table 2.1")
+            assert "lateness µs" in tui.text(total)
+            tab = app.query_one(LatencyTab)
+            await pilot.click("#latency-test")
+            await tui.until(lambda: tab.fresh is not None, timeout=5, what="the fresh test")
+            assert 300 < tab.fresh.ticks < 800  # ~0.5 s at 1 kHz
+            fresh = app.query_one("#latency-fresh")
+            await tui.until(lambda: "fresh" in tui.text(fresh), what="the fresh table")
+
+    asyncio.run(scenario())
