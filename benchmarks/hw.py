@@ -130,26 +130,46 @@ def serial_round_trip() -> None:
     module.main([])
 
 
+def measure() -> dict:
+    """Wall seconds of each 10 s run, and what the moves achieved (``main`` prints them)."""
+    unimate, rig = load_machine("unimate2000b"), load_machine("rig")
+    move_wall, late_error, wrong = unimate_move(unimate)
+    steps_wall, bounce, final = rig_steps(rig)
+    return {
+        "seconds": MOVE_S,
+        "unimate_io_wall": simulator_only(unimate),
+        "unimate_move_wall": move_wall,
+        "unimate_late_error": dict(zip([j.key for j in unimate.joints], late_error,
+                                       strict=True)),
+        "unimate_wrong_readings": wrong,
+        "rig_io_wall": simulator_only(rig),
+        "rig_steps_wall": steps_wall,
+        "rig_bounce_mm": bounce,
+        "rig_final_mm": final,
+    }
+
+
 def main() -> None:
+    m = measure()
     unimate = load_machine("unimate2000b")
-    wall = simulator_only(unimate)
+    wall = m["unimate_io_wall"]
     print(f"unimate2000b: {MOVE_S:g} s of read + write alone: {wall:.3f} s wall, "
           f"{MOVE_S / wall:.0f}x real time, {wall / MOVE_S * 1e3:.1f} us per 1 ms tick")
-    wall, late_error, wrong = unimate_move(unimate)
+    wall = m["unimate_move_wall"]
     print(f"unimate2000b: {MOVE_S:g} s six-axis move under P.I. control: {wall:.3f} s wall, "
           f"{MOVE_S / wall:.0f}x real time, {wall / MOVE_S * 1e3:.1f} us per 1 ms tick")
-    units = ", ".join(f"{j.key} {e:.2f}{j.symbol}" for j, e in zip(unimate.joints, late_error,
-                                                                    strict=True))
+    units = ", ".join(f"{j.key} {m['unimate_late_error'][j.key]:.2f}{j.symbol}"
+                      for j in unimate.joints)
     print(f"  largest error in the last second: {units}")
-    print(f"  wrong encoder readings (Figure 6.1): {wrong}")
-    rig = load_machine("rig")
-    wall = simulator_only(rig)
+    print(f"  wrong encoder readings (Figure 6.1): {m['unimate_wrong_readings']}")
+    wall = m["rig_io_wall"]
     print(f"rig: {MOVE_S:g} s of read + write alone: {wall:.3f} s wall, "
           f"{MOVE_S / wall:.0f}x real time")
-    wall, bounce, final = rig_steps(rig)
+    wall = m["rig_steps_wall"]
     print(f"rig: {MOVE_S:g} s of PID steps 200->600->200 mm: {wall:.3f} s wall, "
           f"{MOVE_S / wall:.0f}x real time")
-    print(f"  bounce on arrival {bounce:.2f} mm peak to peak, final offset {final:+.2f} mm")
+    print(f"  bounce on arrival {m['rig_bounce_mm']:.2f} mm peak to peak, final offset "
+          f"{m['rig_final_mm']:+.2f} mm")
     serial_round_trip()
 
 

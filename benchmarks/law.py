@@ -45,7 +45,8 @@ def _nothing(j: int, error: float) -> float:
     return error
 
 
-def main() -> None:
+def measure() -> list[tuple[str, float]]:
+    """``(case, best µs per six-joint update)`` for each case ``main`` prints."""
     unimate = load_machine("unimate2000b")
     rig = load_machine("rig")
     rig_track = rig.track
@@ -57,9 +58,14 @@ def main() -> None:
         ("rig observer (2 w + 2 kp taps), 1 joint x 6 calls", rig, rig.coefficients["observer"]),
         ("floor: six calls of a function that returns its argument", unimate, None),
     ]
+    return [(label, per_six_joint_update_us(machine, coefficients))
+            for label, machine, coefficients in cases]
+
+
+def main() -> None:
     print(f"eq. 5.1 law, {TICKS} ticks, best of {REPEATS}: µs per six-joint update")
-    for label, machine, coefficients in cases:
-        print(f"  {per_six_joint_update_us(machine, coefficients):6.2f} µs  {label}")
+    for label, us in measure():
+        print(f"  {us:6.2f} µs  {label}")
 
 
 if __name__ == "__main__":

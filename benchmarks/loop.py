@@ -27,6 +27,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from control import ControlClient
+from control.client import SPIN_US
 from control.layout import HIST_BIN_NS
 
 TABLE_2_1 = {"min_us": 11.5, "mean_us": 13.97, "max_us": 54.0, "ticks": 100_290}
@@ -42,9 +43,12 @@ class Lateness:
     p999: float
     max_us: float
     over_1ms: int
+    min_us: float | None = None
+    mean_us: float | None = None
 
     @classmethod
-    def from_histogram(cls, edges_us: np.ndarray, counts: np.ndarray, max_us: float) -> Lateness:
+    def from_histogram(cls, edges_us: np.ndarray, counts: np.ndarray, max_us: float,
+                       min_us: float | None = None, mean_us: float | None = None) -> Lateness:
         total = int(counts.sum())
         cumulative = np.cumsum(counts)
 
@@ -53,7 +57,7 @@ class Lateness:
                                       len(edges_us) - 1)])
 
         over = int(counts[edges_us > 1000].sum())
-        return cls(total, pct(50), pct(99), pct(99.9), max_us, over)
+        return cls(total, pct(50), pct(99), pct(99.9), max_us, over, min_us, mean_us)
 
 
 def cpu_seconds(pid: int) -> float:
@@ -77,12 +81,15 @@ def parse_cyclictest(output: str) -> Lateness:
         if re.match(r"^\d+\s+\d+", line):
             us, count = (int(v) for v in line.split()[:2])
             counts[min(us, 2000)] += count
-    max_line = re.search(r"# Max Latencies:\s+(\d+)", output)
     overflow = re.search(r"# Histogram Overflows:\s+(\d+)", output)
     if overflow:
         counts[2000] += int(overflow.group(1))
     edges = np.arange(2001, dtype=float) + 1.0  # a count at n µs lies in [n, n+1)
-    return Lateness.from_histogram(edges, counts, float(max_line.group(1)) if max_line else 0.0)
+    summary = {name: float(m.group(1)) if (m := re.search(rf"# {name} Latencies:\s+(\d+)",
+                                                          output)) else None
+               for name in ("Min", "Avg", "Max")}
+    return Lateness.from_histogram(edges, counts, summary["Max"] or 0.0, summary["Min"],
+                                   summary["Avg"])
 
 
 def command_latency(client: ControlClient, samples: int = 300) -> np.ndarray:
@@ -103,14 +110,20 @@ def command_latency(client: ControlClient, samples: int = 300) -> np.ndarray:
     return np.array(out)
 
 
-def run(seconds: float, machine: str, spin_us: float, warmup: float) -> None:
-    print(f"machine: {platform.node()} {platform.machine()}, {os.cpu_count()} CPUs, "
-          f"{platform.system()} {platform.release()}, Python {platform.python_version()}")
+def measure(seconds: float = 10.0, machine: str = "unimate2000b", spin_us: float = SPIN_US,
+            warmup: float = 1.0) -> dict:
+    """Run the controller for ``seconds`` (cyclictest alongside) and return the figures.
+
+    Keys: ``realtime``, ``notice``, ``period_us``, ``ticks``, ``compute_mean_us``,
+    ``compute_max_us``, ``cpu_pct``, ``overruns``, ``jog_ms`` (median, p99, max of
+    ``client.jog`` → duty at the backend, ms), ``servodesk`` and ``cyclictest``
+    (``Lateness`` in µs; servodesk's mean and percentiles cover the window, its min and
+    max the whole run, as the histogram keeps them; ``cyclictest`` None when not installed),
+    ``whole_run`` (min, mean, max µs and ticks since the controller started).
+    """
     with tempfile.TemporaryDirectory() as data, \
             ControlClient(machine, data_dir=data, spin_us=spin_us) as client:
-        fifo = "granted" if client.realtime else "refused"
-        print(f"control process pid {client.pid}: SCHED_FIFO {fifo}"
-              f"{' - ' + client.notice if client.notice else ''}; spin {spin_us:g} µs")
+        realtime, notice, pid = client.realtime, client.notice, client.pid
         period_us = round(client.dt * 1e6)
         time.sleep(warmup)
         others = sorted(os.sched_getaffinity(0))
@@ -126,24 +139,51 @@ def run(seconds: float, machine: str, spin_us: float, warmup: float) -> None:
     counts = after.counts - before.counts
     edges = (np.arange(len(counts)) + 1) * HIST_BIN_NS / 1e3
     edges[-1] = np.inf
-    ours = Lateness.from_histogram(edges, counts, after.max_us)
-    compute_us = (status1.compute_total_s - status0.compute_total_s) / max(ticks, 1) * 1e6
-    cpu_pct = 100 * (cpu1 - cpu0) / (wall1 - wall0)
-    print(f"\nservodesk loop, {machine}, period {period_us} µs, {seconds:g} s, {ticks} ticks")
-    print(f"  compute per six-joint tick (simulator included): mean {compute_us:.1f} µs, "
-          f"max {status1.compute_max_us:.0f} µs")
-    print(f"  CPU use of the control process: {cpu_pct:.1f} % of a core")
-    print(f"  overruns: {status1.overruns - status0.overruns}")
-    print(f"  client.jog -> duty at the backend: median {np.median(latency):.2f} ms, "
-          f"p99 {np.percentile(latency, 99):.2f} ms, max {latency.max():.2f} ms "
-          f"over {len(latency)} commands (target < 2 ms)")
+    return {
+        "machine": machine, "pid": pid, "realtime": realtime, "notice": notice,
+        "spin_us": spin_us, "seconds": seconds, "period_us": period_us, "ticks": ticks,
+        "compute_mean_us": (status1.compute_total_s - status0.compute_total_s)
+        / max(ticks, 1) * 1e6,
+        "compute_max_us": status1.compute_max_us,
+        "io_mean_us": (status1.io_total_s - status0.io_total_s) / max(ticks, 1) * 1e6,
+        "cpu_pct": 100 * (cpu1 - cpu0) / (wall1 - wall0),
+        "overruns": status1.overruns - status0.overruns,
+        "jog_ms": (float(np.median(latency)), float(np.percentile(latency, 99)),
+                   float(latency.max()), len(latency)),
+        "servodesk": Lateness.from_histogram(
+            edges, counts, after.max_us, after.min_us,
+            (after.mean_us * after.ticks - before.mean_us * before.ticks)
+            / max(after.ticks - before.ticks, 1)),
+        "cyclictest": parse_cyclictest(cyclic_out) if cyclic_out else None,
+        "whole_run": (after.min_us, after.mean_us, after.max_us, after.ticks),
+    }
+
+
+def run(seconds: float, machine: str, spin_us: float, warmup: float) -> None:
+    print(f"machine: {platform.node()} {platform.machine()}, {os.cpu_count()} CPUs, "
+          f"{platform.system()} {platform.release()}, Python {platform.python_version()}")
+    m = measure(seconds, machine, spin_us, warmup)
+    fifo = "granted" if m["realtime"] else "refused"
+    print(f"control process pid {m['pid']}: SCHED_FIFO {fifo}"
+          f"{' - ' + m['notice'] if m['notice'] else ''}; spin {spin_us:g} µs")
+    median, p99, worst, n = m["jog_ms"]
+    print(f"\nservodesk loop, {machine}, period {m['period_us']} µs, {seconds:g} s, "
+          f"{m['ticks']} ticks")
+    control_us = m["compute_mean_us"] - m["io_mean_us"]
+    print(f"  compute per six-joint tick: mean {m['compute_mean_us']:.1f} µs (controller "
+          f"{control_us:.1f} µs + backend read/write {m['io_mean_us']:.1f} µs), "
+          f"max {m['compute_max_us']:.0f} µs")
+    print(f"  CPU use of the control process: {m['cpu_pct']:.1f} % of a core")
+    print(f"  overruns: {m['overruns']}")
+    print(f"  client.jog -> duty at the backend: median {median:.2f} ms, "
+          f"p99 {p99:.2f} ms, max {worst:.2f} ms over {n} commands (target < 2 ms)")
+    ours, ct = m["servodesk"], m["cyclictest"]
     header = f"  {'':<22}{'p50':>8}{'p99':>8}{'p99.9':>8}{'max':>9}{'>1 ms':>8}"
     print("\nwake-up lateness (µs; servodesk in 5 µs bins, upper edges)")
     print(header)
     print(f"  {'servodesk':<22}{ours.p50:>8.0f}{ours.p99:>8.0f}{ours.p999:>8.0f}"
           f"{ours.max_us:>9.0f}{ours.over_1ms:>8d}")
-    if cyclic_out:
-        ct = parse_cyclictest(cyclic_out)
+    if ct is not None:
         print(f"  {'cyclictest (C)':<22}{ct.p50:>8.0f}{ct.p99:>8.0f}{ct.p999:>8.0f}"
               f"{ct.max_us:>9.0f}{ct.over_1ms:>8d}")
         print(f"  ratio p99 servodesk/cyclictest: {ours.p99 / max(ct.p99, 1):.2f} "
@@ -152,16 +192,17 @@ def run(seconds: float, machine: str, spin_us: float, warmup: float) -> None:
         print("  cyclictest: not installed (apt-get install rt-tests) - no comparison")
     print(f"  thesis Table 2.1 (486-66, RTL): min {TABLE_2_1['min_us']} mean "
           f"{TABLE_2_1['mean_us']} max {TABLE_2_1['max_us']} over {TABLE_2_1['ticks']} interrupts")
-    print(f"  servodesk over the whole run: min {after.min_us:.1f} mean {after.mean_us:.1f} "
-          f"max {after.max_us:.1f} over {after.ticks} ticks")
+    low, mean, high, total = m["whole_run"]
+    print(f"  servodesk over the whole run: min {low:.1f} mean {mean:.1f} "
+          f"max {high:.1f} over {total} ticks")
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=10.0)
     parser.add_argument("--machine", default="unimate2000b")
-    parser.add_argument("--spin-us", type=float, default=0.0,
-                        help="spin this long before each deadline instead of sleeping")
+    parser.add_argument("--spin-us", type=float, default=SPIN_US,
+                        help=f"spin this long before each deadline (default {SPIN_US:g})")
     parser.add_argument("--warmup", type=float, default=1.0)
     args = parser.parse_args()
     run(args.seconds, args.machine, args.spin_us, args.warmup)

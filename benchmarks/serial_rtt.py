@@ -72,8 +72,29 @@ def measure(backend: SerialBackend, seconds: float) -> tuple[list[int], int, flo
     return rtts, missed, (time.monotonic_ns() - start) / 1e9
 
 
-def percentile(sorted_values: list[int], p: float) -> float:
-    return sorted_values[min(len(sorted_values) - 1, int(p * len(sorted_values)))] / 1e3
+def percentile(sorted_values: list[float], p: float) -> float:
+    return sorted_values[min(len(sorted_values) - 1, int(p * len(sorted_values)))]
+
+
+def run(seconds: float = 10.0, machine_name: str = "unimate2000b", port: str | None = None,
+        tcp: bool = False) -> dict:
+    """Measure ``seconds`` of 1 kHz round trips (the emulator unless ``port``); the figures:
+    ``url``, ``elapsed_s``, ``rtts_us`` (sorted), ``missed``, link ``counters``, ``fault``."""
+    machine = load_machine(machine_name)
+    child, url = (None, port) if port else start_emulator(machine_name, tcp)
+    backend = SerialBackend(machine, url, watchdog_s=0.25, open_timeout_s=5.0)
+    try:
+        backend.open()
+        backend.clock.spin_ns = 200_000
+        rtts, missed, elapsed = measure(backend, seconds)
+    finally:
+        backend.close()
+        if child is not None:
+            child.send_signal(signal.SIGTERM)
+            child.wait(timeout=30)
+    return {"machine": machine.name, "url": url, "elapsed_s": elapsed,
+            "rtts_us": [r / 1e3 for r in sorted(rtts)] or [0.0], "missed": missed,
+            "counters": backend.counters.as_dict(), "fault": backend.fault}
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -83,31 +104,19 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--port", help="a real board's URL; default: start the emulator")
     parser.add_argument("--tcp", action="store_true", help="emulator on TCP instead of a pty")
     args = parser.parse_args(argv)
-    machine = load_machine(args.machine)
-    child, url = (None, args.port) if args.port else start_emulator(args.machine, args.tcp)
-    backend = SerialBackend(machine, url, watchdog_s=0.25, open_timeout_s=5.0)
-    try:
-        backend.open()
-        backend.clock.spin_ns = 200_000
-        rtts, missed, elapsed = measure(backend, args.seconds)
-    finally:
-        backend.close()
-        if child is not None:
-            child.send_signal(signal.SIGTERM)
-            child.wait(timeout=30)
-    rtts = sorted(rtts) or [0]
-    c = backend.counters
-    print(f"serial round trip, {machine.name} on {url}, {elapsed:.1f} s at 1 kHz")
+    m = run(args.seconds, args.machine, args.port, args.tcp)
+    rtts, elapsed, c = m["rtts_us"], m["elapsed_s"], m["counters"]
+    print(f"serial round trip, {m['machine']} on {m['url']}, {elapsed:.1f} s at 1 kHz")
     print(f"  DUTY → REPORT: median {percentile(rtts, 0.5):.0f} µs, "
-          f"p99 {percentile(rtts, 0.99):.0f} µs, max {rtts[-1] / 1e3:.0f} µs")
-    print(f"  {c.frames_tx / elapsed:.0f} frames/s out, {c.frames_rx / elapsed:.0f} frames/s in; "
-          f"answers later than one tick: {sum(r > PERIOD_NS for r in rtts)}, "
-          f"unanswered: {missed}")
-    print(f"  errors: crc {c.crc_errors}, truncated {c.truncated}, garbage bytes "
-          f"{c.garbage_bytes}, out of order {c.out_of_order}, link lost {c.link_lost}, "
-          f"watchdog trips {c.watchdog_trips}")
-    if backend.fault:
-        print(f"  stopped early: {backend.fault}")
+          f"p99 {percentile(rtts, 0.99):.0f} µs, max {rtts[-1]:.0f} µs")
+    print(f"  {c['frames_tx'] / elapsed:.0f} frames/s out, {c['frames_rx'] / elapsed:.0f} "
+          f"frames/s in; answers later than one tick: {sum(r > PERIOD_NS / 1e3 for r in rtts)}, "
+          f"unanswered: {m['missed']}")
+    print(f"  errors: crc {c['crc_errors']}, truncated {c['truncated']}, garbage bytes "
+          f"{c['garbage_bytes']}, out of order {c['out_of_order']}, link lost {c['link_lost']}, "
+          f"watchdog trips {c['watchdog_trips']}")
+    if m["fault"]:
+        print(f"  stopped early: {m['fault']}")
 
 
 if __name__ == "__main__":

@@ -1,0 +1,650 @@
+"""Bad input everywhere an operator or a file can give it: no crash, a clear message,
+nothing started.
+
+Property-based (hypothesis) over every parser and form: path files (TSV, CSV,
+raw bytes), machine TOML files, coefficient files, the command line's numbers,
+serial frames reaching the I/O board, pose inputs (the End point form's fields,
+the inverse kinematics, pose files) and paths handed to a running controller.
+Each property either gets a clear, one-line error of the parser's own type
+that names its source, or a value that satisfies the parser's promises (inside
+the limits, finite, increasing times…). The examples tried are counted per
+test (``measured.example``) and reported in the terminal summary.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import io
+import math
+import os
+import re
+import string
+import tomllib
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import strategies as st
+
+from app import cli
+from app.coefficient_files import CoefficientFileError, dump_coefficients, parse_coefficients
+from app.path_files import PathFileError, PathPoints, parse_csv, parse_tsv, read_path, resample
+from app.widgets.fields import FieldError, NumberCheck, position_check
+from control import ControlClient
+from control.cartesian import PoseFileError, parse_poses
+from control.layout import MAX_TAPS
+from hw.emulator import EmulatedBoard
+from hw.machine import Machine, MachineError, load_machine, parse_machine
+from hw.messages import BoardConfig, Config, Duty, Heartbeat, MessageWriter
+from hw.sim import SimBackend
+from kinematics import Unreachable, unimate, xyz_fixed
+
+UNIMATE = load_machine("unimate2000b")
+MACHINE_TEXT = Path(UNIMATE.path).read_text()
+HOLD = (1500.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+LOWER, UPPER = np.array(UNIMATE.lower), np.array(UNIMATE.upper)
+MAX_SPEED = np.array([j.max_speed for j in UNIMATE.joints])
+
+
+def fuzz(examples: int) -> settings:
+    """Settings sized to keep the suite fast; ``measured`` is deliberately shared across
+    examples (it counts them), so the function-scoped-fixture health check is off."""
+    return settings(max_examples=examples, deadline=None,
+                    suppress_health_check=[HealthCheck.function_scoped_fixture,
+                                           HealthCheck.too_slow])
+
+
+def one_line(message: str, prefix: str) -> None:
+    """A clear message: one line, naming its source first."""
+    assert message.startswith(prefix), message
+    assert "\n" not in message and "Traceback" not in message, message
+
+
+# -- strategies ---------------------------------------------------------------------------
+
+NASTY_NUMBERS = st.sampled_from(["nan", "NaN", "inf", "-inf", "1e999", "-1e999", "1e308",
+                                 "", " ", "x", "1,5", "--1", "0x10", "½", "1_000", "١٢", "1e",
+                                 ".", "-", "+", "٣.٥", "1e-400", "∞"])
+NUMBER_TEXT = st.one_of(
+    NASTY_NUMBERS,
+    st.floats(allow_nan=True, allow_infinity=True).map(repr),
+    st.floats(-3000, 3000).map(lambda v: f"{v:.4g}"),
+    st.integers(-10**6, 10**6).map(str),
+    st.text(max_size=6),
+)
+
+
+@st.composite
+def path_rows(draw: st.DrawFn) -> list[list[float]]:
+    """Mostly sensible points near HOLD (so speed and limit checks are reached)."""
+    n = draw(st.integers(1, 12))
+    times = np.cumsum(draw(st.lists(st.floats(-0.5, 5.0), min_size=n, max_size=n)))
+    rows = []
+    for t in times:
+        offsets = draw(st.lists(st.floats(-600.0, 600.0), min_size=6, max_size=6))
+        rows.append([float(t), *(h + o * s for h, o, s in zip(
+            HOLD, offsets, (1.0, 0.2, 0.05, 0.2, 0.3, 0.3), strict=True))])
+    return rows
+
+
+@st.composite
+def mutated_table(draw: st.DrawFn, separator: str) -> tuple[list[list[str]], str]:
+    """A table of number texts with some fields replaced by nasty ones."""
+    rows = [[repr(v) for v in row] for row in draw(path_rows())]
+    for _ in range(draw(st.integers(0, 3))):
+        r = draw(st.integers(0, len(rows) - 1))
+        if rows[r] and draw(st.booleans()):
+            c = draw(st.integers(0, len(rows[r]) - 1))
+            rows[r][c] = draw(NUMBER_TEXT)
+        else:
+            rows[r] = rows[r][:draw(st.integers(0, len(rows[r])))]
+    extra = draw(st.sampled_from(["", "# a comment\n", "\n\n", "  # indented comment\n"]))
+    return rows, extra
+
+
+def tsv_text(rows: list[list[str]], extra: str) -> str:
+    return extra + "".join("\t".join(row) + "\n" for row in rows)
+
+
+HEADER_NAMES = st.sampled_from(["t", "time", "t [s]", "In/Out", "inout", "Rotate [deg]",
+                                "Up/Down desired [deg]", "Bend actual [deg]", "Yaw duty [%]",
+                                "swivel", "elbow", "", "Rotate", "x", "t"])
+
+
+# -- path files ---------------------------------------------------------------------------
+
+
+def check_points(points: PathPoints) -> None:
+    """What a parsed path file promises: times from 0, increasing; finite; in limits; speeds."""
+    t, q = points.t, points.q
+    assert len(t) >= 1 and t[0] == 0.0 and np.all(np.diff(t) > 0)
+    assert np.isfinite(q).all() and np.all(q >= LOWER) and np.all(q <= UPPER)
+    if len(t) > 1:
+        speed = np.abs(np.diff(q, axis=0)) / np.diff(t)[:, None]
+        assert np.all(speed <= MAX_SPEED * (1 + 1e-9))
+
+
+@fuzz(400)
+@given(text=st.text(max_size=300))
+def test_any_text_as_a_tsv_path_file(measured, text: str) -> None:
+    """Arbitrary text read as a TSV path: PathFileError naming the file, or a valid path."""
+    measured.example()
+    try:
+        points = parse_tsv(text, UNIMATE, HOLD, "fuzz.tsv")
+    except PathFileError as exc:
+        one_line(str(exc), "fuzz.tsv: ")
+    else:
+        check_points(points)
+
+
+@fuzz(400)
+@given(table=mutated_table("\t"))
+def test_damaged_tsv_path_files(measured, table: tuple[list[list[str]], str]) -> None:
+    """Plausible TSV paths with damaged fields, short lines, bad times, fast or out-of-limit
+    points: PathFileError naming the file and line, or a path that resamples into limits."""
+    measured.example()
+    try:
+        points = parse_tsv(tsv_text(*table), UNIMATE, HOLD, "fuzz.tsv")
+    except PathFileError as exc:
+        one_line(str(exc), "fuzz.tsv: ")
+    else:
+        check_points(points)
+        path = resample(points, UNIMATE.sample_time_s)
+        assert path.shape[1] == 6 and np.all(path >= LOWER) and np.all(path <= UPPER)
+
+
+@fuzz(300)
+@given(header=st.lists(HEADER_NAMES, min_size=0, max_size=5),
+       table=mutated_table(","))
+def test_damaged_csv_path_files(measured, header: list[str],
+                                table: tuple[list[list[str]], str]) -> None:
+    """CSV paths with any header (unknown joints, duplicates, saved-run columns) and damaged
+    rows: PathFileError naming the file and line, or a valid path."""
+    measured.example()
+    rows, extra = table
+    text = extra + ",".join(header) + "\n" + "".join(",".join(r[:len(header)]) + "\n"
+                                                     for r in rows)
+    try:
+        points = parse_csv(text, UNIMATE, HOLD, "fuzz.csv")
+    except PathFileError as exc:
+        one_line(str(exc), "fuzz.csv: ")
+    else:
+        check_points(points)
+
+
+@fuzz(150)
+@given(data=st.binary(max_size=200), suffix=st.sampled_from([".tsv", ".csv", ".txt"]))
+def test_any_bytes_as_a_path_file(measured, tmp_path_factory, data: bytes,
+                                  suffix: str) -> None:
+    """Any bytes in a path file (not UTF-8, NULs, control characters): PathFileError naming
+    the file, or a valid path; never a crash."""
+    measured.example()
+    path = tmp_path_factory.getbasetemp() / f"bytes{suffix}"
+    path.write_bytes(data)
+    try:
+        check_points(read_path(path, UNIMATE, HOLD))
+    except PathFileError as exc:
+        one_line(str(exc), str(path))
+
+
+def test_a_path_file_lasting_ages_is_refused_with_a_message() -> None:
+    """A two-point path whose second point is at t = 1e15 s: slow enough for every joint,
+    but no move can last that long; the file must be refused with a PathFileError that
+    says so, not crash the Moves tab with MemoryError when it is run."""
+    text = "0\t1500\t0\t0\t0\t0\t0\n1e15\t1600\t0\t0\t0\t0\t0\n"
+    with pytest.raises(PathFileError, match=r"fuzz\.tsv: "):
+        resample(parse_tsv(text, UNIMATE, HOLD, "fuzz.tsv"), UNIMATE.sample_time_s)
+
+
+# -- machine files ------------------------------------------------------------------------
+
+VALUE_SPANS = [m.span() for m in re.finditer(r'-?\d+(?:\.\d+)?(?:[eE][-+]?\d+)?|"[^"\n]*"',
+                                             MACHINE_TEXT)]
+TOML_VALUES = st.one_of(
+    st.sampled_from(["nan", "inf", "-inf", "-1", "0", "1e9", "true", '"x"', "[]", "[1, 2]",
+                     "{}", "-0.0", "1e-9", "300", "-300", '"deg"', '"mm"', '"gray"']),
+    st.floats(allow_nan=False, allow_infinity=False).map(repr),
+    st.integers(-10**9, 10**9).map(str),
+)
+
+
+def check_machine(machine: Machine) -> None:
+    """What a loaded machine promises the controller."""
+    assert machine.sample_time_s > 0 and machine.n_joints >= 1
+    for j in machine.joints:
+        assert math.isfinite(j.lower) and math.isfinite(j.upper) and j.lower < j.upper
+        assert 0 <= j.min_pwm_pos <= 100 and 0 <= j.min_pwm_neg <= 100
+        assert j.polarity in (1, -1) and j.max_speed > 0
+    assert {"hold", "track"} <= set(machine.coefficients)
+
+
+@fuzz(400)
+@given(which=st.integers(0, len(VALUE_SPANS) - 1), value=TOML_VALUES)
+def test_machine_files_with_a_wrong_value(measured, which: int, value: str) -> None:
+    """Any one value of the Unimate's file replaced (NaN, inf, a string for a number, an
+    empty list…): MachineError as ``FILE: KEY: what is wrong``, or a machine that keeps
+    its promises (finite limits in order, minimum PWM in 0…100 %, polarity ±1…)."""
+    measured.example()
+    start, stop = VALUE_SPANS[which]
+    text = MACHINE_TEXT[:start] + value + MACHINE_TEXT[stop:]
+    try:
+        machine = parse_machine(text, Path("fuzz.toml"))
+    except MachineError as exc:
+        one_line(str(exc), "fuzz.toml: ")
+        assert re.match(r"fuzz\.toml: [^:]+: ", str(exc)), str(exc)
+    else:
+        check_machine(machine)
+
+
+@fuzz(60)
+@given(which=st.integers(0, len(VALUE_SPANS) - 1), value=TOML_VALUES)
+def test_servodesk_machine_on_a_damaged_file(measured, tmp_path_factory, which: int,
+                                             value: str) -> None:
+    """``servodesk machine FILE`` on a damaged file: exit 2 with one line on stderr, or
+    exit 0 describing it; never a traceback."""
+    measured.example()
+    start, stop = VALUE_SPANS[which]
+    path = tmp_path_factory.getbasetemp() / "fuzz.toml"
+    path.write_text(MACHINE_TEXT[:start] + value + MACHINE_TEXT[stop:])
+    code, out, err = run_cli(["machine", str(path)])
+    if code == 0:
+        assert out.startswith("Unimate 2000B") and err == ""
+    else:
+        assert code == 2
+        one_line(err.strip(), "servodesk: fuzz.toml: ")
+
+
+def test_a_bad_machine_file_starts_nothing(tmp_path: Path, leftovers) -> None:
+    """ControlClient on a damaged machine file raises MachineError before it creates a
+    segment or a process."""
+    path = tmp_path / "bad.toml"
+    path.write_text(MACHINE_TEXT.replace("sample_time_ms = 1.0", "sample_time_ms = -1.0"))
+    before = leftovers(os.getpid())
+    with pytest.raises(MachineError, match=r"bad\.toml: machine\.sample_time_ms: "):
+        ControlClient(path)
+    assert leftovers(os.getpid()) == before
+
+
+# -- coefficient files --------------------------------------------------------------------
+
+TOML_NUMBER = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(-1000, 1000))
+
+
+def toml_value(value: object) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        return "nan" if math.isnan(value) else ("inf" if value > 0 else "-inf") \
+            if math.isinf(value) else repr(value)
+    if isinstance(value, list):
+        return "[" + ", ".join(toml_value(v) for v in value) + "]"
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    return str(value)
+
+
+NUMBERS = st.lists(TOML_NUMBER, min_size=0, max_size=8)
+COEFFICIENT_VALUES = {
+    "note": st.text(alphabet=string.printable, max_size=10),
+    "kp": st.lists(NUMBERS, min_size=5, max_size=7),
+    "w": st.lists(st.lists(TOML_NUMBER, max_size=10), min_size=5, max_size=7),
+    "ki": st.lists(TOML_NUMBER, min_size=5, max_size=7),
+    "kd": st.lists(TOML_NUMBER, min_size=5, max_size=7),
+    "kv": st.lists(TOML_NUMBER, min_size=5, max_size=7),
+    "filter": st.lists(TOML_NUMBER, max_size=10),
+    "filter_divisor": TOML_NUMBER,
+    "integral_limit": TOML_NUMBER,
+    "duty_limit": TOML_NUMBER,
+    "gain": TOML_NUMBER,
+}
+
+
+@st.composite
+def coefficient_files(draw: st.DrawFn) -> str:
+    """Text of a coefficient file: a valid dump with some keys replaced, dropped or added."""
+    text = dump_coefficients({"hold": UNIMATE.hold, "track": UNIMATE.track}, UNIMATE)
+    lines = text.splitlines()
+    for _ in range(draw(st.integers(1, 4))):
+        key = draw(st.sampled_from(sorted(COEFFICIENT_VALUES)))
+        value = toml_value(draw(COEFFICIENT_VALUES[key]))
+        at = draw(st.integers(0, len(lines) - 1))
+        if draw(st.booleans()):
+            lines = [f"{key} = {value}" if ln.startswith(f"{key} = ") and i >= at else ln
+                     for i, ln in enumerate(lines)]
+        else:
+            lines.insert(at, f"{key} = {value}")
+    return "\n".join(lines) + "\n"
+
+
+@fuzz(400)
+@given(text=coefficient_files())
+def test_damaged_coefficient_files(measured, text: str) -> None:
+    """Coefficient files with wrong tap counts, NaN gains, strings, unknown keys, duplicate
+    keys, too many taps: CoefficientFileError naming the file and key, or sets the
+    controller can take (finite, at most MAX_TAPS taps) that dump and load back equal."""
+    measured.example()
+    try:
+        sets = parse_coefficients(text, UNIMATE, "fuzz.toml")
+    except CoefficientFileError as exc:
+        one_line(str(exc), "fuzz.toml: ")
+    else:
+        for c in sets.values():
+            taps = [*c.kp, *c.w, c.filter]
+            assert all(len(t) <= MAX_TAPS for t in taps)
+            values = [v for t in taps for v in t] + [*c.ki, *c.kd, *c.kv, c.filter_divisor,
+                                                     c.integral_limit, c.duty_limit]
+            assert all(math.isfinite(v) for v in values)
+        assert parse_coefficients(dump_coefficients(sets, UNIMATE), UNIMATE) == sets
+
+
+def test_a_saved_feed_forward_set_loads_back_equal() -> None:
+    """A track set with velocity feed-forward (kv) saved as a coefficient file and loaded
+    again is the same set: saving must not drop a coefficient."""
+    tuned = dataclasses.replace(UNIMATE.track, name="tuned", kv=(0.5, 0.2, 0.3, 0.1, 0.1, 0.1))
+    assert parse_coefficients(dump_coefficients({"tuned": tuned}, UNIMATE), UNIMATE) == {
+        "tuned": tuned}
+
+
+@fuzz(200)
+@given(text=st.text(max_size=200))
+def test_any_text_as_a_coefficient_file(measured, text: str) -> None:
+    """Arbitrary text: CoefficientFileError naming the file (not valid TOML, no sets…)."""
+    measured.example()
+    with contextlib.suppress(tomllib.TOMLDecodeError):
+        assume("coefficients" not in tomllib.loads(text))
+    with pytest.raises(CoefficientFileError) as info:
+        parse_coefficients(text, UNIMATE, "fuzz.toml")
+    one_line(str(info.value), "fuzz.toml: ")
+
+
+# -- the command line's numbers -------------------------------------------------------------
+
+
+def run_cli(argv: list[str]) -> tuple[int, str, str]:
+    """``servodesk ARGV`` in process: exit code, stdout, stderr."""
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            code = cli.main(argv)
+        except SystemExit as exc:
+            code = exc.code if isinstance(exc.code, int) else 2
+    return code, out.getvalue(), err.getvalue()
+
+
+CLI_NUMBER = st.one_of(NUMBER_TEXT, st.floats(-3000, 3000).map(repr),
+                       st.sampled_from(["-1e3", "-inf", "-nan", "--", "-h", "-x", "1e5000"]))
+
+
+@fuzz(300)
+@given(command=st.sampled_from(["fk", "ik"]), values=st.lists(CLI_NUMBER, min_size=6,
+                                                                max_size=6))
+def test_fk_and_ik_numbers(measured, command: str, values: list[str]) -> None:
+    """``servodesk fk`` / ``ik`` with any six arguments: exit 0 with a result, or exit 2
+    with one line saying which number is wrong (or argparse's usage line); no traceback."""
+    measured.example()
+    code, out, err = run_cli([command, *values])
+    assert "Traceback" not in err
+    if code == 0:
+        assert out and err == ""
+    else:
+        assert code == 2 and out == ""
+        last = err.strip().splitlines()[-1]
+        assert last.startswith((f"servodesk {command}: ", "servodesk: error: ",
+                                f"usage: servodesk {command}")), err
+
+
+@fuzz(200)
+@given(option=st.sampled_from(["--corrupt-rate", "--corrupt-rx-rate", "--drop-rate",
+                               "--glitch-scale", "--silent-after", "--seed", "--tcp"]),
+       value=CLI_NUMBER)
+def test_emulator_options(measured, option: str, value: str) -> None:
+    """``servodesk emulate`` options parsed from any text: a usable value (a probability in
+    0…1 for the rates) or exit 2 with argparse's message; the emulator is not started
+    here, only its command line is parsed."""
+    measured.example()
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        try:
+            args = cli.build_parser().parse_args(["emulate", option, value])
+        except SystemExit as exc:
+            assert exc.code == 2
+            assert err.getvalue().strip().splitlines()[-1].startswith("servodesk emulate: error: ")
+            return
+    parsed = getattr(args, option[2:].replace("-", "_"))
+    if option.endswith("rate"):
+        assert 0.0 <= parsed <= 1.0
+    elif option in ("--seed", "--tcp"):
+        assert isinstance(parsed, int)
+
+
+@pytest.mark.parametrize(("option", "value"), [("--tcp", "99999"), ("--tcp", "-1"),
+                                               ("--glitch-scale", "nan"),
+                                               ("--silent-after", "nan")])
+def test_emulate_refuses_numbers_it_cannot_use(option: str, value: str) -> None:
+    """``servodesk emulate`` refuses a port outside 0…65535 and a non-finite scale or
+    delay when parsing, with argparse's message naming the option (as it does for rates)."""
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), pytest.raises(SystemExit) as info:
+        cli.build_parser().parse_args(["emulate", option, value])
+    assert info.value.code == 2 and option in err.getvalue()
+
+
+# -- serial frames at the I/O board ------------------------------------------------------------
+
+
+class RecordingPlant(SimBackend):
+    """The simulator, remembering every duty the board applied to it."""
+
+    def __init__(self) -> None:
+        super().__init__(UNIMATE, lockstep=True, glitch_scale=0.0)
+        self.applied: list[tuple[float, ...]] = []
+
+    def write(self, duty_pct: Sequence[float]) -> None:
+        self.applied.append(tuple(duty_pct))
+        super().write(duty_pct)
+
+
+def feed(board: EmulatedBoard, data: bytes, cuts: list[int]) -> None:
+    """Feed ``data`` in pieces cut at ``cuts``, a millisecond apart, polling between."""
+    pieces = [data[a:b] for a, b in zip([0, *cuts], [*cuts, len(data)], strict=True)]
+    for k, piece in enumerate(pieces):
+        board.receive(piece, k * 1_000_000)
+        board.poll(k * 1_000_000)
+
+
+@fuzz(300)
+@given(data=st.binary(max_size=600), cuts=st.lists(st.integers(0, 600), max_size=6))
+def test_random_bytes_at_the_board_move_nothing(measured, data: bytes,
+                                                cuts: list[int]) -> None:
+    """Any bytes on the board's link: it never raises and never opens a valve."""
+    measured.example()
+    plant = RecordingPlant()
+    board = EmulatedBoard(plant)
+    feed(board, data, sorted(c for c in cuts if c <= len(data)))
+    assert board.applied == 0
+    assert all(not any(duty) for duty in plant.applied)
+
+
+@st.composite
+def damaged_sessions(draw: st.DrawFn) -> tuple[bytes, set[tuple[float, ...]]]:
+    """A host's CONFIG, HEARTBEAT and DUTY frames with bytes flipped, lost and inserted; and
+    the duty vectors (in %, as the board quantises them) the host really sent."""
+    writer = MessageWriter()
+    config = BoardConfig.from_machine(UNIMATE, 0.05, 0.02)
+    frames = [writer.encode(Config(config)), writer.encode(Heartbeat())]
+    sent: set[tuple[float, ...]] = set()
+    for k in range(draw(st.integers(1, 8))):
+        units = tuple(draw(st.lists(st.integers(-10_000, 10_000), min_size=6, max_size=6)))
+        frames.append(writer.encode(Duty(units, clear=k == 0)))
+        sent.add(tuple(round(u / config.duty_step) * config.duty_step / 100 for u in units))
+    stream = bytearray(b"".join(frames))
+    for _ in range(draw(st.integers(0, 6))):
+        at = draw(st.integers(0, len(stream) - 1))
+        action = draw(st.sampled_from(["flip", "drop", "insert"]))
+        if action == "flip":
+            stream[at] ^= 1 << draw(st.integers(0, 7))
+        elif action == "drop":
+            del stream[at]
+        else:
+            stream.insert(at, draw(st.integers(0, 255)))
+    return bytes(stream), sent
+
+
+@fuzz(300)
+@given(session=damaged_sessions(), cuts=st.lists(st.integers(0, 400), max_size=4))
+def test_a_damaged_session_applies_only_what_the_host_sent(
+        measured, session: tuple[bytes, set[tuple[float, ...]]], cuts: list[int]) -> None:
+    """A real session with bit flips, lost and inserted bytes: every duty the board applies
+    is one the host sent (or all-closed); a damaged frame is counted, never acted on."""
+    measured.example()
+    data, sent = session
+    plant = RecordingPlant()
+    board = EmulatedBoard(plant)
+    feed(board, data, sorted(c for c in cuts if c <= len(data)))
+    closed = (0.0,) * 6
+    assert all(duty == closed or duty in sent for duty in plant.applied)
+
+
+# -- pose inputs --------------------------------------------------------------------------
+
+FIELD_TEXT = st.one_of(NUMBER_TEXT, st.floats(allow_nan=True, allow_infinity=True).map(str),
+                       st.text(max_size=12))
+
+
+@fuzz(400)
+@given(text=FIELD_TEXT, joint=st.integers(0, 5))
+def test_form_fields(measured, text: str, joint: int) -> None:
+    """The End point form's pose fields and a joint-target field with anything typed:
+    FieldError naming the field and the fix, or a finite number inside the field's range."""
+    measured.example()
+    for check in (NumberCheck("x", " mm"), position_check(UNIMATE.joints[joint], UNIMATE,
+                                                          "target")):
+        try:
+            value = check.parse(text)
+        except FieldError as exc:
+            one_line(str(exc), check.what)
+            assert not check.validate(text).is_valid
+        else:
+            assert value is not None and math.isfinite(value)
+            assert check.low is None or check.low <= value <= check.high
+            assert check.validate(text).is_valid
+
+
+@st.composite
+def poses(draw: st.DrawFn) -> tuple[np.ndarray, np.ndarray | None]:
+    """Poses of in-limit configurations, nudged (often out of reach), or any six floats."""
+    if draw(st.booleans()):
+        q = np.array([draw(st.floats(lo, hi)) for lo, hi in zip(LOWER, UPPER, strict=True)])
+        p = unimate.pose(q)
+        nudge = np.array(draw(st.lists(st.sampled_from([0.0, 0.0, 1.0, -50.0, 500.0, 90.0]),
+                                       min_size=6, max_size=6)))
+        p = p + nudge
+    else:
+        p = np.array(draw(st.lists(st.floats(allow_nan=True, allow_infinity=True,
+                                             width=32), min_size=6, max_size=6)))
+    near = draw(st.one_of(st.none(), st.lists(st.floats(-400, 2100), min_size=6, max_size=6)
+                          .map(np.array)))
+    return p, near
+
+
+@fuzz(400)
+@given(case=poses())
+def test_inverse_kinematics_of_any_pose(measured,
+                                        case: tuple[np.ndarray, np.ndarray | None]) -> None:
+    """Any pose and any ``near``: Unreachable or ValueError with a message, or solutions
+    that are all inside the limits and all reach the pose."""
+    measured.example()
+    p, near = case
+    try:
+        solutions = unimate.inverse(p, near=near)
+    except (Unreachable, ValueError) as exc:
+        assert str(exc) and "\n" not in str(exc)
+        return
+    assert len(solutions) >= 1
+    assert np.all(solutions >= LOWER - 1e-9) and np.all(solutions <= UPPER + 1e-9)
+    t = unimate.forward(solutions)
+    np.testing.assert_allclose(t[:, :3, 3], np.broadcast_to(p[:3], (len(solutions), 3)),
+                               atol=1e-6)
+    want = xyz_fixed.rotation(*np.radians(p[3:]))
+    np.testing.assert_allclose(t[:, :3, :3], np.broadcast_to(want, t[:, :3, :3].shape),
+                               atol=1e-9)
+
+
+POSE_HEADER = st.lists(st.sampled_from(["t", "time", "x", "y", "z", "gamma", "beta", "alpha",
+                                        "γ", "x [mm]", "w", "", "X"]), max_size=7)
+
+
+@fuzz(300)
+@given(header=POSE_HEADER, rows=st.lists(st.lists(NUMBER_TEXT, min_size=0, max_size=7),
+                                         max_size=6))
+def test_pose_files(measured, header: list[str], rows: list[list[str]]) -> None:
+    """A pose CSV with any header and any fields: PoseFileError naming the file and line,
+    or via points that are finite with increasing times."""
+    measured.example()
+    text = ",".join(header) + "\n" + "".join(",".join(r) + "\n" for r in rows)
+    try:
+        points = parse_poses(text, "fuzz.csv")
+    except PoseFileError as exc:
+        one_line(str(exc), "fuzz.csv: ")
+    else:
+        assert np.isfinite(points.xyz).all() and len(points.xyz) >= 1
+        if points.t is not None:
+            assert np.all(np.diff(np.concatenate([[0.0], points.t])) > 0)
+
+
+# -- a running controller given bad paths -------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def live(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ControlClient]:
+    """One real-time controller for the module (1 kHz, not lockstep: it must stay idle)."""
+    client = ControlClient("unimate2000b", data_dir=tmp_path_factory.mktemp("runs"))
+    yield client
+    client.close()
+
+
+@st.composite
+def bad_arrays(draw: st.DrawFn) -> np.ndarray:
+    """Holding paths with one thing wrong: a NaN, an infinity, a point past a limit, the
+    wrong number of joints, or no samples."""
+    n = draw(st.integers(1, 50))
+    path = np.tile(np.array(HOLD), (n, 1))
+    fault = draw(st.sampled_from(["nan", "inf", "below", "above", "columns", "empty"]))
+    k, j = draw(st.integers(0, n - 1)), draw(st.integers(0, 5))
+    if fault == "nan":
+        path[k, j] = math.nan
+    elif fault == "inf":
+        path[k, j] = draw(st.sampled_from([math.inf, -math.inf]))
+    elif fault == "below":
+        path[k, j] = LOWER[j] - draw(st.floats(1e-6, 1e6))
+    elif fault == "above":
+        path[k, j] = UPPER[j] + draw(st.floats(1e-6, 1e6))
+    elif fault == "columns":
+        path = path[:, :draw(st.sampled_from([0, 1, 5]))]
+    else:
+        path = path[:0]
+    return path
+
+
+@fuzz(150)
+@given(path=bad_arrays(), as_profile=st.booleans())
+def test_a_bad_path_or_profile_starts_nothing(measured, live: ControlClient, leftovers,
+                                              path: np.ndarray, as_profile: bool) -> None:
+    """Bad arrays handed to a running controller as a path (``move``) or a duty profile
+    (``actuate``, where limits are ±100 %): ValueError with a message, no move segment
+    created, the controller still holding with nothing moving."""
+    measured.example()
+    if as_profile:
+        path = np.clip(path - np.array(HOLD)[:path.shape[1]], -1e9, 1e9) if path.size else path
+        assume(path.ndim != 2 or path.shape[1] != 6 or len(path) == 0
+               or not np.all(np.isfinite(path) & (np.abs(path) <= 100)))
+    pid = os.getpid()
+    with pytest.raises(ValueError) as info:
+        (live.actuate if as_profile else live.move)(path)
+    assert str(info.value) and "\n" not in str(info.value)
+    assert leftovers(pid) == [live.segment_name]
+    status = live.status()
+    assert not status.moving and status.move_total == 0 and not status.estop

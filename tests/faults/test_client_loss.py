@@ -1,0 +1,226 @@
+"""The UI side frozen (SIGSTOP) or killed (SIGKILL) mid-move: the controller holds, keeps
+ticking and publishing, saves the interrupted run itself, and exits cleanly.
+
+The "UI" is a small client script in its own process (as the TUI would be),
+driven over its stdin. The test watches the controller from outside through
+the control segment's seqlocked status, so it sees what an operator's second
+screen would see while the client is gone.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+
+from control import Flag, Mode, shm
+from control.layout import ControlLayout, LatencyHistogram, Status
+from control.recorder import list_runs, load_run
+from control.seqlock import SeqlockReader
+
+PR_SET_CHILD_SUBREAPER = 36
+ROOT = Path(__file__).resolve().parents[2]
+
+CLIENT_SCRIPT = textwrap.dedent("""
+    import json, sys
+    import numpy as np
+    from control import ControlClient, moves
+
+    data_dir, orphan_s, path_file = sys.argv[1], float(sys.argv[2]), sys.argv[3]
+    client = ControlClient("unimate2000b", data_dir=data_dir, orphan_timeout_s=orphan_s)
+    start = client.status().position
+    path = moves.step(start, 1, start[1] + 40.0, duration=8.0, machine=client.machine)
+    np.save(path_file, path)
+    handle = client.move(path, kind="step")
+    print(json.dumps({"controller": client.pid, "segment": client.segment_name}), flush=True)
+    for line in sys.stdin:
+        command = line.strip()
+        if command == "report":
+            print(json.dumps({"dead": client.dead, "alive": client.alive,
+                              "tick": client.status().tick}), flush=True)
+        elif command == "welcome":
+            back = client.wait_event("notice", 5.0, lambda e: "client is back" in e.message)
+            print(json.dumps({"notice": back.message}), flush=True)
+        elif command == "wait":
+            result = client.wait(handle, timeout=10)
+            print(json.dumps({"status": result.status, "samples": result.run.samples,
+                              "files": str(result.files.json) if result.files else None}),
+                  flush=True)
+        elif command == "close":
+            client.close()
+            print(json.dumps({"controller_exit": client._process.returncode}), flush=True)
+            break
+""")
+
+
+class ClientScript:
+    """The client script as a child process, answering one JSON line per command."""
+
+    def __init__(self, data_dir: Path, orphan_timeout_s: float) -> None:
+        self.path_file = data_dir.parent / "path.npy"
+        env = {**os.environ, "PYTHONPATH": str(ROOT)}
+        self.proc = subprocess.Popen(
+            [sys.executable, "-c", CLIENT_SCRIPT, str(data_dir), str(orphan_timeout_s),
+             str(self.path_file)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+            env=env)
+        first = self.answer()
+        self.controller = int(first["controller"])
+        self.segment = str(first["segment"])
+
+    def answer(self) -> dict:
+        assert self.proc.stdout is not None
+        line = self.proc.stdout.readline()
+        assert line, "the client script ended unexpectedly"
+        return json.loads(line)
+
+    def ask(self, command: str) -> dict:
+        assert self.proc.stdin is not None
+        self.proc.stdin.write(command + "\n")
+        self.proc.stdin.flush()
+        return self.answer()
+
+    @property
+    def path(self) -> np.ndarray:
+        return np.load(self.path_file)
+
+    def kill(self) -> None:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(self.proc.pid, signal.SIGCONT)
+        self.proc.kill()
+        self.proc.wait(timeout=10)
+
+
+class StatusWatch:
+    """Read the controller's status and histogram from the client's control segment."""
+
+    def __init__(self, name: str) -> None:
+        self.segment = shm.attach(name)
+        self.layout = ControlLayout(6)
+        self.reader = SeqlockReader(self.segment.buf, self.layout.status_offset,
+                                    self.layout.status.struct)
+
+    def status(self) -> Status:
+        return self.layout.status.decode(self.reader.read())
+
+    def histogram(self) -> LatencyHistogram:
+        values = self.layout.histogram(self.segment.buf).copy()
+        return LatencyHistogram.from_counters(values, self.status().overruns)
+
+    def holding_without_client(self) -> bool:
+        s = self.status()
+        return s.mode == Mode.HOLD and bool(s.flags & Flag.UI_LOST) and not s.moving
+
+    def close(self) -> None:
+        self.reader.release()
+        shm.release(self.segment, unlink=False)
+
+
+@contextlib.contextmanager
+def adopting_orphans() -> Iterator[None]:
+    """Make this process the child subreaper, so an orphaned controller's exit code is ours."""
+    libc = ctypes.CDLL(None, use_errno=True)
+    if libc.prctl(PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0) != 0:
+        raise OSError(ctypes.get_errno(), "prctl(PR_SET_CHILD_SUBREAPER) failed")
+    try:
+        yield
+    finally:
+        libc.prctl(PR_SET_CHILD_SUBREAPER, 0, 0, 0, 0)
+
+
+def the_interrupted_run(runs: Path, rows_before: int, path: np.ndarray) -> Path:
+    """The run the controller saved itself: interrupted, every row up to the hold, readable."""
+    (info,) = list_runs(runs)
+    run = load_run(info.files.json)
+    assert run.status == "interrupted: client silent"
+    assert rows_before <= run.samples < len(path)
+    np.testing.assert_allclose(run.desired, path[:run.samples], atol=1e-9)
+    return info.files.json
+
+
+def ticks_keep_coming(watch: StatusWatch, seconds: float) -> tuple[int, int]:
+    """Ticks and latency-histogram counts published during ``seconds`` without a client."""
+    s0, h0 = watch.status(), watch.histogram()
+    time.sleep(seconds)
+    s1, h1 = watch.status(), watch.histogram()
+    assert s1.mode == Mode.HOLD and s1.flags & Flag.UI_LOST
+    return s1.tick - s0.tick, h1.ticks - h0.ticks
+
+
+def test_a_frozen_client_makes_the_controller_hold_and_it_is_alive_on_resume(
+        tmp_path: Path, until, leftovers, measured) -> None:
+    """SIGSTOP of the client mid-move: the controller aborts into hold when the heartbeats
+    stop (time from the freeze measured), keeps ticking and recording its latency (it never
+    blocks on the channel), saves the interrupted run itself; on SIGCONT the client finds
+    it alive, gets the saved run's path, and its close stops the controller with exit
+    code 0 and no segment left."""
+    runs = tmp_path / "runs"
+    script = ClientScript(runs, orphan_timeout_s=30.0)
+    watch = StatusWatch(script.segment)
+    try:
+        until(lambda: watch.status().move_done >= 300, 10.0, "the move to run")
+        rows_before = watch.status().move_done
+        os.kill(script.proc.pid, signal.SIGSTOP)
+        hold_s = until(watch.holding_without_client, 5.0, "the controller to hold")
+        measured("hold_after_freeze_ms", hold_s * 1e3, "ms")
+        assert hold_s < 2.0, "design: the controller holds 250 ms after the last heartbeat"
+        ticks, counted = ticks_keep_coming(watch, 1.0)
+        measured("ticks_per_s_while_frozen", ticks)
+        assert ticks > 500 and counted > 500, "the loop must not block on a frozen client"
+        saved = the_interrupted_run(runs, rows_before, script.path)
+
+        os.kill(script.proc.pid, signal.SIGCONT)
+        report = script.ask("report")
+        assert report["dead"] == "" and report["alive"] is True
+        assert script.ask("welcome")["notice"] == "client is back; holding position"
+        until(lambda: not watch.status().flags & Flag.UI_LOST, 5.0, "the client to be back")
+        until(lambda: watch.status().tick > report["tick"] + 100, 2.0, "ticks after the resume")
+        result = script.ask("wait")
+        assert result["status"] == "interrupted: client silent"
+        assert result["files"] == str(saved)
+        assert script.ask("close")["controller_exit"] == 0
+        script.proc.wait(timeout=10)
+    finally:
+        watch.close()
+        script.kill()
+    assert leftovers(script.proc.pid) == []
+
+
+def test_a_killed_client_leaves_a_holding_controller_that_saves_and_exits(
+        tmp_path: Path, until, leftovers, measured) -> None:
+    """SIGKILL of the client mid-move: the controller holds at once (measured), keeps
+    ticking, saves the interrupted run itself with every row recorded, exits with code 0
+    after its orphan timeout (measured) and leaves no shared-memory segment."""
+    runs = tmp_path / "runs"
+    orphan_s = 1.5
+    with adopting_orphans():
+        script = ClientScript(runs, orphan_timeout_s=orphan_s)
+        watch = StatusWatch(script.segment)
+        try:
+            until(lambda: watch.status().move_done >= 300, 10.0, "the move to run")
+            rows_before = watch.status().move_done
+            killed = time.monotonic()
+            script.proc.kill()
+            script.proc.wait(timeout=10)
+            hold_s = until(watch.holding_without_client, 5.0, "the controller to hold")
+            measured("hold_after_kill_ms", hold_s * 1e3, "ms")
+            assert hold_s < 2.0
+            ticks, counted = ticks_keep_coming(watch, 0.5)
+            assert ticks > 250 and counted > 250
+            the_interrupted_run(runs, rows_before, script.path)
+        finally:
+            watch.close()
+        _, code = os.waitpid(script.controller, 0)
+        exited_s = measured("exit_after_kill_s", time.monotonic() - killed, "s")
+    assert os.waitstatus_to_exitcode(code) == 0
+    assert orphan_s <= exited_s < orphan_s + 5.0
+    assert leftovers(script.proc.pid) == []

@@ -1,0 +1,102 @@
+"""A joint driven into its limit, and a joint that falls too far behind (following error):
+motion stops on that joint, with a message naming it, and the run up to then is on disk.
+
+Lockstep simulator: the real control process, computing as fast as it can, so
+a few seconds of motion take a fraction of that.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from control import Mode
+from control.recorder import load_run
+from hw.machine import load_machine
+
+UNIMATE = load_machine("unimate2000b")
+INOUT, ROTATE, UPDOWN, BEND = (UNIMATE.joint_index(k) for k in ("inout", "rotate", "updown",
+                                                                 "bend"))
+UPDOWN_STOP = UNIMATE.joints[UPDOWN].upper - 2 * abs(UNIMATE.joints[UPDOWN].encoder.gradient)
+
+
+def test_a_jogged_joint_stops_at_its_limit_and_only_that_joint(controller, until) -> None:
+    """Manual actuation drives Up/Down up and Rotate round: Up/Down's valve closes at its
+    30° limit with a fault naming it, while Rotate's valve stays open and Rotate keeps
+    moving: the limit stops the joint, not the robot."""
+    client = controller(lockstep=True)
+    duty = [0.0] * 6
+    duty[UPDOWN], duty[ROTATE] = 60.0, 30.0
+    client.jog(duty)
+    fault = client.wait_event("fault", 30.0, lambda e: e.payload["kind"] == "limit")
+    assert fault.payload["joint"] == UPDOWN
+    assert fault.message.startswith("Up/Down at ")
+    assert fault.message.endswith("reached its limit -27…30°: motion stopped on that joint")
+    until(lambda: client.status().valve[UPDOWN] == 0.0, 2.0, "Up/Down's valve to close")
+    status = client.status()
+    assert status.mode == Mode.MANUAL_ACTUATE and status.valve[ROTATE] != 0.0
+    rotate = status.position[ROTATE]
+    until(lambda: client.status().position[ROTATE] > rotate + 1.0, 5.0, "Rotate to go on")
+    assert client.status().position[UPDOWN] <= UNIMATE.joints[UPDOWN].upper
+
+
+def test_a_profile_into_a_limit_records_the_duty_actually_sent(controller) -> None:
+    """tracking_actuate plays 60 % on Up/Down into its limit: the move completes, the fault
+    names Up/Down, and the saved run (used for identification) shows 0 % on Up/Down from
+    the tick it stopped, because that is what the valve got."""
+    client = controller(lockstep=True)
+    profile = np.zeros((3000, 6))
+    profile[:, UPDOWN], profile[:, ROTATE] = 60.0, 30.0
+    result = client.wait(client.actuate(profile), timeout=60)
+    assert result.complete, result.status
+    fault = client.wait_event("fault", 5.0, lambda e: e.payload["kind"] == "limit")
+    assert fault.payload["joint"] == UPDOWN
+    run = load_run(result.files.json)
+    at_limit = np.flatnonzero(run.actual[:, UPDOWN] >= UPDOWN_STOP)
+    assert len(at_limit) > 100
+    assert np.all(run.duty[at_limit, ROTATE] == 30.0)
+    assert np.all(run.duty[at_limit, UPDOWN] == 0.0), "the run records duty the valve never got"
+
+
+def test_a_following_error_aborts_the_move_and_holds_where_the_joint_is(controller) -> None:
+    """A path asking In/Out for 1500 mm/s (it can do 400): the move is aborted with a fault
+    naming In/Out and its error, the run up to the abort is on disk, and the robot holds
+    where In/Out got to, not at the path's end."""
+    client = controller(lockstep=True)
+    start = np.array(client.status().position)
+    path = np.tile(start, (3000, 1))
+    path[:, INOUT] = np.minimum(start[INOUT] + 1.5 * np.arange(3000), 2041.0)
+    result = client.wait(client.move(path, kind="path"), timeout=60)
+    assert result.status.startswith("fault: following error: In/Out is ")
+    assert result.status.endswith("(limit 150mm) and not closing; move aborted, holding")
+    fault = client.wait_event("fault", 5.0, lambda e: e.payload["kind"] == "following_error")
+    assert fault.payload["joint"] == INOUT
+    saved = load_run(result.files.json)
+    assert saved == result.run and 0 < saved.samples < len(path)
+    np.testing.assert_allclose(saved.desired, path[:saved.samples], atol=1e-9)
+    status = client.status()
+    assert status.mode == Mode.HOLD and not status.moving and not status.estop
+    assert abs(status.desired[INOUT] - saved.actual[-1, INOUT]) < 50.0
+    assert path[-1, INOUT] - status.desired[INOUT] > UNIMATE.joints[INOUT].following_error
+
+
+def test_a_joint_that_cannot_hold_gets_its_valves_closed(controller, until) -> None:
+    """Bend stops responding while holding (its hold gains zeroed) and its target is moved
+    40° away: after the following-error window the controller closes every valve and
+    latches, with a fault naming Bend."""
+    client = controller(lockstep=True)
+    hold = UNIMATE.hold
+    dead_bend = dataclasses.replace(
+        hold, name="dead_bend",
+        kp=tuple((0.0,) if j == BEND else k for j, k in enumerate(hold.kp)),
+        ki=tuple(0.0 if j == BEND else k for j, k in enumerate(hold.ki)))
+    client.set_coefficients("hold", dead_bend)
+    client.jog_position(BEND, 40.0)
+    fault = client.wait_event("fault", 30.0, lambda e: e.payload["kind"] == "following_error")
+    assert fault.payload["joint"] == BEND
+    assert fault.message.startswith("following error: Bend is ")
+    assert "while holding; valves closed: check the joint, then reset" in fault.message
+    until(lambda: client.status().estop, 2.0, "the latch")
+    status = client.status()
+    assert status.valve == (0.0,) * 6 and status.fault.startswith("following error: Bend")
