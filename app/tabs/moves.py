@@ -2,9 +2,10 @@
 
 Unimate 2000B: single step, multi-step (all six joints), ramp, sine, end point
 and orientation (through the closed-form inverse, every solution shown), path
-from a file. Rig: step, multi-step (the sequence of positions and dwell times of
-function.c MultiStep), ramp, sine, set pulse (open loop), initialise, path from
-a file.
+from a file, via points (joint space, or Cartesian x y z with γ and β held,
+section 6.4). Rig: step, multi-step (the sequence of positions and dwell times
+of function.c MultiStep), ramp, sine, set pulse (open loop), initialise, path
+from a file, via points.
 
 Each field is validated as it is typed; the desired path is previewed before
 Run (ctrl+s). A move that starts elsewhere than where the joints are gets an
@@ -37,6 +38,8 @@ from textual.widgets import (
     ProgressBar,
     Select,
     Static,
+    Switch,
+    TextArea,
 )
 from textual.widgets.option_list import Option
 from textual_plotext import PlotextPlot
@@ -56,7 +59,9 @@ from app.widgets.live_text import LiveText
 from app.widgets.messages import RunsChanged
 from app.widgets.run_plot import draw_path
 from control import moves
+from control.cartesian import cartesian_path
 from control.client import MoveHandle, MoveResult
+from control.trajectory import via_path
 from hw.machine import Machine
 from kinematics import Unreachable, unimate
 
@@ -485,6 +490,88 @@ class PathFileForm(MoveForm):
                         approach=approach, moving=moving_joints(path), note=note)
 
 
+class ViaPointsForm(MoveForm):
+    KIND = "via_points"
+    LABEL = "Via points"
+    HELP = ("A smooth path from here through points, one per line: every joint's position "
+            "(joint space, section 6.4's via points), or with Cartesian on the tool's x y z in "
+            "mm with γ and β held (section 6.4). Numbers separated by spaces or commas.")
+
+    def fields(self) -> ComposeResult:
+        if self.cartesian_allowed:
+            with Horizontal(classes="field"):
+                yield Label("Cartesian (x y z)", classes="field-label")
+                yield Switch(value=False, id="via-cartesian")
+        yield NumberField("speed fraction", NumberCheck("speed fraction", "", 0.0, 1.0,
+                                                        strict_low=True), "0.5", id="speed")
+        yield Label("points", classes="field-label")
+        yield TextArea(id="via-points", soft_wrap=False, show_line_numbers=True)
+        yield Button("Add the current position", id="via-add")
+
+    @property
+    def cartesian_allowed(self) -> bool:
+        return self.machine.kinematics_model == "unimate2000b"
+
+    @property
+    def cartesian(self) -> bool:
+        return self.cartesian_allowed and self.query_one("#via-cartesian", Switch).value
+
+    def help_text(self) -> str:
+        names = " ".join(j.name for j in self.machine.joints)
+        return f"{self.HELP} Joint order: {names}."
+
+    def on_text_area_changed(self, event: TextArea.Changed) -> None:
+        self.tab.schedule_preview()
+
+    def on_switch_changed(self, event: Switch.Changed) -> None:
+        event.stop()
+        self.tab.schedule_preview()
+
+    @on(Button.Pressed, "#via-add")
+    def _add_current(self, event: Button.Pressed) -> None:
+        event.stop()
+        current = self.tab.current()
+        row = unimate.pose(current)[:3] if self.cartesian else current
+        area = self.query_one("#via-points", TextArea)
+        text = area.text.rstrip("\n")
+        area.text = (text + "\n" if text else "") + " ".join(f"{v:.2f}" for v in row)
+
+    def points(self) -> np.ndarray:
+        """The typed points ``(M, J)`` or ``(M, 3)``; ValueError naming the line and the fix."""
+        width = 3 if self.cartesian else self.machine.n_joints
+        what = "x y z (mm)" if self.cartesian else f"{width} joint positions"
+        rows = []
+        for n, line in enumerate(self.query_one("#via-points", TextArea).text.splitlines(), 1):
+            parts = line.replace(",", " ").split()
+            if not parts:
+                continue
+            try:
+                row = [float(p) for p in parts]
+            except ValueError:
+                raise ValueError(f"point line {n}: {line.strip()!r} is not numbers; "
+                                 f"type {what}") from None
+            if len(row) != width or not all(math.isfinite(v) for v in row):
+                raise ValueError(f"point line {n}: {len(row)} numbers; type {what}")
+            rows.append(row)
+        if not rows:
+            raise ValueError(f"type at least one point, one per line: {what}")
+        return np.array(rows)
+
+    def plan(self, current: np.ndarray, dt: float) -> MovePlan:
+        points = self.points()
+        fraction = self.field("speed").value()
+        meta = {"points": points.tolist(), "speed_fraction": fraction}
+        if self.cartesian:
+            path = cartesian_path(current, points, self.machine, dt=dt,
+                                  speed_fraction=fraction).q
+            return MovePlan("cartesian", f"Cartesian path through {len(points)} points", path,
+                            meta=meta, moving=moving_joints(path))
+        path = via_path(np.vstack([current, points]), self.machine, dt=dt,
+                        speed_fraction=fraction).q
+        return MovePlan("via_points", f"path through {len(points)} via points", path,
+                        meta=meta, moving=moving_joints(path))
+
+
 class PulseForm(MoveForm):
     KIND = "set_pulse"
     LABEL = "Set pulse"
@@ -519,11 +606,11 @@ class InitialiseForm(MoveForm):
 def forms_for(machine: Machine) -> list[type[MoveForm]]:
     if machine.n_joints == 1:
         return [StepForm, SequenceForm, RampForm, SineForm, PulseForm, InitialiseForm,
-                PathFileForm]
+                PathFileForm, ViaPointsForm]
     kinds: list[type[MoveForm]] = [StepForm, MultiStepForm, RampForm, SineForm]
     if machine.kinematics_model == "unimate2000b":
         kinds.append(EndPointForm)
-    return [*kinds, PathFileForm]
+    return [*kinds, PathFileForm, ViaPointsForm]
 
 
 class MovesTab(TabPage):

@@ -111,6 +111,10 @@ class TuningTab(TabPage):
     def focus_main(self) -> None:
         self.query_one("#tuning-joints", DataTable).focus()
 
+    def shown(self) -> None:
+        self._fill()  # another tab (Identify) may have changed the sets
+        super().shown()
+
     @property
     def current(self) -> Coefficients:
         client = self.servodesk.client

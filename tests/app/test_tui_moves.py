@@ -9,7 +9,7 @@ import asyncio
 from pathlib import Path
 
 import numpy as np
-from textual.widgets import DataTable, OptionList
+from textual.widgets import DataTable, OptionList, Switch, TextArea
 
 from app.tabs.moves import POSE_FIELDS, EndPointForm, MovesTab
 from app.tabs.runs import RunsTab
@@ -197,5 +197,47 @@ def test_path_file_plays_and_a_bad_line_is_reported(tui, tmp_path: Path) -> None
             tab = await run_and_wait(tui, app, pilot)
             assert tab.last_result.complete, tab.last_result.status
             assert tab.last_result.run.meta["file"] == str(good.resolve())
+
+    asyncio.run(scenario())
+
+
+def test_via_points_preview_and_run_in_joint_space_and_cartesian(tui) -> None:
+    async def scenario() -> None:
+        app = tui.app()
+        async with app.run_test(size=SIZE) as pilot:
+            status = await tui.ready(app, pilot)
+            q = np.array(status.position)
+            await pilot.press("f2")
+            await choose(app, pilot, "Via points")
+            area = app.query_one("#via-points", TextArea)
+            area.text = "1500 0 0 0 0 0 0"
+            await pilot.press("ctrl+s")
+            assert "line 1: 7 numbers" in str(app.query_one("#move-error").render())
+            via = q + np.array([40.0, 5.0, 2.0, 5.0, 0.0, 0.0])
+            back = q + np.array([0.0, 10.0, 0.0, 0.0, 0.0, 0.0])
+            area.text = "\n".join(" ".join(f"{v:.3f}" for v in row) for row in (via, back))
+            await pilot.pause(0.5)
+            title = app.query_one("#move-preview-title").render().plain
+            assert "path through 2 via points" in title, title
+            tab = await run_and_wait(tui, app, pilot)
+            result = tab.last_result
+            assert result.complete and result.run.kind == "via_points", result.status
+            assert np.allclose(result.run.meta["points"][0], np.round(via, 3))
+            final = np.array(app.client.status().position)
+            assert abs(final[1] - (q[1] + 10.0)) < 1.0, final
+            app.query_one("#via-cartesian", Switch).value = True
+            start = unimate.pose(final)[:3]
+            area.text = (f"{start[0] + 40:.2f} {start[1]:.2f} {start[2]:.2f}\n"
+                         f"{start[0] + 40:.2f} {start[1] + 60:.2f} {start[2] + 20:.2f}")
+            await pilot.pause(0.5)
+            assert "Cartesian path through 2 points" in \
+                app.query_one("#move-preview-title").render().plain
+            tab = await run_and_wait(tui, app, pilot)
+            assert tab.last_result.complete and tab.last_result.run.kind == "cartesian"
+            desired = tab.last_result.run.desired
+            assert np.allclose(unimate.pose(desired[-1])[:3], start + np.array([40, 60, 20]),
+                               atol=0.01)
+            assert np.ptp(desired[:, 4:], axis=0).max() < 1e-6  # γ β held: Yaw, Swivel still
+            assert np.allclose(app.client.status().position, desired[-1], atol=1.0)
 
     asyncio.run(scenario())

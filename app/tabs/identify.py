@@ -1,0 +1,315 @@
+"""Identify: system identification and tuning from ``tracking_actuate`` (thesis section 6.3).
+
+Choose a joint and an excitation (steps, PRBS, chirp; ``control.excitation``),
+sized from where the joint is now and refused, with the excitation module's
+message, if it could reach an end stop. Run plays it open loop, fits the
+joint's models to the recorded run (``control.sysid``), proposes P.I. gains
+(``control.tuning.propose`` on the current track and hold sets) and predicts
+the step response of the current and the proposed track set on the identified
+models (``tuning.simulate``). "Apply to track" / "Apply to hold" send the
+proposal to the controller, with velocity feed-forward (``with_feed_forward``)
+when the switch is on. Joints identified earlier in the session keep their
+models, so the proposal covers every joint identified so far.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+from rich.text import Text
+from textual import work
+from textual.app import ComposeResult
+from textual.containers import Horizontal, Vertical
+from textual.widgets import Button, DataTable, Label, Select, Static, Switch
+from textual_plotext import PlotextPlot
+
+from app.tabs.tab import TabPage
+from app.widgets.fields import FieldError, JointField, NumberCheck, NumberField, seconds_check
+from app.widgets.live_text import LiveText
+from app.widgets.messages import RunsChanged
+from app.widgets.run_plot import ACTUAL_COLOR, DESIRED_COLOR, DUTY_COLOR, decimate
+from control import excitation, sysid, tuning
+from control.client import ControlClient, MoveHandle
+from control.recorder import Run
+from control.sysid import DeadbandModel, Identification
+from hw.machine import Coefficients, Machine
+
+PROFILES = (("Steps (Figure 3.2 staircase)", "steps"), ("PRBS", "prbs"), ("Chirp", "chirp"))
+STEP_LEVELS = 6  # excitation.steps' default
+STEP_FRACTION = 0.05  # predicted step: this share of the joint's range, towards its middle
+STEP_AT_S = 0.1
+PREDICT_S = 1.0
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """What one identification produced: the fit, both proposals and the predicted steps
+    (``desired``, ``current``, ``proposed``, ``proposed_ff`` position ``(N,)`` of the joint)."""
+
+    identification: Identification
+    models: tuple[DeadbandModel | None, ...]
+    track: Coefficients
+    hold: Coefficients
+    designs: tuple[tuning.Design | None, ...]
+    feed_forward: tuple[tuning.FeedForward | None, ...]
+    t: np.ndarray
+    desired: np.ndarray
+    current: np.ndarray
+    proposed: np.ndarray
+    proposed_ff: np.ndarray
+
+
+def build(machine: Machine, kind: str, joint: int, start: np.ndarray,
+          amplitude: float | None, duration: float | None) -> excitation.Excitation:
+    """The chosen excitation from ``start (J,)``, ``duration`` s long (None: the module's
+    default); ValueError (the module's) if it could hit a stop."""
+    if kind == "steps":
+        options = {} if duration is None else {"hold_s": duration / (2 * STEP_LEVELS)}
+        return excitation.steps(machine, joint, start, amplitude=amplitude,
+                                levels=STEP_LEVELS, **options)
+    options = {} if duration is None else {"duration": duration}
+    return getattr(excitation, kind)(machine, joint, start, amplitude=amplitude, **options)
+
+
+def step_desired(machine: Machine, joint: int, start: np.ndarray) -> np.ndarray:
+    """``(N, J)``: hold at ``start``, then a step of ``STEP_FRACTION`` of the joint's range
+    towards its middle, for the predicted responses."""
+    spec = machine.joints[joint]
+    dt = machine.sample_time_s
+    size = STEP_FRACTION * (spec.upper - spec.lower)
+    sign = 1.0 if start[joint] <= (spec.upper + spec.lower) / 2 else -1.0
+    desired = np.tile(np.asarray(start, dtype=float), (round(PREDICT_S / dt), 1))
+    desired[round(STEP_AT_S / dt):, joint] += sign * size
+    return desired
+
+
+def with_kv(coefficients: Coefficients, base: Coefficients,
+            ffs: tuple[tuning.FeedForward | None, ...]) -> Coefficients:
+    """``coefficients`` with the identified joints' feed-forward; the others keep ``base``'s."""
+    added = tuning.with_feed_forward(coefficients, ffs)
+    kv = tuple(new if ff is not None else (base.kv[j] if base.kv else 0.0)
+               for j, (new, ff) in enumerate(zip(added.kv, ffs, strict=True)))
+    return replace(added, kv=kv)
+
+
+class IdentifyTab(TabPage):
+    """Excite one joint, fit its model, propose and apply gains."""
+
+    TITLE = "Identify"
+
+    def __init__(self, *, id: str | None = None) -> None:
+        super().__init__(id=id)
+        self.models: list[DeadbandModel | None] = []
+        self.handle: MoveHandle | None = None
+        self.outcome: Outcome | None = None
+
+    def compose(self) -> ComposeResult:
+        self.models = [None] * self.machine.n_joints
+        with Horizontal():
+            with Vertical(id="identify-left"):
+                yield Static("Open loop (tracking_actuate): the joint moves by itself about "
+                             "where it is now; the profile is sized to keep off the stops.",
+                             classes="form-help")
+                yield JointField("joint", self.machine.joints, id="identify-joint")
+                with Horizontal(classes="field"):
+                    yield Label("profile", classes="field-label")
+                    yield Select(PROFILES, value="prbs", allow_blank=False, compact=True,
+                                 id="identify-profile", classes="field-select")
+                yield NumberField("amplitude (blank: auto)",
+                                  NumberCheck("amplitude", " %", 0.0, 100.0, strict_low=True,
+                                              optional=True), id="identify-amplitude")
+                yield NumberField("duration (blank: auto)",
+                                  seconds_check("duration", optional=True),
+                                  id="identify-duration")
+                yield Button("Run identification", id="identify-run", variant="success")
+                yield Static(id="identify-error")
+                with Horizontal(classes="field"):
+                    yield Label("feed-forward", classes="field-label")
+                    yield Switch(value=False, id="identify-ff")
+                with Horizontal(id="identify-apply"):
+                    yield Button("Apply to track", id="identify-apply-track", variant="warning",
+                                 disabled=True)
+                    yield Button("Apply to hold", id="identify-apply-hold", variant="warning",
+                                 disabled=True)
+            with Vertical(id="identify-right"):
+                yield LiveText(id="identify-state")
+                yield DataTable(id="identify-model", cursor_type="none", zebra_stripes=True)
+                yield PlotextPlot(id="identify-plot")
+
+    def on_mount(self) -> None:
+        self.query_one("#identify-model", DataTable).add_columns(
+            "joint", "k+", "d+ %", "k−", "d− %", "fn Hz", "ζ", "fit v %", "fit q %",
+            "ARX v %", "proposed Kp / Ki", "Ms, PM")
+        self._state(Text("no identification yet", "dim"))
+
+    def focus_main(self) -> None:
+        self.query_one("#identify-joint Select", Select).focus()
+
+    # -- running ----------------------------------------------------------------------------
+
+    def on_button_pressed(self, event: Button.Pressed) -> None:
+        event.stop()
+        if event.button.id == "identify-run":
+            self.action_run()
+        elif event.button.id == "identify-apply-track":
+            self.apply("track")
+        elif event.button.id == "identify-apply-hold":
+            self.apply("hold")
+
+    def on_switch_changed(self, event: Switch.Changed) -> None:
+        event.stop()
+        if self.outcome is not None:
+            self._plot(self.outcome)
+
+    def joint(self) -> int:
+        return self.query_one(JointField).index
+
+    def action_run(self) -> None:
+        error = self.query_one("#identify-error", Static)
+        if self.handle is not None:
+            error.update(Text("an identification is running: wait for it, or abort it with ^G",
+                              "yellow"))
+            return
+        client, status = self.client, self.status()
+        if client is None or status is None:
+            self.command("identify", "check")
+            return
+        j = self.joint()
+        kind = str(self.query_one("#identify-profile", Select).value)
+        try:
+            amplitude = self.query_one("#identify-amplitude", NumberField).value()
+            duration = self.query_one("#identify-duration", NumberField).value()
+            profile = build(self.machine, kind, j, np.array(status.position), amplitude,
+                            duration)
+            meta = {**profile.meta, "joint": self.machine.joints[j].name, "profile": kind}
+            handle = client.actuate(profile.duty, "tracking_actuate", meta)
+        except (FieldError, ValueError) as exc:
+            error.update(Text(str(exc), "bold red"))
+            self.notify(f"not run: {exc}", severity="error")
+            return
+        except Exception as exc:  # ControllerError: the controller refused to start it
+            error.update(Text(str(exc), "bold red"))
+            return
+        error.update("")
+        self.handle = handle
+        self._state(Text(f"playing {kind} on {self.machine.joints[j].name} "
+                         f"({profile.duration:.1f} s)…", "cyan"))
+        self._identify(client, handle, j)
+
+    @work(thread=True, group="identify")
+    def _identify(self, client: ControlClient, handle: MoveHandle, j: int) -> None:
+        try:
+            result = client.wait(handle)
+            if not result.complete:
+                raise ValueError(f"the run ended {result.status}: nothing to fit; run it again")
+            self.servodesk.later(self._state, Text("fitting the model and designing gains…",
+                                                   "cyan"))
+            outcome = self._fit(client, result.run, j)
+        except Exception as exc:  # a refusal of sysid/tuning or a closed controller
+            self.servodesk.later(self._failed, f"{exc}")
+            return
+        self.servodesk.later(self._identified, outcome)
+
+    def _fit(self, client: ControlClient, run: Run, j: int) -> Outcome:
+        """Identify, propose and predict (worker thread)."""
+        m = self.machine
+        identification = sysid.identify(run, m, j)
+        models = list(self.models)
+        models[j] = identification.deadband
+        track, hold = client.coefficients["track"], client.coefficients["hold"]
+        proposal = tuning.propose(models, m, track)
+        hold_proposal = tuning.propose(models, m, hold)
+        ffs = tuple(None if model is None else tuning.feed_forward(model, spec)
+                    for model, spec in zip(models, m.joints, strict=True))
+        desired = step_desired(m, j, np.asarray(run.actual[-1]))
+        predicted = [tuning.simulate(models, m, c, desired).position[:, j]
+                     for c in (track, proposal.coefficients,
+                               with_kv(proposal.coefficients, track, ffs))]
+        t = np.arange(len(desired)) * m.sample_time_s
+        return Outcome(identification, tuple(models), proposal.coefficients,
+                       hold_proposal.coefficients, proposal.designs, ffs, t, desired[:, j],
+                       *predicted)
+
+    def _failed(self, message: str) -> None:
+        self.handle = None
+        self.query_one("#identify-error", Static).update(Text(message, "bold red"))
+        self._state(Text("identification failed", "bold yellow"))
+        self.notify(f"identify: {message}", severity="error")
+
+    def _identified(self, outcome: Outcome) -> None:
+        self.handle = None
+        self.outcome = outcome
+        self.models = list(outcome.models)
+        ident = outcome.identification
+        spec = self.machine.joints[ident.joint]
+        self._state(Text.assemble(
+            (f"{spec.name}: ", "bold"),
+            (f"fit {ident.deadband_fit.velocity_pct:.1f} %", "bold green"),
+            f" in velocity, {ident.deadband_fit.position_pct:.1f} % in position "
+            "(free run over the recorded excitation)"))
+        self._table()
+        self._plot(outcome)
+        for which in ("track", "hold"):
+            self.query_one(f"#identify-apply-{which}", Button).disabled = False
+        self.app.post_message(RunsChanged())
+
+    def _table(self) -> None:
+        """One row per joint identified so far, the proposal's design beside its model."""
+        table = self.query_one("#identify-model", DataTable)
+        table.clear()
+        outcome = self.outcome
+        if outcome is None:
+            return
+        for j, model in enumerate(self.models):
+            if model is None:
+                continue
+            design = outcome.designs[j]
+            fits = (outcome.identification.deadband_fit, outcome.identification.arx_fit) \
+                if j == outcome.identification.joint else None
+            table.add_row(
+                model.name, f"{model.k_pos:.4g}", f"{model.d_pos:.1f}", f"{model.k_neg:.4g}",
+                f"{model.d_neg:.1f}", f"{model.wn / (2 * np.pi):.1f}", f"{model.zeta:.2f}",
+                f"{fits[0].velocity_pct:.1f}" if fits else "earlier",
+                f"{fits[0].position_pct:.1f}" if fits else "",
+                f"{fits[1].velocity_pct:.1f}" if fits else "",
+                "–" if design is None else f"{design.kp:.3g} / {design.ki:.3g}",
+                "–" if design is None else
+                f"{design.margins.ms:.2f}, {design.margins.phase_margin_deg:.0f}°")
+
+    def _plot(self, outcome: Outcome) -> None:
+        plot = self.query_one("#identify-plot", PlotextPlot)
+        plt = plot.plt
+        plt.clear_figure()
+        spec = self.machine.joints[outcome.identification.joint]
+        ff = self.query_one("#identify-ff", Switch).value
+        proposed = outcome.proposed_ff if ff else outcome.proposed
+        points = 2 * max(20, plot.size.width)
+        for y, color, label in ((outcome.desired, DESIRED_COLOR, "desired"),
+                                (outcome.current, ACTUAL_COLOR, "current track set"),
+                                (proposed, DUTY_COLOR,
+                                 "proposed" + (" + feed-forward" if ff else ""))):
+            tt, yy = decimate(outcome.t, y, points)
+            plt.plot(tt.tolist(), yy.tolist(), marker="braille", color=color, label=label)
+        plt.title(f"predicted step response · {spec.name} ({spec.symbol})")
+        plt.xlabel("time (s)")
+        plot.refresh()
+
+    def apply(self, which: str) -> None:
+        outcome = self.outcome
+        client = self.client
+        if outcome is None:
+            self.notify("run an identification first", severity="warning")
+            return
+        if client is None:
+            self.command(f"apply to {which}", "check")
+            return
+        proposed = outcome.track if which == "track" else outcome.hold
+        if self.query_one("#identify-ff", Switch).value:
+            proposed = with_kv(proposed, client.coefficients[which], outcome.feed_forward)
+        if self.command(f"apply to {which}", "set_coefficients", which, proposed):
+            self.notify(f"proposed gains applied to the {which} set")
+            self._state(Text(f"applied to the {which} set: {proposed.note}", "green"))
+
+    def _state(self, text: Text) -> None:
+        self.query_one("#identify-state", LiveText).show(text)
