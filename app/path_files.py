@@ -19,12 +19,12 @@ from __future__ import annotations
 
 import csv
 import io
-import math
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from control.file_fields import field_number
 from hw.machine import Machine
 
 TIME_NAMES = ("t", "time", "t [s]", "time [s]")
@@ -164,15 +164,7 @@ def _joint_part(name: str) -> tuple[str, str]:
 
 
 def _number(text: str, source: str, line: int, field: int) -> float:
-    try:
-        value = float(text.strip())
-    except ValueError:
-        raise PathFileError(f"{source}: line {line}: field {field} {text.strip()!r} is not a "
-                            "number") from None
-    if not math.isfinite(value):
-        raise PathFileError(f"{source}: line {line}: field {field} is {value}, not a finite "
-                            "number")
-    return value
+    return field_number(text, source, line, field, PathFileError)
 
 
 def _points(source: str, times: list[float], rows: list[list[float]], lines: list[int],

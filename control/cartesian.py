@@ -63,6 +63,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.interpolate import CubicSpline
 
+from control.file_fields import field_number
 from hw.machine import Machine
 from kinematics import unimate, xyz_fixed
 
@@ -477,15 +478,7 @@ def _pose_columns(header: list[str], source: str, line: int) -> tuple[int | None
 
 
 def _number(text: str, source: str, line: int, field: int) -> float:
-    try:
-        value = float(text.strip())
-    except ValueError:
-        raise PoseFileError(f"{source}: line {line}: field {field} {text.strip()!r} is not a "
-                            "number") from None
-    if not math.isfinite(value):
-        raise PoseFileError(f"{source}: line {line}: field {field} is {value}, not a finite "
-                            "number")
-    return value
+    return field_number(text, source, line, field, PoseFileError)
 
 
 def _check_orientation(points: PosePoints, frame: _ArmFrame) -> None:
