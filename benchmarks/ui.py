@@ -31,6 +31,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from multiprocessing import resource_tracker
 from multiprocessing.connection import Connection
 from pathlib import Path
 
@@ -323,6 +324,9 @@ def startup(repeats: int) -> None:
 
 
 def main() -> None:
+    # The key-to-valve watcher is a spawned process, and spawn starts multiprocessing's
+    # resource tracker with sys.stderr's descriptor: start it now, before Textual takes stderr.
+    resource_tracker.ensure_running()
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="fewer repeats, shorter runs")
     args = parser.parse_args()

@@ -15,6 +15,7 @@ models, so the proposal covers every joint identified so far.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 from rich.text import Text
@@ -29,11 +30,13 @@ from app.widgets.fields import FieldError, JointField, NumberCheck, NumberField,
 from app.widgets.live_text import LiveText
 from app.widgets.messages import RunsChanged
 from app.widgets.run_plot import ACTUAL_COLOR, DESIRED_COLOR, DUTY_COLOR, decimate
-from control import excitation, sysid, tuning
 from control.client import ControlClient, MoveHandle
 from control.recorder import Run
-from control.sysid import DeadbandModel, Identification
 from hw.machine import Coefficients, Machine
+
+if TYPE_CHECKING:  # the numerics pull in scipy (≈0.9 s): imported when first used
+    from control import excitation, tuning
+    from control.sysid import DeadbandModel, Identification
 
 PROFILES = (("Steps (Figure 3.2 staircase)", "steps"), ("PRBS", "prbs"), ("Chirp", "chirp"))
 STEP_LEVELS = 6  # excitation.steps' default
@@ -64,6 +67,8 @@ def build(machine: Machine, kind: str, joint: int, start: np.ndarray,
           amplitude: float | None, duration: float | None) -> excitation.Excitation:
     """The chosen excitation from ``start (J,)``, ``duration`` s long (None: the module's
     default); ValueError (the module's) if it could hit a stop."""
+    from control import excitation
+
     if kind == "steps":
         options = {} if duration is None else {"hold_s": duration / (2 * STEP_LEVELS)}
         return excitation.steps(machine, joint, start, amplitude=amplitude,
@@ -87,6 +92,8 @@ def step_desired(machine: Machine, joint: int, start: np.ndarray) -> np.ndarray:
 def with_kv(coefficients: Coefficients, base: Coefficients,
             ffs: tuple[tuning.FeedForward | None, ...]) -> Coefficients:
     """``coefficients`` with the identified joints' feed-forward; the others keep ``base``'s."""
+    from control import tuning
+
     added = tuning.with_feed_forward(coefficients, ffs)
     kv = tuple(new if ff is not None else (base.kv[j] if base.kv else 0.0)
                for j, (new, ff) in enumerate(zip(added.kv, ffs, strict=True)))
@@ -213,6 +220,8 @@ class IdentifyTab(TabPage):
 
     def _fit(self, client: ControlClient, run: Run, j: int) -> Outcome:
         """Identify, propose and predict (worker thread)."""
+        from control import sysid, tuning
+
         m = self.machine
         identification = sysid.identify(run, m, j)
         models = list(self.models)

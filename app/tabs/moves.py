@@ -59,9 +59,7 @@ from app.widgets.live_text import LiveText
 from app.widgets.messages import RunsChanged
 from app.widgets.run_plot import draw_path
 from control import moves
-from control.cartesian import cartesian_path
 from control.client import MoveHandle, MoveResult
-from control.trajectory import via_path
 from hw.machine import Machine
 from kinematics import Unreachable, unimate
 
@@ -558,6 +556,9 @@ class ViaPointsForm(MoveForm):
         return np.array(rows)
 
     def plan(self, current: np.ndarray, dt: float) -> MovePlan:
+        from control.cartesian import cartesian_path  # scipy's splines: loaded on first use
+        from control.trajectory import via_path
+
         points = self.points()
         fraction = self.field("speed").value()
         meta = {"points": points.tolist(), "speed_fraction": fraction}
