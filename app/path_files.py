@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from control.file_fields import field_number
+from control.file_fields import field_number, read_text_file
 from hw.machine import Machine
 
 TIME_NAMES = ("t", "time", "t [s]", "time [s]")
@@ -52,13 +52,7 @@ class PathPoints:
 
 def read_path(path: str | Path, machine: Machine, hold: tuple[float, ...]) -> PathPoints:
     """Read a path file for ``machine``; joints the file leaves out stay at ``hold``."""
-    path = Path(path).expanduser()
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise PathFileError(f"{path}: cannot read: {exc.strerror or exc}") from None
-    except UnicodeDecodeError:
-        raise PathFileError(f"{path}: not a text file") from None
+    path, text = read_text_file(path, PathFileError)
     if path.suffix.lower() in CSV_SUFFIXES:
         return parse_csv(text, machine, hold, str(path))
     return parse_tsv(text, machine, hold, str(path))

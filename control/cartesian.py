@@ -63,7 +63,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.interpolate import CubicSpline
 
-from control.file_fields import field_number
+from control.file_fields import field_number, read_text_file
 from hw.machine import Machine
 from kinematics import unimate, xyz_fixed
 
@@ -403,13 +403,7 @@ def _positive(value: float, name: str) -> float:
 
 def read_poses(path: str | Path) -> PosePoints:
     """Read a pose CSV (module docstring); PoseFileError names the file and line."""
-    path = Path(path).expanduser()
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise PoseFileError(f"{path}: cannot read: {exc.strerror or exc}") from None
-    except UnicodeDecodeError:
-        raise PoseFileError(f"{path}: not a text file") from None
+    path, text = read_text_file(path, PoseFileError)
     return parse_poses(text, str(path))
 
 

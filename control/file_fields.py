@@ -1,8 +1,20 @@
-"""Numbers read from a line of a path or pose file, with errors that name the line."""
+"""Reading path and pose files: the text, and numbers whose errors name the line."""
 
 from __future__ import annotations
 
 import math
+from pathlib import Path
+
+
+def read_text_file(path: str | Path, error: type[ValueError] = ValueError) -> tuple[Path, str]:
+    """``(path, text)`` of a UTF-8 file; ``error`` names the file if it cannot be read."""
+    path = Path(path).expanduser()
+    try:
+        return path, path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise error(f"{path}: cannot read: {exc.strerror or exc}") from None
+    except UnicodeDecodeError:
+        raise error(f"{path}: not a text file") from None
 
 
 def field_number(text: str, source: str, line: int, field: int,

@@ -32,7 +32,12 @@ class Tui:
 
     def app(self, machine: str = "unimate2000b", lockstep: bool = True,
             **options: object) -> ServodeskApp:
-        return ServodeskApp(machine, "sim", None, self.data_dir, lockstep=lockstep, **options)
+        # A Pilot-driven app on a loaded two-core machine can pause its client's heartbeat
+        # thread past 250 ms, and the controller would (rightly) abort the move. Heartbeat
+        # loss is proven in tests/faults and tests/control; here the UI flows are.
+        client_options = {"heartbeat_timeout_s": 2.0, **options.pop("client_options", {})}
+        return ServodeskApp(machine, "sim", None, self.data_dir, lockstep=lockstep,
+                            client_options=client_options, **options)
 
     @staticmethod
     async def ready(app: ServodeskApp, pilot: Pilot) -> Status:
