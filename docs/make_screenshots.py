@@ -2,9 +2,9 @@
 
 Run: ``python docs/make_screenshots.py`` (about half a minute). The app runs
 headless at 160 × 48 against the real-time simulated Unimate 2000B: it jogs a joint,
-runs an Up/Down step from the Moves tab (and watches it on the Scope), then saves each
-tab as the operator would see it. Runs go to a temporary directory; ``--rig`` adds the
-rig's Jog and Moves tabs.
+runs an Up/Down step from the Moves tab (and watches it on the Scope), identifies Bend,
+then saves each tab as the operator would see it. Runs go to a temporary directory;
+``--rig`` adds the rig's Jog and Moves tabs.
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ from textual.widgets import OptionList
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from app.tabs.identify import IdentifyTab
 from app.tabs.moves import MovesTab
 from app.tabs.runs import RunsTab
 from app.tui import ServodeskApp
@@ -92,6 +93,17 @@ async def unimate(data_dir: str) -> None:
         await pilot.press("f7")
         await pilot.pause(1.0)
         save(app, "latency")
+        await pilot.press("f8")
+        identify = app.query_one(IdentifyTab)
+        await pilot.pause(0.3)
+        app.query_one("#identify-joint Select").value = 3  # Bend
+        app.query_one("#identify-duration", NumberField).text = "3"
+        await pilot.pause(0.3)
+        await pilot.click("#identify-run")
+        await wait_for(lambda: 3 in identify.held_out, timeout=120)
+        app.query_one("#identify-ff").value = True
+        await pilot.pause(0.8)
+        save(app, "identify")
         await pilot.press("escape")
         await pilot.pause(0.5)
         save(app, "estop")

@@ -6,10 +6,13 @@ message, if it could reach an end stop. Run plays it open loop, fits the
 joint's models to the recorded run (``control.sysid``), proposes P.I. gains
 (``control.tuning.propose`` on the current track and hold sets) and predicts
 the step response of the current and the proposed track set on the identified
-models (``tuning.simulate``). "Apply to track" / "Apply to hold" send the
-proposal to the controller, with velocity feed-forward (``with_feed_forward``)
-when the switch is on. Joints identified earlier in the session keep their
-models, so the proposal covers every joint identified so far.
+models (``tuning.simulate``). Then a fresh PRBS the fit never saw is played from
+where the joint stopped, and both models' fit on it is shown: the held-out
+figure to judge a model by (the fit on its own run flatters it). "Apply to
+track" / "Apply to hold" send the proposal to the controller, with velocity
+feed-forward (``with_feed_forward``) when the switch is on. Joints identified
+earlier in the session keep their models, so the proposal covers every joint
+identified so far.
 """
 
 from __future__ import annotations
@@ -36,13 +39,15 @@ from hw.machine import Coefficients, Machine
 
 if TYPE_CHECKING:  # the numerics pull in scipy (≈0.9 s): imported when first used
     from control import excitation, tuning
-    from control.sysid import DeadbandModel, Identification
+    from control.sysid import DeadbandModel, Fit, Identification
 
 PROFILES = (("Steps (Figure 3.2 staircase)", "steps"), ("PRBS", "prbs"), ("Chirp", "chirp"))
 STEP_LEVELS = 6  # excitation.steps' default
 STEP_FRACTION = 0.05  # predicted step: this share of the joint's range, towards its middle
 STEP_AT_S = 0.1
 PREDICT_S = 1.0
+HELD_OUT_S = 2.0
+HELD_OUT_SEED = 97  # a PRBS none of the tab's excitations uses (prbs' default seed is 1)
 
 
 @dataclass(frozen=True)
@@ -110,13 +115,15 @@ class IdentifyTab(TabPage):
         self.models: list[DeadbandModel | None] = []
         self.handle: MoveHandle | None = None
         self.outcome: Outcome | None = None
+        self.held_out: dict[int, tuple[Fit, Fit]] = {}
 
     def compose(self) -> ComposeResult:
         self.models = [None] * self.machine.n_joints
         with Horizontal():
             with Vertical(id="identify-left"):
                 yield Static("Open loop (tracking_actuate): the joint moves by itself about "
-                             "where it is now; the profile is sized to keep off the stops.",
+                             "where it is now, twice (the profile, then a fresh PRBS to check "
+                             "the fit on); both are sized to keep off the stops.",
                              classes="form-help")
                 yield JointField("joint", self.machine.joints, id="identify-joint")
                 with Horizontal(classes="field"):
@@ -142,12 +149,15 @@ class IdentifyTab(TabPage):
             with Vertical(id="identify-right"):
                 yield LiveText(id="identify-state")
                 yield DataTable(id="identify-model", cursor_type="none", zebra_stripes=True)
+                yield Static("fit %: own = on the run it was fitted to, new = on a fresh PRBS "
+                             "it never saw; v velocity, q position. Kp / Ki, Ms, PM: the "
+                             "proposed P.I. set and its margins.", classes="form-help")
                 yield PlotextPlot(id="identify-plot")
 
     def on_mount(self) -> None:
         self.query_one("#identify-model", DataTable).add_columns(
-            "joint", "k+", "d+ %", "k−", "d− %", "fn Hz", "ζ", "fit v %", "fit q %",
-            "ARX v %", "proposed Kp / Ki", "Ms, PM")
+            "joint", "k+", "d+ %", "k−", "d− %", "fn Hz", "ζ", "own v%", "new v%", "new q%",
+            "ARX new v%", "Kp / Ki", "Ms, PM")
         self._state(Text("no identification yet", "dim"))
 
     def focus_main(self) -> None:
@@ -250,17 +260,69 @@ class IdentifyTab(TabPage):
         self.handle = None
         self.outcome = outcome
         self.models = list(outcome.models)
-        ident = outcome.identification
-        spec = self.machine.joints[ident.joint]
-        self._state(Text.assemble(
-            (f"{spec.name}: ", "bold"),
-            (f"fit {ident.deadband_fit.velocity_pct:.1f} %", "bold green"),
-            f" in velocity, {ident.deadband_fit.position_pct:.1f} % in position "
-            "(free run over the recorded excitation)"))
+        self.held_out.pop(outcome.identification.joint, None)
         self._table()
         self._plot(outcome)
         for which in ("track", "hold"):
             self.query_one(f"#identify-apply-{which}", Button).disabled = False
+        self.app.post_message(RunsChanged())
+        self._hold_out(outcome)
+
+    # -- the held-out check -----------------------------------------------------------------
+
+    def _hold_out(self, outcome: Outcome) -> None:
+        """Play a fresh PRBS from where the joint is, sized with the identified model."""
+        from control import excitation
+
+        ident = outcome.identification
+        client, status = self.client, self.status()
+        name = self.machine.joints[ident.joint].name
+        own = f"{name}: fit {ident.deadband_fit.velocity_pct:.1f} % in velocity on its own run"
+        try:
+            if client is None or status is None:
+                raise ValueError("the controller is not running")
+            profile = excitation.prbs(self.machine, ident.joint, np.array(status.position),
+                                      duration=HELD_OUT_S, seed=HELD_OUT_SEED,
+                                      model=ident.deadband)
+            meta = {**profile.meta, "joint": name, "profile": "prbs", "purpose": "held-out"}
+            handle = client.actuate(profile.duty, "tracking_actuate", meta)
+        except Exception as exc:  # sizing refused, or the controller refused to start it
+            self._state(Text(f"{own}; held-out check not played: {exc}", "yellow"))
+            return
+        self.handle = handle
+        self._state(Text(f"{own}; checking it on a fresh {HELD_OUT_S:g} s PRBS…", "cyan"))
+        self._check(client, handle, ident)
+
+    @work(thread=True, group="identify")
+    def _check(self, client: ControlClient, handle: MoveHandle, ident: Identification) -> None:
+        from control import sysid
+
+        try:
+            result = client.wait(handle)
+            if not result.complete:
+                raise ValueError(f"the held-out run ended {result.status}")
+            data = sysid.joint_series(result.run, self.machine, ident.joint)
+            fits = (sysid.validate(ident.deadband, data), sysid.validate(ident.arx, data))
+        except Exception as exc:  # a stopped run or a closed controller
+            self.servodesk.later(self._unchecked, f"{exc}: the fit shown is on the model's own "
+                                 "run; run the identification again to check it")
+            return
+        self.servodesk.later(self._checked, ident.joint, fits)
+
+    def _unchecked(self, message: str) -> None:
+        self.handle = None
+        self._state(Text(message, "yellow"))
+
+    def _checked(self, joint: int, fits: tuple[Fit, Fit]) -> None:
+        self.handle = None
+        self.held_out[joint] = fits
+        line, arx = fits
+        self._state(Text.assemble(
+            (f"{self.machine.joints[joint].name}: ", "bold"),
+            (f"held-out fit {line.velocity_pct:.1f} %", "bold green"),
+            f" in velocity, {line.position_pct:.1f} % in position, ARX "
+            f"{arx.velocity_pct:.1f} % (a fresh {HELD_OUT_S:g} s PRBS the fit never saw)"))
+        self._table()
         self.app.post_message(RunsChanged())
 
     def _table(self) -> None:
@@ -274,15 +336,17 @@ class IdentifyTab(TabPage):
             if model is None:
                 continue
             design = outcome.designs[j]
-            fits = (outcome.identification.deadband_fit, outcome.identification.arx_fit) \
-                if j == outcome.identification.joint else None
+            own = outcome.identification.deadband_fit if j == outcome.identification.joint \
+                else None
+            held = self.held_out.get(j)
             table.add_row(
                 model.name, f"{model.k_pos:.4g}", f"{model.d_pos:.1f}", f"{model.k_neg:.4g}",
                 f"{model.d_neg:.1f}", f"{model.wn / (2 * np.pi):.1f}", f"{model.zeta:.2f}",
-                f"{fits[0].velocity_pct:.1f}" if fits else "earlier",
-                f"{fits[0].position_pct:.1f}" if fits else "",
-                f"{fits[1].velocity_pct:.1f}" if fits else "",
-                "–" if design is None else f"{design.kp:.3g} / {design.ki:.3g}",
+                f"{own.velocity_pct:.1f}" if own else "earlier",
+                f"{held[0].velocity_pct:.1f}" if held else "…",
+                f"{held[0].position_pct:.1f}" if held else "",
+                f"{held[1].velocity_pct:.1f}" if held else "",
+                "–" if design is None else f"{design.kp:.3g} / {design.ki:.4g}",
                 "–" if design is None else
                 f"{design.margins.ms:.2f}, {design.margins.phase_margin_deg:.0f}°")
 

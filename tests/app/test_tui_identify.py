@@ -1,6 +1,7 @@
-"""Identify tab: a short PRBS on one Unimate joint is played, fitted above 80 % and its
-proposed gains applied to the track set; a profile that cannot fit the joint's range is
-refused with the excitation module's message and runs nothing."""
+"""Identify tab: a short PRBS on one Unimate joint is played, fitted, checked above 80 % on
+a fresh held-out PRBS, and its proposed gains applied to the track set; a profile that
+cannot fit the joint's range is refused with the excitation module's message and runs
+nothing."""
 
 from __future__ import annotations
 
@@ -21,9 +22,9 @@ BEND = 3
 async def open_tab(tui, app, pilot) -> IdentifyTab:
     await tui.ready(app, pilot)
     await pilot.press("f8")
-    await pilot.pause()
     tab = app.query_one(IdentifyTab)
-    assert tab.visible_now
+    await tui.until(lambda: tab.visible_now, what="the Identify tab")
+    await pilot.pause()
     return tab
 
 
@@ -40,15 +41,17 @@ def test_prbs_on_one_joint_fits_and_applies_to_track(tui, data_dir: Path) -> Non
             await pilot.click("#identify-run")
             await tui.until(lambda: tab.handle is not None or tab.outcome is not None, timeout=5,
                             what="the run to start")
-            await tui.until(lambda: tab.outcome is not None, timeout=60,
-                            what=lambda: f"the fit ({app.query_one('#identify-error').render()})")
+            state = app.query_one("#identify-state")
+            await tui.until(lambda: BEND in tab.held_out, timeout=90,
+                            what=lambda: f"the held-out fit ({state.text})")
             await pilot.pause()
-            state = app.query_one("#identify-state").text
-            fit = float(re.search(r"fit ([\d.]+) %", state).group(1))
-            assert fit > 80, state
+            fit = float(re.search(r"held-out fit ([\d.]+) %", state.text).group(1))
+            assert fit > 80, state.text
             table = app.query_one("#identify-model", DataTable)
             assert table.row_count == 1 and table.get_row_at(0)[0] == "Bend"
-            assert list(data_dir.glob("*-tracking_actuate.json"))
+            assert table.get_row_at(0)[8] == f"{fit:.1f}"
+            runs = sorted(data_dir.glob("*-tracking_actuate.json"))
+            assert len(runs) == 2 and '"held-out"' in runs[1].read_text()
             app.query_one("#identify-ff", Switch).value = True
             await pilot.pause()
             await pilot.click("#identify-apply-track")
