@@ -4,7 +4,8 @@
 prints every in-limit joint solution, nearest ``--near`` first. Joints are in
 the thesis's actuator order, In/Out in mm, then Rotate, Up/Down, Bend, Yaw,
 Swivel in degrees; a pose is x, y, z in mm and X-Y-Z fixed angles γ, β, α in
-degrees (eq. 4.04). Both use the default ``kinematics.unimate`` model.
+degrees (eq. 4.04). Both solve the ``--machine``'s model (``control.robot_model``:
+its DH lengths and joint limits), the built-in Unimate 2000B by default.
 """
 
 from __future__ import annotations
@@ -17,8 +18,13 @@ import sys
 
 import numpy as np
 
+from control.robot_model import unimate_model
+from hw.machine import load_machine
 from kinematics import Unreachable, unimate
 
+DEFAULT_MACHINE = "unimate2000b"
+MACHINE_HELP = ("built-in machine or machine TOML path whose [kinematics] model is solved "
+                "(default unimate2000b)")
 JOINT_ARGS = ("IN_OUT", "ROTATE", "UPDOWN", "BEND", "YAW", "SWIVEL")
 POSE_ARGS = ("X", "Y", "Z", "GAMMA", "BETA", "ALPHA")
 POSE_NAMES = ("x", "y", "z", "gamma", "beta", "alpha")
@@ -40,6 +46,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     for metavar, name, unit in zip(JOINT_ARGS, unimate.JOINTS, unimate.UNITS, strict=True):
         fk.add_argument(metavar.lower(), metavar=metavar, help=f"{name} ({unit})")
     fk.add_argument("--json", action="store_true", help="machine-readable output")
+    fk.add_argument("--machine", default=argparse.SUPPRESS, help=MACHINE_HELP)
     fk.set_defaults(func=run_fk)
 
     ik = sub.add_parser(
@@ -52,6 +59,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                     help="joint vector to rank by, e.g. the current reading; also the Swivel/Bend "
                          "kept at a wrist singularity (default: the middle of the limits)")
     ik.add_argument("--json", action="store_true", help="machine-readable output")
+    ik.add_argument("--machine", default=argparse.SUPPRESS, help=MACHINE_HELP)
     ik.set_defaults(func=run_ik)
 
     for parser in (fk, ik):
@@ -62,12 +70,13 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
 def run_fk(args: argparse.Namespace) -> int:
     """``servodesk fk``: exit 0, or 2 with a one-line reason on stderr."""
     try:
+        model = machine_model(args)
         q = parse_numbers([getattr(args, m.lower()) for m in JOINT_ARGS], unimate.JOINTS)
     except ValueError as exc:
         return fail("fk", exc)
-    pose = unimate.pose(q)
-    outside = [name for name, v, lo, hi in zip(unimate.JOINTS, q, unimate.MODEL.lower,
-                                               unimate.MODEL.upper, strict=True)
+    pose = model.pose(q)
+    outside = [name for name, v, lo, hi in zip(unimate.JOINTS, q, model.lower, model.upper,
+                                               strict=True)
                if not lo <= v <= hi]
     if args.json:
         print(json.dumps({"q": named(unimate.JOINTS, q), "pose": named(POSE_NAMES, pose),
@@ -85,12 +94,13 @@ def run_fk(args: argparse.Namespace) -> int:
 def run_ik(args: argparse.Namespace) -> int:
     """``servodesk ik``: exit 0, or 2 with a one-line reason on stderr."""
     try:
+        model = machine_model(args)
         pose = parse_numbers([getattr(args, m.lower()) for m in POSE_ARGS], POSE_LABELS)
         near = None if args.near is None else parse_numbers(args.near, unimate.JOINTS)
-        solutions = unimate.inverse(pose, near=near)
+        solutions = model.inverse(pose, near=near)
     except (ValueError, Unreachable) as exc:
         return fail("ik", exc)
-    ref = np.array(unimate.MODEL.mid_range if near is None else near)
+    ref = np.array(model.mid_range if near is None else near)
     travel = unimate.distance(solutions, ref)
     singular = abs(math.sin(math.radians(solutions[0, 4]))) <= unimate.WRIST_TOL
     if args.json:
@@ -111,6 +121,12 @@ def run_ik(args: argparse.Namespace) -> int:
     if singular:
         print("note: wrist singular (Yaw 0°): Swivel or Bend is kept at its --near value")
     return 0
+
+
+def machine_model(args: argparse.Namespace) -> unimate.Unimate2000B:
+    """The model of ``--machine`` (given before or after the subcommand); ValueError (a
+    MachineError naming file and key for a bad file) when it has none."""
+    return unimate_model(load_machine(getattr(args, "machine", DEFAULT_MACHINE)))
 
 
 def parse_numbers(texts: list[str], names: tuple[str, ...]) -> list[float]:

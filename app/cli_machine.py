@@ -6,6 +6,7 @@ import argparse
 import json
 import sys
 
+from control.robot_model import model_of
 from hw.machine import Machine, MachineError, load_machine
 
 
@@ -23,6 +24,7 @@ def run(args: argparse.Namespace) -> int:
     spec = args.spec or args.machine
     try:
         machine = load_machine(spec)
+        model_of(machine)  # a DH table the closed-form model cannot take
     except MachineError as exc:
         print(f"servodesk: {exc}", file=sys.stderr)
         return 2

@@ -44,6 +44,7 @@ from app.widgets.messages import (
 )
 from control.client import ControlClient, ControllerError, Event
 from control.recorder import Run, default_data_dir
+from control.robot_model import model_of
 from hw.machine import Machine, load_machine
 
 HEADER_HZ = 10.0
@@ -99,6 +100,7 @@ class ServodeskApp(App[None]):
                  client_options: dict | None = None) -> None:
         super().__init__()
         self.machine = machine if isinstance(machine, Machine) else load_machine(machine)
+        self.model = model_of(self.machine)  # MachineError for a DH table of another form
         self.backend = backend
         self.port = port
         self.data_dir = Path(data_dir) if data_dir is not None else default_data_dir()

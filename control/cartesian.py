@@ -64,10 +64,11 @@ from numpy.typing import ArrayLike
 from scipy.interpolate import CubicSpline
 
 from control.file_fields import field_number, read_text_file
+from control.robot_model import unimate_model
 from hw.machine import Machine
 from kinematics import unimate, xyz_fixed
+from kinematics.unimate import Unimate2000B
 
-KINEMATICS_MODEL = "unimate2000b"
 NOMINAL_SPEED = 100.0  # mm/s of the chord-length knots before timing; only the shape matters
 FINE_SPACING_MM = 0.5  # timing samples along the path at least this dense
 FINE_SAMPLES = (1000, 20000)
@@ -161,14 +162,14 @@ def cartesian_path(start: ArrayLike, points: ArrayLike, machine: Machine, *,
     joints' ``max_speed`` and ``max_accel`` times ``speed_fraction`` allow.
     Raises ValueError naming the first bad point and why.
     """
-    _check_machine(machine)
+    model = unimate_model(machine)
     q0 = _start(start, machine)
     xyz = _via_xyz(points)
     step = machine.sample_time_s if dt is None else _positive(dt, "dt")
     if not 0.0 < speed_fraction <= 1.0:
         raise ValueError(f"speed_fraction must be in (0, 1], got {speed_fraction}")
-    frame = arm_frame(q0)
-    knots_xyz = np.vstack([unimate.pose(q0)[:3], xyz])
+    frame = arm_frame(q0, model)
+    knots_xyz = np.vstack([model.pose(q0)[:3], xyz])
     knots = _knots(knots_xyz, times)
     vmax = np.array([j.max_speed for j in machine.joints]) * speed_fraction
     amax = np.array([j.max_accel for j in machine.joints]) * speed_fraction
@@ -177,7 +178,7 @@ def cartesian_path(start: ArrayLike, points: ArrayLike, machine: Machine, *,
         length = float(np.linalg.norm(np.diff(knots_xyz, axis=0), axis=1).sum())
         u = np.linspace(0.0, float(knots[-1]), int(np.clip(length / FINE_SPACING_MM,
                                                              *FINE_SAMPLES)))
-        q, _, _ = _solve(spline(u), _Where(u, knots, timed=False), frame, q0, machine)
+        q, _, _ = _solve(spline(u), _Where(u, knots, timed=False), frame, q0, machine, model)
         scale = max(_limit_ratio(q, u[1] - u[0], vmax, amax), 1e-6)  # > 0: it is multiplied
     else:
         scale = 1.0
@@ -188,7 +189,8 @@ def cartesian_path(start: ArrayLike, points: ArrayLike, machine: Machine, *,
         via_t = via_index * step
         spline = CubicSpline(via_t, knots_xyz, bc_type="clamped")
         t = np.arange(via_index[-1] + 1) * step
-        q, poses, branch = _solve(spline(t), _Where(t, via_t, timed=True), frame, q0, machine)
+        q, poses, branch = _solve(spline(t), _Where(t, via_t, timed=True), frame, q0, machine,
+                                  model)
         ratio = _limit_ratio(q, step, vmax, amax)
         if ratio <= 1.0 + 1e-9:
             break
@@ -202,13 +204,13 @@ def cartesian_path(start: ArrayLike, points: ArrayLike, machine: Machine, *,
 def path_from_poses(points: PosePoints, start: ArrayLike, machine: Machine, *,
                     dt: float | None = None, speed_fraction: float = 1.0) -> CartesianPath:
     """``cartesian_path`` from a pose file's points, after checking its orientation columns."""
-    _check_machine(machine)
+    model = unimate_model(machine)
     q0 = _start(start, machine)
     if len(points.xyz) < 2:
         raise PoseFileError(f"{points.source}: {len(points.xyz)} via point(s): a path needs an "
                             "intermediate point and an end point (section 6.4)")
     if points.orientation is not None:
-        _check_orientation(points, arm_frame(q0))
+        _check_orientation(points, arm_frame(q0, model))
     try:
         return cartesian_path(q0, points.xyz, machine, dt=dt, times=points.t,
                               speed_fraction=speed_fraction)
@@ -216,9 +218,9 @@ def path_from_poses(points: PosePoints, start: ArrayLike, machine: Machine, *,
         raise PoseFileError(f"{points.source}: {exc}") from None
 
 
-def arm_frame(q0: np.ndarray) -> _ArmFrame:
+def arm_frame(q0: np.ndarray, model: Unimate2000B = unimate.MODEL) -> _ArmFrame:
     """The 1:1 rule's constants of the start joints ``q0 (6,)`` (module docstring)."""
-    p = unimate.pose(q0)
+    p = model.pose(q0)
     theta1 = math.radians(float(q0[1]))
     r, phi = math.hypot(p[0], p[1]), math.atan2(p[1], p[0])
     return _ArmFrame(
@@ -230,7 +232,7 @@ def arm_frame(q0: np.ndarray) -> _ArmFrame:
 
 
 def _solve(xyz: np.ndarray, where: _Where, frame: _ArmFrame, q0: np.ndarray,
-           machine: Machine) -> tuple[np.ndarray, np.ndarray, int]:
+           machine: Machine, model: Unimate2000B) -> tuple[np.ndarray, np.ndarray, int]:
     """Joints ``(N, 6)``, target poses ``(N, 6)`` and the branch slot of tool points
     ``xyz (N, 3)``, all on the start's branch. Refuses the first bad sample, described by
     ``where``."""
@@ -242,7 +244,7 @@ def _solve(xyz: np.ndarray, where: _Where, frame: _ArmFrame, q0: np.ndarray,
                          f"{abs(frame.offset):.0f} mm of the Rotate axis, where no Rotate "
                          "angle keeps the tool's orientation")
     poses = frame.poses(xyz, theta1)
-    batch = unimate.inverse_batch(poses, near=q0)
+    batch = model.inverse_batch(poses, near=q0)
     slot = _start_branch(q0, batch.solutions[0], batch.valid[0])
     q = batch.solutions[:, slot]
     ok = batch.valid[:, slot]
@@ -251,7 +253,8 @@ def _solve(xyz: np.ndarray, where: _Where, frame: _ArmFrame, q0: np.ndarray,
     if len(bad):
         k = int(bad[0])
         why = (_jump_reason(q, k, machine) if ok[k]
-               else _branch_reason(poses[k], slot, batch.valid[k], q[k - 1] if k else q0))
+               else _branch_reason(model, poses[k], slot, batch.valid[k],
+                                   q[k - 1] if k else q0))
         raise ValueError(where(k, xyz) + ": " + why)
     return q, poses, slot
 
@@ -285,7 +288,8 @@ def _jump_reason(q: np.ndarray, k: int, machine: Machine) -> str:
             f"{joint.limit_text()} (or through a singularity); choose other points")
 
 
-def _branch_reason(pose: np.ndarray, slot: int, valid: np.ndarray, previous: np.ndarray) -> str:
+def _branch_reason(model: Unimate2000B, pose: np.ndarray, slot: int, valid: np.ndarray,
+                   previous: np.ndarray) -> str:
     """Why the path's branch has no valid solution at ``pose``."""
     if valid.any():
         other = int(np.flatnonzero(valid)[0])
@@ -295,7 +299,7 @@ def _branch_reason(pose: np.ndarray, slot: int, valid: np.ndarray, previous: np.
                 + f": inverse-kinematics slot {slot} → {other}); a path never switches branch "
                 "mid-way: choose points the current configuration can reach")
     try:
-        unimate.inverse(pose, near=previous)
+        model.inverse(pose, near=previous)
     except unimate.Unreachable as exc:
         return str(exc)
     return "no solution inside the joint limits on the path's branch"
@@ -362,12 +366,6 @@ def _knots(xyz: np.ndarray, times: ArrayLike | None) -> np.ndarray:
     if not np.all(np.isfinite(t)) or np.any(np.diff(knots) <= 0):
         raise ValueError(f"times must increase from after 0 s, got {t.tolist()}")
     return knots
-
-
-def _check_machine(machine: Machine) -> None:
-    if machine.kinematics_model != KINEMATICS_MODEL:
-        raise ValueError(f"machine {machine.name} has no {KINEMATICS_MODEL} kinematics: "
-                         "Cartesian paths (section 6.4) need the Unimate 2000B")
 
 
 def _start(start: ArrayLike, machine: Machine) -> np.ndarray:

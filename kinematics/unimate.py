@@ -131,6 +131,26 @@ class Unimate2000B:
             if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
                 raise ValueError(f"{name} limits {lo:g}…{hi:g} must be finite with lower < upper")
 
+    @classmethod
+    def from_links(cls, links: Sequence[DHLink], lower: Sequence[float],
+                   upper: Sequence[float]) -> Unimate2000B:
+        """The model whose DH rows (in DH order θ1, θ2, d3, θ4, θ5, θ6) are ``links``.
+
+        Only the lengths may differ from Table 4.1: d1 (row 1), a2 (row 2), lb and ly
+        (d of rows 5 and 6); the closed-form inverse holds for no other form, so any other
+        difference raises ValueError naming the row.
+        """
+        if len(links) != 6:
+            raise ValueError(f"the Unimate 2000B has 6 DH rows, got {len(links)}")
+        model = cls(d1=links[0].d, a2=links[1].a, lb=links[4].d, ly=links[5].d,
+                    lower=tuple(lower), upper=tuple(upper))
+        for i, (got, form) in enumerate(zip(links, model.links(), strict=True)):
+            if got != form:
+                raise ValueError(
+                    f"DH row {i + 1} ({JOINTS[DH_ORDER[i]]}) is {_row(got)}, but the Unimate "
+                    f"2000B's closed form needs {_row(form)}")
+        return model
+
     @property
     def mid_range(self) -> tuple[float, ...]:
         """The middle of each joint's limits (mm, deg): the default ``near``."""
@@ -503,6 +523,12 @@ def _distance(q: Sequence[float], near: Sequence[float]) -> float:
     return abs(q[0] - near[0]) / MM_PER_DEGREE + sum(
         abs(v - r) for v, r in zip(q[1:], near[1:], strict=True)
     )
+
+
+def _row(link: DHLink) -> str:
+    kind = "prismatic" if link.prismatic else "revolute"
+    return (f"α {link.alpha_deg:g}°, a {link.a:g} mm, d {link.d:g} mm, θ {link.theta_deg:g}° "
+            f"({kind})")
 
 
 def _vector(v: ArrayLike, what: str) -> list[float]:

@@ -60,8 +60,9 @@ from app.widgets.messages import RunsChanged
 from app.widgets.run_plot import draw_path
 from control import moves
 from control.client import MoveHandle, MoveResult
+from control.robot_model import has_unimate_model
 from hw.machine import Machine
-from kinematics import Unreachable, unimate
+from kinematics import Unreachable
 
 APPROACH_SPEED = 0.5  # approach ramps run at half of each joint's max_speed
 APPROACH_SETTLE_S = 0.5
@@ -366,7 +367,7 @@ class EndPointForm(MoveForm):
         table.add_columns("#", *[f"{j.name} {j.symbol}" for j in self.machine.joints])
 
     def fill(self, current: np.ndarray) -> None:
-        pose = unimate.pose(current)
+        pose = self.tab.model.pose(current)
         for (_, _, key), value in zip(POSE_FIELDS, pose, strict=True):
             f = self.field(f"pose-{key}")
             f.input.placeholder = f"{value:.3f}"
@@ -376,7 +377,7 @@ class EndPointForm(MoveForm):
     @on(Button.Pressed, "#pose-current")
     def _pose_current(self, event: Button.Pressed) -> None:
         event.stop()
-        pose = unimate.pose(self.tab.current())
+        pose = self.tab.model.pose(self.tab.current())
         for (_, _, key), value in zip(POSE_FIELDS, pose, strict=True):
             self.field(f"pose-{key}").text = f"{value:.3f}"
 
@@ -389,7 +390,7 @@ class EndPointForm(MoveForm):
         state = self.query_one("#ik-state", Static)
         try:
             pose = self.pose()
-            self.solutions = unimate.inverse(pose, near=current)
+            self.solutions = self.tab.model.inverse(pose, near=current)
             self.problem = ""
         except FieldError as exc:
             self.solutions, self.problem = np.zeros((0, 6)), str(exc)
@@ -508,7 +509,7 @@ class ViaPointsForm(MoveForm):
 
     @property
     def cartesian_allowed(self) -> bool:
-        return self.machine.kinematics_model == "unimate2000b"
+        return has_unimate_model(self.machine)
 
     @property
     def cartesian(self) -> bool:
@@ -529,7 +530,7 @@ class ViaPointsForm(MoveForm):
     def _add_current(self, event: Button.Pressed) -> None:
         event.stop()
         current = self.tab.current()
-        row = unimate.pose(current)[:3] if self.cartesian else current
+        row = self.tab.model.pose(current)[:3] if self.cartesian else current
         area = self.query_one("#via-points", TextArea)
         text = area.text.rstrip("\n")
         area.text = (text + "\n" if text else "") + " ".join(f"{v:.2f}" for v in row)
@@ -609,7 +610,7 @@ def forms_for(machine: Machine) -> list[type[MoveForm]]:
         return [StepForm, SequenceForm, RampForm, SineForm, PulseForm, InitialiseForm,
                 PathFileForm, ViaPointsForm]
     kinds: list[type[MoveForm]] = [StepForm, MultiStepForm, RampForm, SineForm]
-    if machine.kinematics_model == "unimate2000b":
+    if has_unimate_model(machine):
         kinds.append(EndPointForm)
     return [*kinds, PathFileForm, ViaPointsForm]
 

@@ -19,7 +19,6 @@ from app.widgets.header import MODE_NAMES
 from app.widgets.limit_bar import LimitBar
 from app.widgets.live_text import LiveText
 from control.layout import Flag, Status
-from kinematics import unimate
 
 POSE_LABELS = (("x", "mm"), ("y", "mm"), ("z", "mm"), ("γ", "°"), ("β", "°"), ("α", "°"))
 
@@ -71,10 +70,10 @@ class StatusTab(TabPage):
         return table
 
     def _pose(self, status: Status) -> Group | Text:
-        if self.machine.kinematics_model != "unimate2000b":
+        if self.model is None:
             return Text.assemble(("end effector\n", "bold"),
                                  ("no kinematic model for this machine", "dim"))
-        pose = unimate.pose(np.asarray(status.position))
+        pose = self.model.pose(np.asarray(status.position))
         table = Table(box=None, padding=(0, 1), show_header=False)
         table.add_column(justify="left")
         table.add_column(justify="right")

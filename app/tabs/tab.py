@@ -11,6 +11,7 @@ from textual.timer import Timer
 from control.client import ControlClient, ControllerError
 from control.layout import Status
 from hw.machine import Machine
+from kinematics.unimate import Unimate2000B
 
 if TYPE_CHECKING:
     from app.tui import ServodeskApp
@@ -34,6 +35,11 @@ class TabPage(Container):
     @property
     def machine(self) -> Machine:
         return self.servodesk.machine
+
+    @property
+    def model(self) -> Unimate2000B | None:
+        """The machine's closed-form kinematics, None for a machine without (the rig)."""
+        return self.servodesk.model
 
     @property
     def client(self) -> ControlClient | None:

@@ -4,12 +4,15 @@ from __future__ import annotations
 
 import argparse
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from app import cli_kinematics
+from app import cli, cli_kinematics
 from kinematics import unimate
+
+BUILTIN = Path(__file__).resolve().parents[2] / "hw" / "machines"
 
 
 def parser() -> argparse.ArgumentParser:
@@ -159,3 +162,56 @@ def test_wrong_number_of_values_is_an_argparse_error(capsys: pytest.CaptureFixtu
         parser().parse_args(["fk", "1", "2", "3"])
     assert info.value.code == 2
     assert "required: BEND, YAW, SWIVEL" in capsys.readouterr().err
+
+
+def machine_file(tmp_path: Path, old: str, new: str) -> Path:
+    """The Unimate 2000B's machine file with ``old`` replaced by ``new`` (once)."""
+    text = (BUILTIN / "unimate2000b.toml").read_text()
+    assert text.count(old) == 1
+    path = tmp_path / "unimate-variant.toml"
+    path.write_text(text.replace(old, new))
+    return path
+
+
+def test_fk_and_ik_solve_the_machine_files_model(tmp_path: Path,
+                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """A longer tool (d of the Swivel row) moves the pose; ``--machine`` before or after the
+    subcommand; ik of that pose on that machine gives back the joints."""
+    longer = machine_file(tmp_path, 'joint = "swivel", alpha = 0.0, a = 0.0, d = 440.0',
+                          'joint = "swivel", alpha = 0.0, a = 0.0, d = 540.0')
+    code, out, _ = run(["--machine", str(longer), "fk", "--json", *map(str, Q)], capsys)
+    assert code == 0
+    pose = np.array(list(json.loads(out)["pose"].values()))
+    built_in = unimate.pose(Q)
+    np.testing.assert_allclose(np.linalg.norm(pose[:3] - built_in[:3]), 100.0, atol=1e-9)
+    np.testing.assert_allclose(pose[3:], built_in[3:], atol=1e-9)
+    code, out, _ = run(["ik", "--json", *map(str, pose), "--near", *map(str, Q),
+                        "--machine", str(longer)], capsys)
+    assert code == 0
+    np.testing.assert_allclose(list(json.loads(out)["solutions"][0].values()), Q, atol=1e-6)
+
+
+def test_ik_respects_the_machine_files_limits(tmp_path: Path,
+                                              capsys: pytest.CaptureFixture[str]) -> None:
+    narrow = machine_file(tmp_path, "limits = [976.0, 2041.0]", "limits = [976.0, 1700.0]")
+    pose = unimate.pose(Q)  # In/Out 1857.5 or 1777.5 mm: both above 1700
+    code, _, err = run(["--machine", str(narrow), "ik", *map(str, pose)], capsys)
+    assert code == 2 and "In/Out" in err and "1700" in err, err
+
+
+def test_a_dh_table_of_another_form_names_the_file_and_row(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    bent = machine_file(tmp_path, 'joint = "bend", alpha = 90.0', 'joint = "bend", alpha = 45.0')
+    code, _, err = run(["--machine", str(bent), "fk", *HOME], capsys)
+    assert code == 2
+    assert str(bent) in err and "kinematics.dh: DH row 4 (Bend)" in err and "α 45°" in err, err
+    assert cli.main(["machine", str(bent)]) == 2  # validating the file says so too
+    assert "kinematics.dh: DH row 4 (Bend)" in capsys.readouterr().err
+
+
+def test_a_machine_without_kinematics_is_refused(capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, err = run(["--machine", "rig", "ik", "0", "0", "0", "0", "0", "0"], capsys)
+    assert code == 2 and out == ""
+    assert err.strip() == ("servodesk ik: machine rig has no unimate2000b kinematics (its "
+                           "file's [kinematics] model): poses, end points and Cartesian paths "
+                           "need it")

@@ -18,6 +18,7 @@ from control.cartesian import (
 )
 from hw.machine import load_machine
 from kinematics import unimate, xyz_fixed
+from kinematics.unimate import Unimate2000B
 
 UNIMATE = load_machine("unimate2000b")
 DT = UNIMATE.sample_time_s
@@ -137,10 +138,11 @@ def test_a_point_out_of_reach_is_refused() -> None:
 
 
 def test_a_branch_change_is_refused(monkeypatch: pytest.MonkeyPatch) -> None:
-    real = unimate.inverse_batch
+    real = Unimate2000B.inverse_batch
 
-    def flipping(p: np.ndarray, near: np.ndarray | None = None) -> unimate.InverseBatch:
-        batch = real(p, near)
+    def flipping(model: Unimate2000B, p: np.ndarray,
+                 near: np.ndarray | None = None) -> unimate.InverseBatch:
+        batch = real(model, p, near)
         valid = batch.valid.copy()
         half = len(valid) // 2
         slot = int(np.argmax(valid[0]))
@@ -148,22 +150,23 @@ def test_a_branch_change_is_refused(monkeypatch: pytest.MonkeyPatch) -> None:
         valid[half:, (slot + 2) % 8] = True  # pretend the other wrist branch is there
         return unimate.InverseBatch(batch.solutions, valid, batch.best, batch.reachable)
 
-    monkeypatch.setattr(unimate, "inverse_batch", flipping)
+    monkeypatch.setattr(Unimate2000B, "inverse_batch", flipping)
     with pytest.raises(ValueError, match=r"would have to change configuration here .*wrist "
                                          r"branch"):
         cartesian_path(START, TOOL + OFFSETS, UNIMATE)
 
 
 def test_a_joint_jump_is_refused(monkeypatch: pytest.MonkeyPatch) -> None:
-    real = unimate.inverse_batch
+    real = Unimate2000B.inverse_batch
 
-    def wrapping(p: np.ndarray, near: np.ndarray | None = None) -> unimate.InverseBatch:
-        batch = real(p, near)
+    def wrapping(model: Unimate2000B, p: np.ndarray,
+                 near: np.ndarray | None = None) -> unimate.InverseBatch:
+        batch = real(model, p, near)
         solutions = batch.solutions.copy()
         solutions[len(solutions) // 2:, :, 5] -= 360.0  # Swivel's other copy
         return unimate.InverseBatch(solutions, batch.valid, batch.best, batch.reachable)
 
-    monkeypatch.setattr(unimate, "inverse_batch", wrapping)
+    monkeypatch.setattr(Unimate2000B, "inverse_batch", wrapping)
     with pytest.raises(ValueError, match=r"Swivel would jump from 20\.00° to -340\.00°"):
         cartesian_path(START, TOOL + OFFSETS, UNIMATE)
 
