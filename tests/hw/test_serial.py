@@ -10,16 +10,11 @@ check behaviour, not speed.
 from __future__ import annotations
 
 import itertools
-import json
 import os
-import select
 import signal
 import statistics
-import subprocess
-import sys
 import time
 from collections.abc import Callable, Iterator, Sequence
-from pathlib import Path
 
 import pytest
 
@@ -47,59 +42,8 @@ from hw.messages import (
 from hw.serial_backend import BoardError, SerialBackend
 from hw.sim import SimBackend
 
-ROOT = Path(__file__).resolve().parents[2]
-LAUNCH = ["-m", "app", "emulate"]
-START_TIMEOUT_S = 60.0
 PATIENT_S = 1.0  # link timeout of the tests that are not about it: a busy machine stalls processes
 UNIMATE = load_machine("unimate2000b")
-
-
-class EmulatorProcess:
-    """``servodesk emulate ARGS`` as a child; ``url`` is the first line it prints."""
-
-    def __init__(self, args: Sequence[str], stderr_path: Path) -> None:
-        env = {**os.environ, "PYTHONPATH": str(ROOT)}
-        self.stderr_path = stderr_path
-        with stderr_path.open("wb") as err:
-            self.proc = subprocess.Popen([sys.executable, *LAUNCH, *args], cwd=ROOT,
-                                         env=env, stdout=subprocess.PIPE, stderr=err)
-        assert self.proc.stdout is not None
-        ready, _, _ = select.select([self.proc.stdout], [], [], START_TIMEOUT_S)
-        line = self.proc.stdout.readline().decode().strip() if ready else ""
-        if not line:
-            self.kill()
-            raise RuntimeError(f"the emulator did not start: {stderr_path.read_text()}")
-        self.url = line
-
-    def send(self, sig: int) -> None:
-        self.proc.send_signal(sig)
-
-    def stop(self) -> dict[str, object]:
-        """SIGTERM, then the JSON summary it prints on the way out."""
-        self.proc.send_signal(signal.SIGTERM)
-        out, _ = self.proc.communicate(timeout=30)
-        assert self.proc.returncode == 0, self.stderr_path.read_text()
-        return json.loads(out.decode().strip().splitlines()[-1])
-
-    def kill(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.kill()
-        self.proc.wait(timeout=30)
-
-
-@pytest.fixture
-def emulator(tmp_path: Path) -> Iterator[Callable[..., EmulatorProcess]]:
-    started: list[EmulatorProcess] = []
-
-    def start(*args: str) -> EmulatorProcess:
-        started.append(EmulatorProcess(args, tmp_path / f"emulator{len(started)}.log"))
-        return started[-1]
-
-    try:
-        yield start
-    finally:
-        for process in started:
-            process.kill()
 
 
 @pytest.fixture
