@@ -62,7 +62,9 @@ class Status:
     """One consistent snapshot of the controller, published every tick.
 
     Positions in joint units (mm, deg); ``duty`` is the controller output in
-    the joint's sense (percent), ``valve`` what the backend was sent.
+    the joint's sense (percent), ``valve`` what the backend was sent. ``time_s``
+    is the controller's clock since it started (simulated time in lockstep),
+    ``wall_ns`` the monotonic clock when the snapshot was written.
     """
 
     tick: int

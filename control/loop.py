@@ -133,6 +133,7 @@ class Controller:
         self.running = True
         self.realtime = False
         self.tick_count = 0
+        self.started_ns = self.clock.now_ns()
         self.deadline = 0
         self.late_ns = 0
         self.late_max_ns = 0
@@ -581,7 +582,8 @@ class Controller:
                  | (FAULT if self.fault else 0))
         counters = self.backend.counters
         self.status_writer.write(
-            self.tick_count, self.clock.now_ns(), time.monotonic_ns(), int(self.mode), flags,
+            self.tick_count, self.clock.now_ns() - self.started_ns, time.monotonic_ns(),
+            int(self.mode), flags,
             move.move_id if move else 0, move.index if move else 0,
             move.layout.samples if move else 0,
             self.late_ns, self.late_max_ns, self.overruns, self.compute_ns, self.compute_max_ns,
