@@ -20,6 +20,7 @@ from contextlib import contextmanager
 import numpy as np
 
 from control import ControlClient, moves
+from control.layout import Status
 from control.recorder import load_run
 from hw.machine import load_machine
 
@@ -40,6 +41,13 @@ def burning_every_core() -> Iterator[int]:
             burner.kill()
         for burner in burners:
             burner.wait(timeout=10)
+
+
+def grid_time(status: Status) -> float:
+    """The deadline of the tick that published ``status``: its publish time less the tick's
+    lateness and compute (a stall inside a tick shows in its compute, and its missed periods
+    are counted as overruns only after it published)."""
+    return status.time_s - (status.late_last_us + status.compute_last_us) / 1e6
 
 
 def test_a_starved_machine_counts_its_overruns_and_the_controller_stays_safe(
@@ -70,14 +78,14 @@ def test_a_starved_machine_counts_its_overruns_and_the_controller_stays_safe(
     assert s2.valve == (0.0,) * 6 and s2.duty == (0.0,) * 6
 
     ticks, overruns = s2.tick - s0.tick, s2.overruns - s0.overruns
-    periods = (s2.time_s - s0.time_s) / client.dt
+    periods = (grid_time(s2) - grid_time(s0)) / client.dt
     measured("overruns", overruns)
     measured("ticks", ticks)
     measured("late_max_us", s2.late_max_us, "µs")
     measured("compute_max_us", s2.compute_max_us, "µs")
     measured("realtime", int(client.realtime))
     assert overruns >= 0 and s2.overruns == h2.overruns
-    assert abs(ticks + overruns - periods) <= 3, "a period neither ticked nor counted"
+    assert abs(ticks + overruns - periods) <= 1, "a period neither ticked nor counted"
     assert abs((h2.ticks - h0.ticks) - ticks) <= 2, "the histogram missed ticks"
 
     result = client.wait(handle, timeout=5.0)
