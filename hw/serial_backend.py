@@ -58,6 +58,34 @@ class BoardError(ConnectionError):
     """The I/O board could not be reached or refused the configuration."""
 
 
+class BoardClock:
+    """The board's latch time (``Report.t_us``, a wrapping u32) on the host's monotonic clock.
+
+    A reply's arrival is not when its words were latched: a host or board that was
+    descheduled delivers old words late, and timing them by arrival makes real motion
+    look faster than the joint can move (a false encoder glitch). The board's own time
+    is exact between samples; it is placed on the host clock by the smallest arrival
+    delay seen so far (the usual one-way clock estimate), so it never runs ahead of the
+    host's clock.
+    """
+
+    def __init__(self) -> None:
+        self._last_us: int | None = None
+        self._board_us = 0  # unwrapped
+        self._offset_ns: int | None = None
+
+    def host_ns(self, t_us: int, arrived_ns: int) -> int:
+        """The host time at which the board latched a report stamped ``t_us``."""
+        if self._last_us is not None:  # signed 32-bit step: wraps forward, never 71 min back
+            self._board_us += ((t_us - self._last_us + 2**31) & 0xFFFF_FFFF) - 2**31
+        self._last_us = t_us
+        board_ns = self._board_us * 1000
+        delay = arrived_ns - board_ns
+        if self._offset_ns is None or delay < self._offset_ns:
+            self._offset_ns = delay
+        return board_ns + self._offset_ns
+
+
 class SerialBackend:
     """``hw.backend.Backend`` over pyserial to an I/O board (or the emulator).
 
@@ -90,7 +118,8 @@ class SerialBackend:
         n = machine.n_joints
         self._n = n
         self._words: Sequence[int] = (0,) * n
-        self.sample_ns = 0  # when the newest words arrived (monotonic ns): a late reply is old
+        self.sample_ns = 0  # when the board latched the newest words, on the host clock
+        self._board_clock = BoardClock()
         self._units = [0] * n
         self._port: serial.SerialBase | None = None
         self._reader = MessageReader(self.counters, BOARD_TO_HOST, resync=(MsgType.CONFIG_ACK,))
@@ -206,6 +235,7 @@ class SerialBackend:
         self._fresh = True
         self._awaiting = False
         self._last_rx_ns = time.monotonic_ns()
+        self._board_clock = BoardClock()  # a (re)configured board may have restarted its clock
 
     def _disconnect(self) -> None:
         port, self._port = self._port, None
@@ -330,7 +360,7 @@ class SerialBackend:
         self.last_report = report
         bits = self._count_bits
         self._words = report.words if not bits else tuple(_signed(w, bits) for w in report.words)
-        self.sample_ns = now
+        self.sample_ns = self._board_clock.host_ns(report.t_us, now)
         if not report.flags & Flag.UNSOLICITED and report.echo_seq == self._writer.seq:
             self._awaiting = False
             self.rtt_ns = now - self._sent_ns

@@ -39,7 +39,7 @@ from hw.messages import (
     NakReason,
     Status,
 )
-from hw.serial_backend import BoardError, SerialBackend
+from hw.serial_backend import BoardClock, BoardError, SerialBackend
 from hw.sim import SimBackend
 
 PATIENT_S = 1.0  # link timeout of the tests that are not about it: a busy machine stalls processes
@@ -129,6 +129,20 @@ def until(predicate: Callable[[], bool], backend: SerialBackend, duty: Sequence[
 
 
 # -- round trips -------------------------------------------------------------------------------
+
+
+def test_board_time_places_late_replies_when_they_were_latched() -> None:
+    """Samples 1 ms apart on the board, the second delivered 9 ms late, then the board's u32
+    microsecond clock wrapping: host times follow the board's spacing, never the arrival."""
+    clock = BoardClock()
+    start = 5_000_000_000
+    t0 = 2**32 - 1500  # 1.5 ms before the board's clock wraps
+    assert clock.host_ns(t0, start + 200_000) == start + 200_000
+    late = clock.host_ns(t0 + 1000, start + 10_200_000)  # latched 1 ms later, arrived 10 ms
+    assert late == start + 1_200_000
+    wrapped = clock.host_ns((t0 + 2000) % 2**32, start + 2_150_000)  # a faster delivery
+    assert wrapped == start + 2_150_000  # 2 ms after the first latch, on the new best delay
+    assert clock.host_ns((t0 + 2000) % 2**32, start + 3_000_000) == wrapped  # a repeat: same
 
 
 def test_open_configures_the_board_and_reads_it(emulator, connect) -> None:
