@@ -34,8 +34,10 @@ def field(app, form: str, name: str) -> NumberField:
 async def run_and_wait(tui, app, pilot) -> MovesTab:
     tab = app.query_one(MovesTab)
     await pilot.press("ctrl+s")
-    await tui.until(lambda: tab.handle is not None or tab.last_result is not None, timeout=5,
-                    what=f"the move to start ({app.query_one('#move-error').render()})")
+    error = app.query_one("#move-error")
+    await tui.until(lambda: tab.handle is not None or tab.last_result is not None, timeout=10,
+                    what=lambda: f"the move to start (error: {error.render()!s}; "
+                                 f"state: {app.query_one('#move-state').render()!s})")
     await tui.until(lambda: tab.handle is None, timeout=60, what="the move to end")
     await pilot.pause()
     return tab

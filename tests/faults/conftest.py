@@ -112,15 +112,17 @@ def pytest_sessionfinish(session: pytest.Session) -> None:
 # -- waiting ------------------------------------------------------------------------------
 
 
-def wait_for(predicate: Callable[[], bool], timeout: float, what: str,
+def wait_for(predicate: Callable[[], bool], timeout: float, what: str | Callable[[], str],
              every: float = 0.002) -> float:
-    """Poll ``predicate`` until true; return the seconds it took, fail after ``timeout``."""
+    """Poll ``predicate`` until true; return the seconds it took, fail after ``timeout``
+    naming ``what`` (or what it returns then: the state that explains the wait)."""
     start = time.monotonic()
     while (elapsed := time.monotonic() - start) < timeout:
         if predicate():
             return elapsed
         time.sleep(every)
-    raise AssertionError(f"timed out after {timeout:g} s waiting for {what}")
+    raise AssertionError(f"timed out after {timeout:g} s waiting for "
+                         f"{what() if callable(what) else what}")
 
 
 @pytest.fixture

@@ -167,7 +167,9 @@ def test_a_frozen_client_makes_the_controller_hold_and_it_is_alive_on_resume(
     script = ClientScript(runs, orphan_timeout_s=30.0)
     watch = StatusWatch(script.segment)
     try:
-        until(lambda: watch.status().move_done >= 300, 10.0, "the move to run")
+        until(lambda: watch.status().move_done >= 300, 10.0, lambda: "the move to run "
+              f"({watch.status().mode.name}, flags {watch.status().flags!r}, "
+              f"{watch.status().move_done} samples)")
         rows_before = watch.status().move_done
         os.kill(script.proc.pid, signal.SIGSTOP)
         hold_s = until(watch.holding_without_client, 5.0, "the controller to hold")
