@@ -197,17 +197,24 @@ def test_after_a_reconnect_the_robot_holds_where_it_now_is(
 def test_losing_a_tcp_link_does_not_stall_the_loop(controller, emulator, until,
                                                     measured) -> None:
     """The board's TCP port vanishes while the robot holds: the loop must keep its 1 kHz
-    beat through the loss, so the E-stop latches within a few ticks and no more than a few
-    deadlines are missed (each missed deadline is an overrun)."""
+    beat through the loss (it once blocked for 300 ms there). A blocked loop is
+    one long stall; this VM also stalls every process for a few ms now and then, which
+    costs a deadline each (an overrun) but is no block. So: no single tick late or long by
+    50 ms, and most of the window's deadlines ticked."""
     board = emulator("--tcp", str(free_tcp_port()), "--glitch-scale", "0")
     client = controller(backend="serial", port=board.url)
     time.sleep(0.3)
-    before = client.status().overruns
+    s0 = client.status()
     os.kill(board.pid, signal.SIGKILL)
     until(lambda: client.status().estop, 5.0, "the link loss to latch")
     time.sleep(0.2)
-    missed = measured("overruns_during_loss", client.status().overruns - before)
-    assert missed < 50
+    s1 = client.status()
+    window = round((s1.time_s - s0.time_s) / client.dt)
+    missed = measured("overruns_during_loss", s1.overruns - s0.overruns)
+    measured("window_periods", window)
+    longest = measured("longest_stall_ms", max(s1.late_max_us, s1.compute_max_us) / 1e3, "ms")
+    assert longest < 50, "a stall this long is the loop blocking on the lost link"
+    assert missed < window / 2
 
 
 @contextmanager
