@@ -17,14 +17,12 @@ time, as ``ControlClient.move`` expects.
 
 from __future__ import annotations
 
-import csv
-import io
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from control.file_fields import field_number, read_text_file
+from control.file_fields import csv_lines, field_number, read_text_file
 from hw.machine import Machine
 
 TIME_NAMES = ("t", "time", "t [s]", "time [s]")
@@ -82,21 +80,15 @@ def parse_tsv(text: str, machine: Machine, hold: tuple[float, ...],
 def parse_csv(text: str, machine: Machine, hold: tuple[float, ...],
               source: str = "<csv>") -> PathPoints:
     """A CSV with a header of joint names (and optionally a time column)."""
-    reader = csv.reader(io.StringIO(text))
-    header: list[str] | None = None
-    header_line = 0
-    for header_line, row in enumerate(reader, start=1):  # noqa: B007 (used after the loop)
-        if row and not row[0].lstrip().startswith("#"):
-            header = [c.strip() for c in row]
-            break
-    if header is None:
+    reader = csv_lines(text, source, PathFileError)
+    first = next(reader, None)
+    if first is None:
         raise PathFileError(f"{source}: empty file: expected a header of joint names")
+    header_line, header = first[0], [c.strip() for c in first[1]]
     time_col, joint_cols = _columns(header, machine, source, header_line)
     base = list(hold)
     times, rows, lines = [], [], []
-    for number, row in enumerate(reader, start=header_line + 1):
-        if not row or all(not c.strip() for c in row) or row[0].lstrip().startswith("#"):
-            continue
+    for number, row in reader:
         if len(row) != len(header):
             raise PathFileError(f"{source}: line {number}: {len(row)} field(s), the header has "
                                 f"{len(header)}")

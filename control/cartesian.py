@@ -53,8 +53,6 @@ reported by line number, in the style of ``app/path_files.py``.
 
 from __future__ import annotations
 
-import csv
-import io
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -63,7 +61,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.interpolate import CubicSpline
 
-from control.file_fields import field_number, read_text_file
+from control.file_fields import csv_lines, field_number, read_text_file
 from control.robot_model import unimate_model
 from hw.machine import Machine
 from kinematics import unimate, xyz_fixed
@@ -407,19 +405,14 @@ def read_poses(path: str | Path) -> PosePoints:
 
 def parse_poses(text: str, source: str = "<csv>") -> PosePoints:
     """Parse the text of a pose CSV: a header, then one via point per line."""
-    reader = csv.reader(io.StringIO(text))
-    header, header_line = None, 0
-    for header_line, row in enumerate(reader, start=1):  # noqa: B007 (used after the loop)
-        if row and any(c.strip() for c in row) and not row[0].lstrip().startswith("#"):
-            header = [c.strip() for c in row]
-            break
-    if header is None:
+    reader = csv_lines(text, source, PoseFileError)
+    first = next(reader, None)
+    if first is None:
         raise PoseFileError(f"{source}: empty file: expected a header such as t,x,y,z")
+    header_line, header = first[0], [c.strip() for c in first[1]]
     time_col, pose_cols = _pose_columns(header, source, header_line)
     times, rows, lines = [], [], []
-    for number, row in enumerate(reader, start=header_line + 1):
-        if not row or all(not c.strip() for c in row) or row[0].lstrip().startswith("#"):
-            continue
+    for number, row in reader:
         if len(row) != len(header):
             raise PoseFileError(f"{source}: line {number}: {len(row)} field(s), the header has "
                                 f"{len(header)}")

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import csv
 import math
+from collections.abc import Iterator
 from pathlib import Path
 
 
@@ -15,6 +17,24 @@ def read_text_file(path: str | Path, error: type[ValueError] = ValueError) -> tu
         raise error(f"{path}: cannot read: {exc.strerror or exc}") from None
     except UnicodeDecodeError:
         raise error(f"{path}: not a text file") from None
+
+
+def csv_lines(text: str, source: str,
+              error: type[ValueError] = ValueError) -> Iterator[tuple[int, list[str]]]:
+    """``(line number, fields)`` of each CSV line that holds something: blank lines, lines of
+    empty fields and ``#`` comments are skipped; a line csv cannot split (a stray carriage
+    return inside a field, a field past csv's size limit) raises ``error`` naming it. Lines
+    are counted as ``str.splitlines`` counts them, like the TSV reader's."""
+    reader = csv.reader(text.splitlines())
+    while True:
+        try:
+            row = next(reader)
+        except StopIteration:
+            return
+        except csv.Error as exc:
+            raise error(f"{source}: line {reader.line_num}: {exc}") from None
+        if any(c.strip() for c in row) and not row[0].lstrip().startswith("#"):
+            yield reader.line_num, row
 
 
 def field_number(text: str, source: str, line: int, field: int,

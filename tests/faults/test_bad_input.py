@@ -14,6 +14,7 @@ test (``measured.example``) and reported in the terminal summary.
 from __future__ import annotations
 
 import contextlib
+import csv
 import dataclasses
 import io
 import math
@@ -26,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import HealthCheck, assume, example, given, settings
 from hypothesis import strategies as st
 
 from app import cli
@@ -188,6 +189,16 @@ def test_any_bytes_as_a_path_file(measured, tmp_path_factory, data: bytes,
         check_points(read_path(path, UNIMATE, HOLD))
     except PathFileError as exc:
         one_line(str(exc), str(path))
+
+
+def test_what_csv_itself_cannot_split_is_a_line_numbered_error() -> None:
+    """A field past csv's size limit, in a path CSV and a pose CSV: the error names the file
+    and the line, it is not csv's own exception."""
+    huge = "1" * (csv.field_size_limit() + 1)
+    with pytest.raises(PathFileError, match=r"^fuzz\.csv: line 3: field larger than"):
+        parse_csv(f"t,inout\n0,1500\n1,{huge}\n", UNIMATE, HOLD, "fuzz.csv")
+    with pytest.raises(PoseFileError, match=r"^fuzz\.csv: line 2: field larger than"):
+        parse_poses(f"x,y,z\n{huge},0,0\n", "fuzz.csv")
 
 
 def test_a_path_file_lasting_ages_is_refused_with_a_message() -> None:
@@ -580,6 +591,7 @@ POSE_HEADER = st.lists(st.sampled_from(["t", "time", "x", "y", "z", "gamma", "be
 @fuzz(300)
 @given(header=POSE_HEADER, rows=st.lists(st.lists(NUMBER_TEXT, min_size=0, max_size=7),
                                          max_size=6))
+@example(header=[], rows=[["\r", "nan"]])  # found by a random run: csv's "new-line in field"
 def test_pose_files(measured, header: list[str], rows: list[list[str]]) -> None:
     """A pose CSV with any header and any fields: PoseFileError naming the file and line,
     or via points that are finite with increasing times."""
