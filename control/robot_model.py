@@ -47,4 +47,4 @@ def unimate_model(machine: Machine) -> Unimate2000B:
                              + ", ".join(machine.joints[j].name for j in order))
         return Unimate2000B.from_links(links, machine.lower, machine.upper)
     except ValueError as exc:
-        raise MachineError(f"{machine.path}: kinematics.dh: {exc}") from None
+        raise MachineError(f"{machine.path.name}: kinematics.dh: {exc}") from None
