@@ -72,11 +72,17 @@ class EmulatedBoard:
     """The board's firmware: bytes from the host in, bytes to the host out.
 
     Times are ``time.monotonic_ns()`` values passed in by the caller, so the
-    state machine itself never reads a clock.
+    state machine itself never reads a clock. With ``plant_time`` a REPORT is stamped
+    with the plant's own latch time (``plant.sample_ns``) instead, as firmware stamps a
+    reading when it latches it: for a real-time plant on the same monotonic clock (the
+    ``Emulator``), where a stall between the caller's clock reading and the latch would
+    otherwise date the words too early.
     """
 
-    def __init__(self, plant: Backend, *, faults: Faults | None = None, seed: int = 0) -> None:
+    def __init__(self, plant: Backend, *, faults: Faults | None = None, seed: int = 0,
+                 plant_time: bool = False) -> None:
         self.plant = plant
+        self.plant_time = plant_time
         self.channels = plant.machine.n_joints
         self.faults = faults or Faults()
         self.counters = LinkCounters()
@@ -260,7 +266,8 @@ class EmulatedBoard:
         flags = self.flags | (Flag.UNSOLICITED if unsolicited else 0)
         mask = (1 << self.config.encoder_bits) - 1  # a quadrature count wraps, two's complement
         words = tuple(w & mask for w in self._raw[: self.config.n_joints])
-        return Report(echo_seq, self._t_us(now_ns), flags, self.rx_errors, words)
+        latched = self.plant.sample_ns if self.plant_time else now_ns
+        return Report(echo_seq, self._t_us(latched), flags, self.rx_errors, words)
 
     def _t_us(self, now_ns: int) -> int:
         return ((now_ns - (self._t0_ns or now_ns)) // 1000) & 0xFFFFFFFF
@@ -407,11 +414,12 @@ class TcpPort:
 
 
 class Emulator:
-    """An emulated board serving ``plant`` on a pty (default) or TCP; run with ``serve``."""
+    """An emulated board serving ``plant`` (real time, on the monotonic clock) on a pty
+    (default) or TCP; run with ``serve``."""
 
     def __init__(self, plant: Backend, *, tcp_port: int | None = None,
                  faults: Faults | None = None, seed: int = 0) -> None:
-        self.board = EmulatedBoard(plant, faults=faults, seed=seed)
+        self.board = EmulatedBoard(plant, faults=faults, seed=seed, plant_time=True)
         self.port: PtyPort | TcpPort
         if tcp_port is None:
             self.port = PtyPort()
