@@ -32,7 +32,7 @@ from control.recorder import save_run
 from control.runs import run_from_record
 from control.seqlock import SeqlockReader, SeqlockWriter
 from hw.backend import Backend
-from hw.gray import gray_to_binary
+from hw.gray import gray_table, gray_to_binary
 from hw.machine import Machine
 
 MS = 1_000_000
@@ -97,6 +97,7 @@ class Controller:
         self.law = DifferenceLaw(machine, machine.hold, config.period_ns / 1e9)
         joints = machine.joints
         self.gray = machine.encoder_kind == "gray"
+        self.gray_table = gray_table(machine.encoder_bits) if self.gray else []
         self.gradient = [j.encoder.gradient for j in joints]
         self.constant = [j.encoder.constant for j in joints]
         self.coupled = [-1 if j.encoder.coupled_to is None else j.encoder.coupled_to
@@ -137,6 +138,9 @@ class Controller:
         self.deadline = 0
         self.late_ns = 0
         self.late_max_ns = 0
+        self.late_min_ns = -1  # none yet
+        self.late_sum_ns = 0
+        self.late_count = 0
         self.overruns = 0
         self.compute_ns = 0
         self.compute_max_ns = 0
@@ -213,15 +217,17 @@ class Controller:
     def measure_lateness(self, woke: int) -> None:
         late = max(0, woke - self.deadline)
         self.late_ns = late
-        self.late_max_ns = max(self.late_max_ns, late)
-        hist = self.hist
+        hist = self.hist  # shared memory: each access costs, so the loop keeps its own tallies
         hist[min(late // HIST_BIN_NS, HIST_BINS)] += 1
         base = HIST_BINS + 1
-        if hist[base + 3] == 0 or late < hist[base]:
-            hist[base] = late
-        hist[base + 1] = max(hist[base + 1], late)
-        hist[base + 2] += late
-        hist[base + 3] += 1
+        if late < self.late_min_ns or self.late_min_ns < 0:
+            self.late_min_ns = hist[base] = late
+        if late > self.late_max_ns:
+            self.late_max_ns = hist[base + 1] = late
+        self.late_sum_ns += late
+        self.late_count += 1
+        hist[base + 2] = self.late_sum_ns
+        hist[base + 3] = self.late_count
 
     # -- read: encoders to joint units, with the glitch filter (section 6.2) ----
 
@@ -230,11 +236,18 @@ class Controller:
         self.backend.read(self.raw)
         self.io_total_ns += self.clock.now_ns() - before
         now = self.backend.sample_ns  # a late serial reply re-reads old words: time them so
+        raw, table, position = self.raw, self.gray_table, self.position
+        size = len(table)
         for j in range(self.n):
-            count = gray_to_binary(self.raw[j]) if self.gray else self.raw[j] - self.offset[j]
+            word = raw[j]
+            if not self.gray:
+                count = word - self.offset[j]
+            else:  # a word wider than the encoder's is decoded too: the glitch filter judges it
+                count = table[word] if 0 <= word < size else gray_to_binary(word)
             q = self.gradient[j] * count + self.constant[j]
-            if self.coupled[j] >= 0:
-                q += self.coupling[j] * self.position[self.coupled[j]]  # rtshare.h joint_dep
+            coupled = self.coupled[j]
+            if coupled >= 0:
+                q += self.coupling[j] * position[coupled]  # rtshare.h joint_dep
             self.accept(j, q, now)
 
     def accept(self, j: int, q: float, now: int) -> None:

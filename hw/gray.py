@@ -34,6 +34,11 @@ def gray_to_binary(g: int) -> int:
     return g
 
 
+def gray_table(bits: int) -> list[int]:
+    """``gray_to_binary`` of every ``bits``-bit word, indexed by the word (a per-tick lookup)."""
+    return gray_to_binary_array(np.arange(1 << bits, dtype=np.int64)).tolist()
+
+
 def binary_to_gray_array(n: NDArray[np.integer]) -> NDArray[np.integer]:
     """Element-wise :func:`binary_to_gray` of an integer array (new array, same dtype)."""
     n = np.asarray(n)

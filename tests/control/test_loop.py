@@ -122,6 +122,18 @@ def test_a_glitch_is_rejected_and_counted_then_a_real_jump_is_believed(rig) -> N
     assert controller.glitches[0] == 5
 
 
+def test_a_word_wider_than_the_encoder_is_decoded_and_judged_not_a_crash(rig) -> None:
+    """A garbled 32-bit word (a high bit set past the encoder's 13) decodes outside the
+    lookup table and is rejected by the glitch filter as an impossible jump."""
+    controller, backend, _client = rig
+    good = backend.word
+    backend.word = lambda j: good(j) | (1 << 20) if j == 1 else good(j)
+    ticks(controller, backend, 1)
+    assert not controller.estop_latched, controller.fault
+    assert controller.glitches[1] == 1 and controller.position[1] == pytest.approx(HOME[1],
+                                                                                    abs=0.1)
+
+
 def test_a_plausible_move_is_never_a_glitch(rig) -> None:
     controller, backend, _client = rig
     for _ in range(100):

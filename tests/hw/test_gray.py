@@ -7,7 +7,13 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from hw.gray import binary_to_gray, binary_to_gray_array, gray_to_binary, gray_to_binary_array
+from hw.gray import (
+    binary_to_gray,
+    binary_to_gray_array,
+    gray_table,
+    gray_to_binary,
+    gray_to_binary_array,
+)
 
 # Table 5.1: decimal, binary, Gray
 TABLE_5_1 = [(0, 0b000), (1, 0b001), (2, 0b011), (3, 0b010),
@@ -35,6 +41,12 @@ def test_every_13_bit_word_round_trips_and_follows_section_5_3() -> None:
         g = binary_to_gray(n)
         assert gray_to_binary(g) == n == section_5_3(g, 13)
         assert g < 1 << 13
+
+
+def test_the_lookup_table_is_the_decoder() -> None:
+    table = gray_table(13)
+    assert len(table) == 1 << 13
+    assert table == [gray_to_binary(g) for g in range(1 << 13)]
 
 
 def test_one_bit_changes_per_count() -> None:
