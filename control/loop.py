@@ -37,6 +37,7 @@ from hw.machine import Machine
 
 MS = 1_000_000
 INJECTABLE = ("press_estop",)
+GRAY_TABLE_BITS = 16  # Gray encoders up to this wide decode by table lookup (64 k entries)
 OUTBOX_LIMIT = 256
 ESTOP_LATCHED, ESTOP_INPUT, HOMED, UI_LOST = (int(f) for f in (
     Flag.ESTOP_LATCHED, Flag.ESTOP_INPUT, Flag.HOMED, Flag.UI_LOST))
@@ -97,7 +98,8 @@ class Controller:
         self.law = DifferenceLaw(machine, machine.hold, config.period_ns / 1e9)
         joints = machine.joints
         self.gray = machine.encoder_kind == "gray"
-        self.gray_table = gray_table(machine.encoder_bits) if self.gray else []
+        self.gray_table = (gray_table(machine.encoder_bits)  # wider: decoded word by word
+                           if self.gray and machine.encoder_bits <= GRAY_TABLE_BITS else [])
         self.gradient = [j.encoder.gradient for j in joints]
         self.constant = [j.encoder.constant for j in joints]
         self.coupled = [-1 if j.encoder.coupled_to is None else j.encoder.coupled_to

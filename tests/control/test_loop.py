@@ -10,6 +10,8 @@ from __future__ import annotations
 import socket
 import time
 from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import replace
 from multiprocessing.connection import Connection
 
 import pytest
@@ -65,21 +67,29 @@ class ScriptedBackend:
         self.written = list(duty)
 
 
-@pytest.fixture
-def rig() -> Iterator[tuple[Controller, ScriptedBackend, Connection]]:
-    backend = ScriptedBackend(UNIMATE)
+@contextmanager
+def controller_on(machine: Machine) -> Iterator[tuple[Controller, ScriptedBackend, Connection]]:
+    backend = ScriptedBackend(machine)
     ours, theirs = socket.socketpair()
-    layout = ControlLayout(UNIMATE.n_joints)
+    layout = ControlLayout(machine.n_joints)
     segment = shm.create("looptest", layout.size)
     layout.write_header(segment.buf)
-    controller = Controller(UNIMATE, backend, Connection(theirs.detach()), segment.buf,
+    controller = Controller(machine, backend, Connection(theirs.detach()), segment.buf,
                             LoopConfig(period_ns=1_000_000, heartbeat_timeout_ns=10**12))
     controller.start()
     client = Connection(ours.detach())
-    yield controller, backend, client
-    controller.release()
-    shm.release(segment, unlink=True)
-    client.close()
+    try:
+        yield controller, backend, client
+    finally:
+        controller.release()
+        shm.release(segment, unlink=True)
+        client.close()
+
+
+@pytest.fixture
+def rig() -> Iterator[tuple[Controller, ScriptedBackend, Connection]]:
+    with controller_on(UNIMATE) as parts:
+        yield parts
 
 
 def ticks(controller: Controller, backend: ScriptedBackend, n: int) -> None:
@@ -132,6 +142,15 @@ def test_a_word_wider_than_the_encoder_is_decoded_and_judged_not_a_crash(rig) ->
     assert not controller.estop_latched, controller.fault
     assert controller.glitches[1] == 1 and controller.position[1] == pytest.approx(HOME[1],
                                                                                     abs=0.1)
+
+
+def test_a_gray_encoder_too_wide_for_the_table_is_decoded_word_by_word() -> None:
+    wide = replace(UNIMATE, encoder_bits=24)
+    with controller_on(wide) as (controller, backend, _client):
+        assert controller.gray_table == []
+        ticks(controller, backend, 3)
+        assert controller.position == pytest.approx(HOME, abs=0.3)
+        assert controller.glitches == [0] * 6
 
 
 def test_a_plausible_move_is_never_a_glitch(rig) -> None:
