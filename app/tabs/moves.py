@@ -281,7 +281,22 @@ class SequenceForm(MoveForm):
                         moving=(0,))
 
 
-class RampForm(MoveForm):
+class StartEndForm(MoveForm):
+    """A one-joint move between a start (blank: where the joint is) and an end field."""
+
+    def fill(self, current: np.ndarray) -> None:
+        self.field("start").input.placeholder = f"{current[self.joint()]:.2f}"
+
+    def ends(self, current: np.ndarray) -> tuple[int, np.ndarray, np.ndarray]:
+        """The joint, and the start and end joint vectors (the others stay where they are)."""
+        j = self.joint()
+        start = self.start_vector(current, j)
+        end = start.copy()
+        end[j] = self.field("end").value()
+        return j, start, end
+
+
+class RampForm(StartEndForm):
     KIND = "ramp"
     LABEL = "Ramp"
     HELP = "From a start to an end position at constant speed, then hold (function.c RampInput)."
@@ -292,14 +307,8 @@ class RampForm(MoveForm):
         yield NumberField("total (blank: auto)", seconds_check("total duration", optional=True),
                           id="total")
 
-    def fill(self, current: np.ndarray) -> None:
-        self.field("start").input.placeholder = f"{current[self.joint()]:.2f}"
-
     def plan(self, current: np.ndarray, dt: float) -> MovePlan:
-        j = self.joint()
-        start = self.start_vector(current, j)
-        end = start.copy()
-        end[j] = self.field("end").value()
+        j, start, end = self.ends(current)
         ramp_time = self.field("ramp_time").value()
         path = moves.ramp(start, end, ramp_time, self.field("total").value(), dt=dt,
                           machine=self.machine)
@@ -311,7 +320,7 @@ class RampForm(MoveForm):
                         approach=approach, moving=(j,))
 
 
-class SineForm(MoveForm):
+class SineForm(StartEndForm):
     KIND = "sine"
     LABEL = "Sine"
     HELP = ("start + (end − start)/2 · (1 − cos 2πt/T): at the end at T/2, back at T "
@@ -322,14 +331,8 @@ class SineForm(MoveForm):
         yield NumberField("period T", seconds_check("period"), "4", id="period")
         yield NumberField("duration", seconds_check("duration"), "8", id="duration")
 
-    def fill(self, current: np.ndarray) -> None:
-        self.field("start").input.placeholder = f"{current[self.joint()]:.2f}"
-
     def plan(self, current: np.ndarray, dt: float) -> MovePlan:
-        j = self.joint()
-        start = self.start_vector(current, j)
-        end = start.copy()
-        end[j] = self.field("end").value()
+        j, start, end = self.ends(current)
         period, duration = self.field("period").value(), self.field("duration").value()
         path = moves.sine(start, end, period, duration, dt=dt, machine=self.machine)
         path, approach = with_approach(current, path, self.machine, dt)
