@@ -14,8 +14,8 @@ import os
 import signal
 import sys
 
-from hw.emulator import Emulator, Faults
 from hw.machine import MachineError, load_machine
+from hw.serial.emulator import Emulator, Faults
 
 DEFAULT_MACHINE = "unimate2000b"
 
@@ -48,7 +48,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from hw.sim import SimBackend
+    from hw.sim.backend import SimBackend
 
     try:
         machine = load_machine(getattr(args, "machine", DEFAULT_MACHINE))

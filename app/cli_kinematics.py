@@ -4,7 +4,7 @@
 prints every in-limit joint solution, nearest ``--near`` first. Joints are in
 the thesis's actuator order, In/Out in mm, then Rotate, Up/Down, Bend, Yaw,
 Swivel in degrees; a pose is x, y, z in mm and X-Y-Z fixed angles γ, β, α in
-degrees (eq. 4.04). Both solve the ``--machine``'s model (``control.robot_model``:
+degrees (eq. 4.04). Both solve the ``--machine``'s model (``control.motion.robot_model``:
 its DH lengths and joint limits), the built-in Unimate 2000B by default.
 """
 
@@ -18,7 +18,7 @@ import sys
 
 import numpy as np
 
-from control.robot_model import unimate_model
+from control.motion.robot_model import unimate_model
 from hw.machine import load_machine
 from kinematics import Unreachable, unimate
 

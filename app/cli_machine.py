@@ -6,7 +6,7 @@ import argparse
 import json
 import sys
 
-from control.robot_model import model_of
+from control.motion.robot_model import model_of
 from hw.machine import Machine, MachineError, load_machine
 
 

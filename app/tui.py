@@ -43,8 +43,8 @@ from app.widgets.messages import (
     RunsChanged,
 )
 from control.client import ControlClient, ControllerError, Event
+from control.motion.robot_model import model_of
 from control.recorder import Run, default_data_dir
-from control.robot_model import model_of
 from hw.machine import Machine, load_machine
 
 HEADER_HZ = 10.0

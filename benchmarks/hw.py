@@ -20,7 +20,7 @@ sys.path.insert(0, str(ROOT))  # ahead of benchmarks/, where this file would sha
 
 from hw.gray import gray_to_binary  # noqa: E402
 from hw.machine import Machine, load_machine  # noqa: E402
-from hw.sim import SimBackend  # noqa: E402
+from hw.sim.backend import SimBackend  # noqa: E402
 
 TICK_NS = 1_000_000
 MOVE_S = 10.0

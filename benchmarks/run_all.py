@@ -38,7 +38,8 @@ sys.path.insert(0, str(ROOT))  # ahead of benchmarks/, whose hw.py would hide th
 
 import numpy as np  # noqa: E402
 
-from control import ControlClient, moves  # noqa: E402
+from control import ControlClient  # noqa: E402
+from control.motion import moves  # noqa: E402
 
 README = ROOT / "README.md"
 RELIABILITY_DOC = ROOT / "docs" / "reliability.md"

@@ -25,7 +25,7 @@ if str(ROOT) not in sys.path[:1]:
     sys.path.insert(0, str(ROOT))  # ahead of benchmarks/, whose hw.py would hide the hw package
 
 from hw.machine import load_machine  # noqa: E402
-from hw.serial_backend import SerialBackend  # noqa: E402
+from hw.serial.backend import SerialBackend  # noqa: E402
 
 LAUNCH = ["-m", "app", "emulate"]
 PERIOD_NS = 1_000_000

@@ -33,8 +33,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # ahead of benchmarks/hw.py
 
-from control import ControlClient, excitation, sysid, trajectory, tuning
-from control.cartesian import CartesianPath, cartesian_path
+from control import ControlClient
+from control.identify import excitation, sysid, tuning
+from control.motion import trajectory
+from control.motion.cartesian import CartesianPath, cartesian_path
 from control.recorder import Run
 from hw.machine import Coefficients, Machine, load_machine
 from kinematics import unimate

@@ -1,7 +1,29 @@
-"""The real-time side: the control subprocess, its shared memory, channel and client."""
+"""The real-time side: the control subprocess, its shared memory, channel and client.
 
-from control.client import ControlClient, ControllerError, Event, MoveHandle, MoveResult
-from control.layout import Flag, LatencyHistogram, Mode, Status
+The client is loaded on first use, so the control process (``python -m
+control.process``) never imports it.
+"""
+
+from __future__ import annotations
+
+from importlib import import_module
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from control.client import ControlClient, ControllerError, Event, MoveHandle, MoveResult
+    from control.layout import Flag, LatencyHistogram, Mode, Status
+
+_EXPORTS = {
+    "ControlClient": "control.client",
+    "ControllerError": "control.client",
+    "Event": "control.client",
+    "MoveHandle": "control.client",
+    "MoveResult": "control.client",
+    "Flag": "control.layout",
+    "LatencyHistogram": "control.layout",
+    "Mode": "control.layout",
+    "Status": "control.layout",
+}
 
 __all__ = [
     "ControlClient",
@@ -14,3 +36,9 @@ __all__ = [
     "MoveResult",
     "Status",
 ]
+
+
+def __getattr__(name: str) -> object:
+    if name not in _EXPORTS:
+        raise AttributeError(f"module 'control' has no attribute {name!r}")
+    return getattr(import_module(_EXPORTS[name]), name)

@@ -18,14 +18,14 @@ def make_backend(machine: Machine, kind: str = "sim", *, port: str | None = None
     ``socket://127.0.0.1:PORT``, or the emulator's pty path).
     """
     if kind == "sim":
-        from hw.sim import SimBackend
+        from hw.sim.backend import SimBackend
 
         return SimBackend(machine, seed=seed, lockstep=lockstep, **sim_options)
     if kind == "serial":
         if not port:
             raise ValueError("the serial backend needs --port URL (a device, pty path or "
                              "socket://HOST:PORT)")
-        from hw.serial_backend import SerialBackend
+        from hw.serial.backend import SerialBackend
 
         return SerialBackend(machine, port)
     raise ValueError(f"unknown backend {kind!r}; choose one of {', '.join(BACKENDS)}")

@@ -1,10 +1,10 @@
 """Identify: system identification and tuning from ``tracking_actuate`` (thesis section 6.3).
 
-Choose a joint and an excitation (steps, PRBS, chirp; ``control.excitation``),
+Choose a joint and an excitation (steps, PRBS, chirp; ``control.identify.excitation``),
 sized from where the joint is now and refused, with the excitation module's
 message, if it could reach an end stop. Run plays it open loop, fits the
-joint's models to the recorded run (``control.sysid``), proposes P.I. gains
-(``control.tuning.propose`` on the current track and hold sets) and predicts
+joint's models to the recorded run (``control.identify.sysid``), proposes P.I. gains
+(``control.identify.tuning.propose`` on the current track and hold sets) and predicts
 the step response of the current and the proposed track set on the identified
 models (``tuning.simulate``). Then a fresh PRBS the fit never saw is played from
 where the joint stopped, and both models' fit on it is shown: the held-out
@@ -38,8 +38,8 @@ from control.recorder import Run
 from hw.machine import Coefficients, Machine
 
 if TYPE_CHECKING:  # the numerics pull in scipy (≈0.9 s): imported when first used
-    from control import excitation, tuning
-    from control.sysid import DeadbandModel, Fit, Identification
+    from control.identify import excitation, tuning
+    from control.identify.sysid import DeadbandModel, Fit, Identification
 
 PROFILES = (("Steps (Figure 3.2 staircase)", "steps"), ("PRBS", "prbs"), ("Chirp", "chirp"))
 STEP_LEVELS = 6  # excitation.steps' default
@@ -72,7 +72,7 @@ def build(machine: Machine, kind: str, joint: int, start: np.ndarray,
           amplitude: float | None, duration: float | None) -> excitation.Excitation:
     """The chosen excitation from ``start (J,)``, ``duration`` s long (None: the module's
     default); ValueError (the module's) if it could hit a stop."""
-    from control import excitation
+    from control.identify import excitation
 
     if kind == "steps":
         options = {} if duration is None else {"hold_s": duration / (2 * STEP_LEVELS)}
@@ -97,7 +97,7 @@ def step_desired(machine: Machine, joint: int, start: np.ndarray) -> np.ndarray:
 def with_kv(coefficients: Coefficients, base: Coefficients,
             ffs: tuple[tuning.FeedForward | None, ...]) -> Coefficients:
     """``coefficients`` with the identified joints' feed-forward; the others keep ``base``'s."""
-    from control import tuning
+    from control.identify import tuning
 
     added = tuning.with_feed_forward(coefficients, ffs)
     kv = tuple(new if ff is not None else (base.kv[j] if base.kv else 0.0)
@@ -230,7 +230,7 @@ class IdentifyTab(TabPage):
 
     def _fit(self, client: ControlClient, run: Run, j: int) -> Outcome:
         """Identify, propose and predict (worker thread)."""
-        from control import sysid, tuning
+        from control.identify import sysid, tuning
 
         m = self.machine
         identification = sysid.identify(run, m, j)
@@ -272,7 +272,7 @@ class IdentifyTab(TabPage):
 
     def _hold_out(self, outcome: Outcome) -> None:
         """Play a fresh PRBS from where the joint is, sized with the identified model."""
-        from control import excitation
+        from control.identify import excitation
 
         ident = outcome.identification
         client, status = self.client, self.status()
@@ -295,7 +295,7 @@ class IdentifyTab(TabPage):
 
     @work(thread=True, group="identify")
     def _check(self, client: ControlClient, handle: MoveHandle, ident: Identification) -> None:
-        from control import sysid
+        from control.identify import sysid
 
         try:
             result = client.wait(handle)

@@ -44,7 +44,6 @@ from textual.widgets import (
 from textual.widgets.option_list import Option
 from textual_plotext import PlotextPlot
 
-from app.path_files import PathFileError, PathPoints, read_path, resample
 from app.tabs.tab import TabPage
 from app.widgets.fields import (
     FieldError,
@@ -58,9 +57,10 @@ from app.widgets.fields import (
 from app.widgets.live_text import LiveText
 from app.widgets.messages import RunsChanged
 from app.widgets.run_plot import draw_path
-from control import moves
 from control.client import MoveHandle, MoveResult
-from control.robot_model import has_unimate_model
+from control.motion import moves
+from control.motion.path_files import PathFileError, PathPoints, read_path, resample
+from control.motion.robot_model import has_unimate_model
 from hw.machine import Machine
 from kinematics import Unreachable
 
@@ -560,8 +560,8 @@ class ViaPointsForm(MoveForm):
         return np.array(rows)
 
     def plan(self, current: np.ndarray, dt: float) -> MovePlan:
-        from control.cartesian import cartesian_path  # scipy's splines: loaded on first use
-        from control.trajectory import via_path
+        from control.motion.cartesian import cartesian_path  # scipy's splines: loaded on first use
+        from control.motion.trajectory import via_path
 
         points = self.points()
         fraction = self.field("speed").value()

@@ -11,7 +11,7 @@ from textual.containers import Horizontal, Vertical
 from textual.validation import ValidationResult, Validator
 from textual.widgets import Input, Label, Select, Static
 
-from app.path_files import MAX_MOVE_S
+from control.motion.path_files import MAX_MOVE_S
 from hw.machine import Joint, Machine
 
 

@@ -18,9 +18,9 @@ from app.coefficient_files import (
     parse_coefficients,
     save_coefficients,
 )
-from app.path_files import PathFileError, parse_csv, parse_tsv, read_path, resample
 from app.widgets.braille import Trace, columns, render
 from app.widgets.run_plot import decimate, steady_velocity
+from control.motion.path_files import PathFileError, parse_csv, parse_tsv, read_path, resample
 from hw.machine import load_machine
 
 UNIMATE = load_machine("unimate2000b")

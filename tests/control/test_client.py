@@ -19,8 +19,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from control import ControlClient, ControllerError, Flag, Mode, moves, shm
+from control import ControlClient, ControllerError, Flag, Mode, shm
 from control.layout import ControlLayout
+from control.motion import moves
 from control.recorder import load_run
 from control.seqlock import SeqlockReader
 from hw.machine import load_machine

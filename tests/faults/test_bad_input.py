@@ -32,15 +32,22 @@ from hypothesis import strategies as st
 
 from app import cli
 from app.coefficient_files import CoefficientFileError, dump_coefficients, parse_coefficients
-from app.path_files import PathFileError, PathPoints, parse_csv, parse_tsv, read_path, resample
 from app.widgets.fields import FieldError, NumberCheck, position_check
 from control import ControlClient
-from control.cartesian import PoseFileError, parse_poses
 from control.layout import MAX_TAPS
-from hw.emulator import EmulatedBoard
+from control.motion.cartesian import PoseFileError, parse_poses
+from control.motion.path_files import (
+    PathFileError,
+    PathPoints,
+    parse_csv,
+    parse_tsv,
+    read_path,
+    resample,
+)
 from hw.machine import Machine, MachineError, load_machine, parse_machine
-from hw.messages import BoardConfig, Config, Duty, Heartbeat, MessageWriter
-from hw.sim import SimBackend
+from hw.serial.emulator import EmulatedBoard
+from hw.serial.messages import BoardConfig, Config, Duty, Heartbeat, MessageWriter
+from hw.sim.backend import SimBackend
 from kinematics import Unreachable, unimate, xyz_fixed
 
 UNIMATE = load_machine("unimate2000b")

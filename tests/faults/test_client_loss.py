@@ -34,7 +34,8 @@ ROOT = Path(__file__).resolve().parents[2]
 CLIENT_SCRIPT = textwrap.dedent("""
     import json, sys
     import numpy as np
-    from control import ControlClient, moves
+    from control import ControlClient
+    from control.motion import moves
 
     data_dir, orphan_s, path_file = sys.argv[1], float(sys.argv[2]), sys.argv[3]
     client = ControlClient("unimate2000b", data_dir=data_dir, orphan_timeout_s=orphan_s)

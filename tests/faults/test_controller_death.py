@@ -16,12 +16,13 @@ import time
 import numpy as np
 import pytest
 
-from control import ControllerError, moves
+from control import ControllerError
+from control.motion import moves
 from control.recorder import load_run
 from hw.backend import LinkCounters
 from hw.gray import gray_to_binary
 from hw.machine import load_machine
-from hw.messages import BOARD_TO_HOST, Event, Flag, MessageReader, Report, Status
+from hw.serial.messages import BOARD_TO_HOST, Event, Flag, MessageReader, Report, Status
 
 UNIMATE = load_machine("unimate2000b")
 ROTATE = UNIMATE.joint_index("rotate")

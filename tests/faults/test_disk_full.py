@@ -19,7 +19,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from control import ControlClient, MoveResult, moves
+from control import ControlClient, MoveResult
+from control.motion import moves
 from control.recorder import RecorderError, load_run, save_run
 from hw.machine import load_machine
 

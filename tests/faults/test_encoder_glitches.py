@@ -14,7 +14,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from control import ControlClient, moves
+from control import ControlClient
+from control.motion import moves
 from control.recorder import Run, load_run
 from hw.machine import load_machine
 

@@ -19,7 +19,8 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from control import ControlClient, Flag, Mode, MoveHandle, Status, moves
+from control import ControlClient, Flag, Mode, MoveHandle, Status
+from control.motion import moves
 from control.recorder import load_run
 from hw.machine import load_machine
 

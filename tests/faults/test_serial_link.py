@@ -19,7 +19,8 @@ from contextlib import contextmanager
 
 import numpy as np
 
-from control import Flag, moves
+from control import Flag
+from control.motion import moves
 from control.recorder import load_run
 from hw.machine import load_machine
 

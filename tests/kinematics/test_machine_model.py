@@ -1,5 +1,5 @@
 """The machine file's DH table and limits are the model the kinematics package solves
-(``control.robot_model``), and ``Unimate2000B.from_links`` takes only that form."""
+(``control.motion.robot_model``), and ``Unimate2000B.from_links`` takes only that form."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from control.robot_model import dh_links, model_of, unimate_model
+from control.motion.robot_model import dh_links, model_of, unimate_model
 from hw.machine import MachineError, load_machine
 from kinematics import dh, unimate
 from kinematics.unimate import Unimate2000B

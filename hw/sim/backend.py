@@ -1,9 +1,9 @@
 """The simulator backend: hydraulic plant, UPP card PWM and encoders behind ``Backend``.
 
 Like ros2_control's ``GenericSystem`` this is a real backend, not a test
-double: the plant (:mod:`hw.plant`) is advanced lazily to the clock's time on
+double: the plant (:mod:`hw.sim.plant`) is advanced lazily to the clock's time on
 every ``read``/``write``, in steps of at most 1 ms, and the encoders
-(:mod:`hw.encoders`) latch what they would have seen. With ``lockstep=True``
+(:mod:`hw.sim.encoders`) latch what they would have seen. With ``lockstep=True``
 the clock is a ``StepClock``: time passes only when the control loop sleeps
 until its next deadline, so a 10 s move simulates in a fraction of a second
 and every run with the same seed gives the same raw words.
@@ -16,10 +16,10 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from hw.backend import LinkCounters, RealClock, StepClock
-from hw.encoders import GrayEncoderBoard, QuadratureEncoder
 from hw.machine import Machine
-from hw.plant import MAX_STEP_S, Plant
-from hw.valve import next_period_ns, quantise_duty
+from hw.sim.encoders import GrayEncoderBoard, QuadratureEncoder
+from hw.sim.plant import MAX_STEP_S, Plant
+from hw.sim.valve import next_period_ns, quantise_duty
 
 MAX_CATCH_UP_NS = 1_000_000_000  # a plant left alone longer is simulated for the last second only
 

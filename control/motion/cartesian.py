@@ -48,7 +48,7 @@ Pose files (``read_poses``): CSV with a header, columns ``x, y, z`` (mm) and
 optionally ``t`` (s from the start of the move) and ``gamma, beta, alpha``
 (deg). Each row is a via point after the start. Given orientation columns must
 agree with the rule above (they are checked, not used). Malformed lines are
-reported by line number, in the style of ``app/path_files.py``.
+reported by line number, in the style of ``control/motion/path_files.py``.
 """
 
 from __future__ import annotations
@@ -61,8 +61,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.interpolate import CubicSpline
 
-from control.file_fields import csv_lines, field_number, read_text_file
-from control.robot_model import unimate_model
+from control.motion.file_fields import csv_lines, field_number, read_text_file
+from control.motion.robot_model import unimate_model
 from hw.machine import Machine
 from kinematics import unimate, xyz_fixed
 from kinematics.unimate import Unimate2000B

@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from hw.valve import LPM, Valve, next_period_ns, orifice_flow, quantise_duty
+from hw.sim.valve import LPM, Valve, next_period_ns, orifice_flow, quantise_duty
 
 
 @pytest.mark.parametrize(("duty", "out"), [

@@ -2,7 +2,7 @@
 
 ``EmulatedBoard`` is the board's firmware: the protocol state machine (configure,
 hold, run, the 50 ms valve watchdog, the E-stop input) driving a plant backend
-(normally ``hw.sim.SimBackend`` in real time) through the same ``Backend``
+(normally ``hw.sim.backend.SimBackend`` in real time) through the same ``Backend``
 interface the control loop uses. ``PtyPort`` and ``TcpPort`` carry its bytes;
 ``Emulator`` runs the loop: wait on the port until the next timed duty (a
 watchdog deadline, a heartbeat), feed what arrived, send what the board says.
@@ -25,7 +25,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from hw.backend import Backend, LinkCounters
-from hw.messages import (
+from hw.serial.messages import (
     DUTY_MAX,
     DUTY_SCALE,
     HOST_TO_BOARD,

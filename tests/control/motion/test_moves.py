@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
-from control import moves
-from control.moves import SETTLE_TAIL_S, StepSummary, summary
+from control.motion import moves
+from control.motion.moves import SETTLE_TAIL_S, StepSummary, summary
 from hw.machine import load_machine
 
 UNIMATE = load_machine("unimate2000b")

@@ -9,7 +9,7 @@ within ±``DUTY_MAX``; encoder words are raw, unsigned 32-bit; board times are
 microseconds of a free-running, wrapping 32-bit counter.
 
 ``MessageWriter`` and ``MessageReader`` add the frame layer
-(``hw.cobs_frame``) and the sequence-number rules: each direction numbers its
+(``hw.serial.frame``) and the sequence-number rules: each direction numbers its
 frames with its own wrapping u16; a receiver accepts a frame only if its number
 is newer than the last one accepted (modular difference 1…32767) and counts the
 rest as out of order. A resynchronising type (CONFIG towards the board,
@@ -25,8 +25,8 @@ from enum import IntEnum, IntFlag
 from typing import ClassVar
 
 from hw.backend import LinkCounters
-from hw.cobs_frame import HEADER_SIZE, SEQ_MOD, FrameReader, FrameWriter, wire_size
 from hw.machine import Machine
+from hw.serial.frame import HEADER_SIZE, SEQ_MOD, FrameReader, FrameWriter, wire_size
 
 PROTOCOL_VERSION = 1
 DUTY_SCALE = 100

@@ -13,9 +13,11 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from control import ControlClient, excitation, moves, shm, sysid, trajectory, tuning
+from control import ControlClient, shm
+from control.identify import excitation, sysid, tuning
+from control.identify.sysid import DeadbandModel
 from control.law import DifferenceLaw, pi, pid
-from control.sysid import DeadbandModel
+from control.motion import moves, trajectory
 from hw.machine import Coefficients, Machine, load_machine
 
 UNIMATE = load_machine("unimate2000b")

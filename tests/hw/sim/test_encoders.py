@@ -9,9 +9,9 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from hw.encoders import GrayEncoderBoard, Lamp, QuadratureEncoder
 from hw.gray import gray_to_binary
 from hw.machine import load_machine
+from hw.sim.encoders import GrayEncoderBoard, Lamp, QuadratureEncoder
 
 UNIMATE = load_machine("unimate2000b")
 MS = 1_000_000

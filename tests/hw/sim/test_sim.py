@@ -8,7 +8,7 @@ from hw.backend import Backend, LinkCounters, RealClock, StepClock
 from hw.factory import make_backend
 from hw.gray import gray_to_binary
 from hw.machine import load_machine
-from hw.sim import SimBackend
+from hw.sim.backend import SimBackend
 
 UNIMATE = load_machine("unimate2000b")
 RIG = load_machine("rig")

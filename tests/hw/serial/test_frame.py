@@ -7,7 +7,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from hw.backend import LinkCounters
-from hw.cobs_frame import (
+from hw.machine import load_machine
+from hw.serial.frame import (
     MAX_ENCODED,
     FrameReader,
     FrameWriter,
@@ -16,8 +17,7 @@ from hw.cobs_frame import (
     crc16,
     wire_size,
 )
-from hw.machine import load_machine
-from hw.messages import (
+from hw.serial.messages import (
     BOARD_TO_HOST,
     HOST_TO_BOARD,
     BoardConfig,

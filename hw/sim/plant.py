@@ -3,7 +3,7 @@
 Every joint is the same physical model with its own numbers (the machine file's
 ``[plant]`` and ``[joints.plant]`` sections, documented in docs/simulator.md):
 
-* A servo valve (:mod:`hw.valve`) feeds one chamber from supply ``ps`` and
+* A servo valve (:mod:`hw.sim.valve`) feeds one chamber from supply ``ps`` and
   drains the other to tank. Chamber ``a`` drives the joint towards larger
   readings, chamber ``b`` towards smaller; positive duty feeds ``a`` when the
   joint's valve polarity is +1 and ``b`` when it is -1. The Unimate's In/Out
@@ -66,13 +66,13 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 from hw.machine import Joint, Machine, MachineError
-from hw.valve import Valve
+from hw.sim.valve import Valve
 
 GRAVITY = 9.81  # m/s^2
 VAPOUR_PA = -1.0e5  # gauge pressure at which oil cavitates (absolute zero)
 MAX_STEP_S = 1.0e-3  # longest integration step
 
-# machine-level [plant] keys; the lamp_* and photocell_* keys are read by hw.encoders
+# machine-level [plant] keys; the lamp_* and photocell_* keys are read by hw.sim.encoders
 MACHINE_KEYS = {"supply_mpa", "relief_mpa", "bulk_modulus_mpa", "column_loss_ms",
                 "spool_time_ms", "valve_rated_drop_mpa",
                 "lamp_cool_ms", "lamp_ripple", "photocell_spread", "lamp_dropouts_per_s"}
@@ -403,7 +403,7 @@ def _chamber(p0: float, c: float, leak: float, leak_sum: float, dvdt: float,
              conductance: float, source: float) -> float:
     """Backward-Euler chamber pressure after one step, solved in closed form.
 
-    The orifice term is :func:`hw.valve.orifice_flow` from ``source`` into the chamber.
+    The orifice term is :func:`hw.sim.valve.orifice_flow` from ``source`` into the chamber.
 
     Solves ``p = p0 + c * (leak * (ps + pt - 2 p) - dV/dt + g * sign(src - p) sqrt|src - p|)``
     with ``c = h beta / V``: the leak terms fold into ``p0`` and ``c``, the orifice

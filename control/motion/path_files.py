@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from control.file_fields import csv_lines, field_number, read_text_file
+from control.motion.file_fields import csv_lines, field_number, read_text_file
 from hw.machine import Machine
 
 TIME_NAMES = ("t", "time", "t [s]", "time [s]")

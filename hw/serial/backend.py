@@ -28,7 +28,7 @@ import serial
 
 from hw.backend import LinkCounters, RealClock
 from hw.machine import Machine
-from hw.messages import (
+from hw.serial.messages import (
     BOARD_TO_HOST,
     DUTY_MAX,
     DUTY_SCALE,

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from control import cartesian
-from control.cartesian import (
+from control.motion import cartesian
+from control.motion.cartesian import (
     PoseFileError,
     cartesian_path,
     parse_poses,

@@ -7,12 +7,12 @@ from pathlib import Path
 import pytest
 
 from hw.machine import Machine, MachineError, load_machine, parse_machine
-from hw.plant import Plant
-from hw.valve import quantise_duty
+from hw.sim.plant import Plant
+from hw.sim.valve import quantise_duty
 
 UNIMATE = load_machine("unimate2000b")
 RIG = load_machine("rig")
-MACHINES = Path(__file__).resolve().parents[2] / "hw" / "machines"
+MACHINES = Path(__file__).resolve().parents[3] / "hw" / "machines"
 STEP = 1e-3
 
 

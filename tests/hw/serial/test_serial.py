@@ -19,11 +19,12 @@ from collections.abc import Callable, Iterator, Sequence
 import pytest
 
 from hw.backend import LinkCounters
-from hw.cobs_frame import FrameWriter
-from hw.emulator import FIRMWARE, EmulatedBoard
 from hw.gray import gray_to_binary
 from hw.machine import Machine, load_machine
-from hw.messages import (
+from hw.serial.backend import BoardClock, BoardError, SerialBackend
+from hw.serial.emulator import FIRMWARE, EmulatedBoard
+from hw.serial.frame import FrameWriter
+from hw.serial.messages import (
     BOARD_TO_HOST,
     BoardConfig,
     Config,
@@ -39,8 +40,7 @@ from hw.messages import (
     NakReason,
     Status,
 )
-from hw.serial_backend import BoardClock, BoardError, SerialBackend
-from hw.sim import SimBackend
+from hw.sim.backend import SimBackend
 
 PATIENT_S = 1.0  # link timeout of the tests that are not about it: a busy machine stalls processes
 UNIMATE = load_machine("unimate2000b")

@@ -48,7 +48,7 @@ from statistics import NormalDist
 
 from hw.gray import binary_to_gray
 from hw.machine import Machine, MachineError
-from hw.plant import MACHINE_KEYS, PlantKeys
+from hw.sim.plant import MACHINE_KEYS, PlantKeys
 
 STANDARD_NORMAL = NormalDist()
 

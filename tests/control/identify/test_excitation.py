@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from control import excitation
-from control.excitation import chirp, combine, lfsr_signs, prbs, steps, worst_case
-from control.sysid import nominal
+from control.identify import excitation
+from control.identify.excitation import chirp, combine, lfsr_signs, prbs, steps, worst_case
+from control.identify.sysid import nominal
 from hw.machine import load_machine
 
 UNIMATE = load_machine("unimate2000b")

@@ -15,9 +15,11 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from control import ControlClient, excitation, shm, sysid, trajectory
+from control import ControlClient, shm
+from control.identify import excitation, sysid
+from control.identify.sysid import DeadbandModel
+from control.motion import trajectory
 from control.recorder import Run
-from control.sysid import DeadbandModel
 from hw.machine import load_machine
 
 UNIMATE = load_machine("unimate2000b")

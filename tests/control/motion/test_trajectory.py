@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from control.trajectory import MONOTONE_CAP, peak_ratios, via_path, via_velocities
+from control.motion.trajectory import MONOTONE_CAP, peak_ratios, via_path, via_velocities
 from hw.machine import load_machine
 
 UNIMATE = load_machine("unimate2000b")

@@ -57,8 +57,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy import signal
 
+from control.identify.sysid import DeadbandModel
 from control.law import DifferenceLaw, output_min_pwm, valve_duty
-from control.sysid import DeadbandModel
 from hw.machine import Coefficients, Joint, Machine
 
 DEFAULT_MS = 2.0

@@ -46,7 +46,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike
 
-from control.sysid import DeadbandModel, nominal
+from control.identify.sysid import DeadbandModel, nominal
 from hw.machine import Joint, Machine
 
 MARGIN = 1.5  # the velocity line's gain may be off by this factor either way

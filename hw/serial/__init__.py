@@ -1,0 +1,1 @@
+"""The serial I/O board: frames, messages, the backend and the board emulator."""
