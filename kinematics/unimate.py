@@ -42,8 +42,8 @@ free stays where it is and the others follow):
   near's (the wrist point is Rot(θ2)·(d3 + Lb·cθ4, a2 + Lb·sθ4) from the
   shoulder, solved like eq. 4.17, Swivel last). If neither is inside the limits
   the pose is reported unreachable with a hint to pass another ``near``;
-- wrist point on the Rotate axis (outside the Unimate's workspace, as d3 ≥ 976
-  mm keeps it at least 585 mm away): Rotate = near's Rotate and that + 180°.
+- wrist point on the Rotate axis (outside the Unimate's workspace: the In/Out
+  lower limit keeps it far away): Rotate = near's Rotate and that + 180°.
 
 Near a wrist singularity the pose is still met to round-off, but the joints are
 ill-conditioned: θ6 comes from the O(sin θ5) components z1·n, z1·o, so round-off
@@ -51,13 +51,30 @@ in the pose moves the solution by ~1e-14/sin θ5 (deg or mm) along the family
 of configurations that nearly reach it. A configuration sitting on a joint
 limit with |θ5| below ~0.005° can therefore come back just outside the limit
 (beyond LIMIT_TOL) and be reported unreachable.
+
+The numbers. Table 4.1's lengths and the joint limits are machine data and live
+in the machine file only; a ``Unimate2000B`` has no defaults.
+``control.motion.robot_model`` builds one from any ``hw.Machine`` (that is how
+the app, the control process and ``servodesk fk/ik`` get theirs). ``MODEL`` and
+the module-level ``forward``, ``pose``, ``inverse``, ``inverse_batch`` use the
+built-in machine, ``hw/machines/unimate2000b.toml``, read on first use. This
+package imports nothing of the project, so that read is a data read: the file is
+found beside the ``hw`` package (``importlib.util.find_spec``, which locates a
+top-level package without running it) and its ``[kinematics] dh`` rows and
+joint limits are taken with ``tomllib``. ``hw.machine`` remains the file's one
+validating loader; the tests hold the model read here equal to
+``robot_model.unimate_model(load_machine("unimate2000b"))``.
 """
 
 from __future__ import annotations
 
+import functools
+import importlib.util
 import math
+import tomllib
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -68,7 +85,10 @@ from kinematics.dh import forward as dh_forward
 
 JOINTS = ("In/Out", "Rotate", "Up/Down", "Bend", "Yaw", "Swivel")
 UNITS = ("mm", "°", "°", "°", "°", "°")
-# Distance metric for ranking solutions: 10 mm of In/Out count as much as 1° of a revolute joint.
+# The built-in machine's file, in the hw package's folder: the numbers of MODEL.
+MACHINE_FILE = Path("machines", "unimate2000b.toml")
+# Distance metric for ranking solutions, a choice of this solver rather than a property of
+# the machine: 10 mm of In/Out count as much as 1° of a revolute joint.
 MM_PER_DEGREE = 10.0
 # Round-off (mm or deg) allowed at a joint limit; a solution this close is clipped onto the limit.
 LIMIT_TOL = 1e-9
@@ -111,18 +131,20 @@ class InverseBatch:
 
 @dataclass(frozen=True)
 class Unimate2000B:
-    """Unimate 2000B geometry (Table 4.1, mm) and joint limits (actuator order, mm and deg).
+    """Unimate 2000B geometry (Table 4.1's lengths, mm) and joint limits (actuator order, mm
+    and deg), all from a machine file (module docstring): no defaults.
 
     ``d1`` base height, ``a2`` Up/Down offset, ``lb`` = d5 Bend-to-Yaw length,
-    ``ly`` = d6 Yaw-to-tool length. Limits are rtshare.h's limit_neg/limit_pos.
+    ``ly`` = d6 Yaw-to-tool length. The built-in file's limits are rtshare.h's
+    limit_neg/limit_pos.
     """
 
-    d1: float = 1066.8
-    a2: float = 120.65
-    lb: float = 200.0
-    ly: float = 440.0
-    lower: tuple[float, ...] = (976.0, -110.0, -27.0, -110.0, -169.0, -180.0)
-    upper: tuple[float, ...] = (2041.0, 110.0, 30.0, 110.0, 174.0, 180.0)
+    d1: float
+    a2: float
+    lb: float
+    ly: float
+    lower: tuple[float, ...]
+    upper: tuple[float, ...]
 
     def __post_init__(self) -> None:
         if len(self.lower) != 6 or len(self.upper) != 6:
@@ -130,6 +152,19 @@ class Unimate2000B:
         for name, lo, hi in zip(JOINTS, self.lower, self.upper, strict=True):
             if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
                 raise ValueError(f"{name} limits {lo:g}…{hi:g} must be finite with lower < upper")
+
+    @classmethod
+    def from_table(cls, links: Sequence[DHLink], drives: Sequence[int], lower: Sequence[float],
+                   upper: Sequence[float], names: Sequence[str] = JOINTS) -> Unimate2000B:
+        """The model of a machine file's DH table: ``links`` in the table's order,
+        ``drives[i]`` the actuator whose variable row i carries, ``names`` the machine's
+        actuator names (for the error). The rows must drive θ1, θ2, d3, θ4, θ5, θ6
+        (``DH_ORDER``) and have ``from_links``'s form; ValueError says what differs.
+        """
+        if tuple(drives) != DH_ORDER:
+            raise ValueError("rows must drive " + ", ".join(JOINTS[j] for j in DH_ORDER)
+                             + " in that order, got " + ", ".join(names[j] for j in drives))
+        return cls.from_links(links, lower, upper)
 
     @classmethod
     def from_links(cls, links: Sequence[DHLink], lower: Sequence[float],
@@ -542,8 +577,72 @@ def _vector(v: ArrayLike, what: str) -> list[float]:
     return values
 
 
-MODEL = Unimate2000B()
-forward = MODEL.forward
-pose = MODEL.pose
-inverse = MODEL.inverse
-inverse_batch = MODEL.inverse_batch
+# --- the built-in machine ------------------------------------------------------------------
+
+MODEL: Unimate2000B  # the built-in machine's model, read on first use (module __getattr__)
+
+
+def __getattr__(name: str) -> Unimate2000B:
+    """``MODEL``, built from the built-in machine file on first use (PEP 562)."""
+    if name == "MODEL":
+        return default_model()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+@functools.cache
+def default_model() -> Unimate2000B:
+    """The model of the built-in machine file (module docstring), read once."""
+    path = _machine_file()
+    return _model_of_file(path.read_text(encoding="utf-8"), path.name)
+
+
+def forward(q: ArrayLike) -> np.ndarray:
+    """``MODEL.forward``: ``T_6^0`` (eq. 4.11) of ``q: (..., 6)`` (mm, deg) → ``(..., 4, 4)``."""
+    return default_model().forward(q)
+
+
+def pose(q: ArrayLike) -> np.ndarray:
+    """``MODEL.pose``: x, y, z (mm), γ, β, α (deg) of ``q: (..., 6)`` → ``(..., 6)``."""
+    return default_model().pose(q)
+
+
+def inverse(p: ArrayLike, near: ArrayLike | None = None) -> np.ndarray:
+    """``MODEL.inverse``: every in-limit solution of pose ``p: (6,)``, nearest ``near`` first."""
+    return default_model().inverse(p, near)
+
+
+def inverse_batch(p: ArrayLike, near: ArrayLike | None = None) -> InverseBatch:
+    """``MODEL.inverse_batch``: all 8 branches of poses ``p: (..., 6)``."""
+    return default_model().inverse_batch(p, near)
+
+
+def _machine_file() -> Path:
+    """The built-in machine file, located beside the ``hw`` package without importing it."""
+    spec = importlib.util.find_spec("hw")
+    if spec is None or not spec.submodule_search_locations:
+        raise ModuleNotFoundError(
+            "the built-in Unimate 2000B model reads hw/machines/unimate2000b.toml, but the hw "
+            "package is not installed (pip install servodesk); or build a Unimate2000B from a "
+            "machine file with control.motion.robot_model.unimate_model")
+    return Path(next(iter(spec.submodule_search_locations))) / MACHINE_FILE
+
+
+def _model_of_file(text: str, name: str) -> Unimate2000B:
+    """The model of a machine file's text: its ``[kinematics] dh`` rows (each naming the
+    joint it drives) and its ``[[joints]]`` kinds and limits. ``name`` names the file."""
+    try:
+        doc = tomllib.loads(text)
+        joints = doc["joints"]
+        keys = [joint["key"] for joint in joints]
+        rows = doc["kinematics"]["dh"]
+        drives = [keys.index(row["joint"]) for row in rows]
+        links = [DHLink(float(row["alpha"]), float(row["a"]), float(row["d"]),
+                        float(row["theta"]), joints[j]["kind"] == "prismatic")
+                 for row, j in zip(rows, drives, strict=True)]
+        lower = [float(joint["limits"][0]) for joint in joints]
+        upper = [float(joint["limits"][1]) for joint in joints]
+        return Unimate2000B.from_table(links, drives, lower, upper,
+                                       [joint["name"] for joint in joints])
+    except (KeyError, TypeError, ValueError, tomllib.TOMLDecodeError) as exc:
+        raise ValueError(f"{name}: no Unimate 2000B model ({type(exc).__name__}: {exc}); "
+                         f"hw.machine.load_machine names the key at fault") from None

@@ -6,13 +6,15 @@ actuator order; each row names the joint whose variable it carries). A file with
 lengths and joint limits, so a re-measured or modified Unimate is a TOML file away;
 ``hw`` stays free of kinematics, and every user of a pose (the Status tab, the
 end-point and Cartesian moves, ``servodesk fk/ik``) goes through here.
+``kinematics.unimate.MODEL`` is the built-in file's model, equal to
+``unimate_model(load_machine("unimate2000b"))``.
 """
 
 from __future__ import annotations
 
 from hw.machine import Machine, MachineError
 from kinematics.dh import DHLink
-from kinematics.unimate import DH_ORDER, JOINTS, Unimate2000B
+from kinematics.unimate import Unimate2000B
 
 UNIMATE = "unimate2000b"
 
@@ -41,10 +43,7 @@ def unimate_model(machine: Machine) -> Unimate2000B:
                          "[kinematics] model): poses, end points and Cartesian paths need it")
     links, order = dh_links(machine)
     try:
-        if order != DH_ORDER:
-            raise ValueError("rows must drive " + ", ".join(JOINTS[j] for j in DH_ORDER)
-                             + " in that order, got "
-                             + ", ".join(machine.joints[j].name for j in order))
-        return Unimate2000B.from_links(links, machine.lower, machine.upper)
+        return Unimate2000B.from_table(links, order, machine.lower, machine.upper,
+                                       [j.name for j in machine.joints])
     except ValueError as exc:
         raise MachineError(f"{machine.path.name}: kinematics.dh: {exc}") from None

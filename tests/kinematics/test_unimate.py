@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -15,7 +16,7 @@ from kinematics.unimate import MM_PER_DEGREE, MODEL, Unimate2000B
 LOWER = np.array(MODEL.lower)
 UPPER = np.array(MODEL.upper)
 WEIGHTS = np.array([1 / MM_PER_DEGREE, 1, 1, 1, 1, 1])
-D1, A2, LB, LY = 1066.8, 120.65, 200.0, 440.0
+D1, A2, LB, LY = 1066.8, 120.65, 200.0, 440.0  # Table 4.1 typed from the thesis, not the file
 
 
 def random_joints(n: int, seed: int) -> np.ndarray:
@@ -275,7 +276,7 @@ def test_swivel_at_180_takes_the_copy_nearest_near() -> None:
 
 
 def test_other_geometry_round_trips() -> None:
-    model = Unimate2000B(d1=900.0, a2=80.0, lb=150.0, ly=300.0)
+    model = replace(MODEL, d1=900.0, a2=80.0, lb=150.0, ly=300.0)
     q = random_joints(2000, seed=27)
     result = model.inverse_batch(model.pose(q), near=q)
     np.testing.assert_allclose(result.best, q, atol=1e-6)
@@ -360,8 +361,8 @@ def test_wrist_point_on_the_rotate_axis_holds_rotate_at_near() -> None:
     """The wrist point's reach from the Rotate axis is c2·d3 - a2·s2 + Lb·c(θ2 + θ4)
     (App. A (8)), zero at θ2 = 0, d3 = -Lb·cθ4: outside the Unimate's In/Out limits, so
     shown on a model without them. θ1 is then free and kept at near's."""
-    model = Unimate2000B(lower=(-3000.0, -180.0, -180.0, -180.0, -180.0, -180.0),
-                         upper=(3000.0, 180.0, 180.0, 180.0, 180.0, 180.0))
+    model = replace(MODEL, lower=(-3000.0, -180.0, -180.0, -180.0, -180.0, -180.0),
+                    upper=(3000.0, 180.0, 180.0, 180.0, 180.0, 180.0))
     q = np.array([-LB * math.cos(math.radians(30.0)), 25.0, 0.0, 30.0, 50.0, 10.0])
     t = model.forward(q)
     assert np.hypot(*(t[:2, 3] - LY * t[:2, 2])) < 1e-9
@@ -479,7 +480,7 @@ def test_inverse_batch_rejects_a_mismatched_near() -> None:
 
 def test_model_rejects_bad_limits() -> None:
     with pytest.raises(ValueError, match="Up/Down limits 30…-27"):
-        Unimate2000B(lower=(976.0, -110.0, 30.0, -110.0, -169.0, -180.0),
-                     upper=(2041.0, 110.0, -27.0, 110.0, 174.0, 180.0))
+        replace(MODEL, lower=(976.0, -110.0, 30.0, -110.0, -169.0, -180.0),
+                upper=(2041.0, 110.0, -27.0, 110.0, 174.0, 180.0))
     with pytest.raises(ValueError, match="6 lower and 6 upper"):
-        Unimate2000B(lower=(0.0,) * 5)
+        replace(MODEL, lower=(0.0,) * 5)
