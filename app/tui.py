@@ -43,6 +43,7 @@ from app.widgets.messages import (
     RunsChanged,
 )
 from control.client import ControlClient, ControllerError, Event
+from control.events import Died, EStop, Fault, Initialised, Notice, Refused
 from control.motion.robot_model import model_of
 from control.recorder import Run, default_data_dir
 from hw.machine import Machine, load_machine
@@ -260,32 +261,27 @@ class ServodeskApp(App[None]):
             return
         if self._held_back(message):
             return
-        event = message.event
-        kind, payload = event.kind, event.payload
-        if kind == "estop":
-            if payload.get("latched"):
-                reason = str(payload.get("reason", ""))
+        match message.event.record:
+            case EStop(latched=True, reason=reason):
                 self._fault("estop", f"E-STOP latched: {reason}. "
                                      f"{estop_advice(reason, self.port)}")
-            else:
+            case EStop(latched=False):
                 self._link(estop_sent=False)
                 if self.fault_kind == "estop":
                     self.action_dismiss_fault()
                 self.notify("E-stop released: every joint holds where it is")
-        elif kind == "fault":
-            fault = str(payload.get("kind", ""))
-            self._fault(fault, f"{event.message}. {FAULT_ADVICE.get(fault, '')}".strip())
-        elif kind == "died":
-            self._died()
-            self._fault("died", event.message)
-        elif kind == "notice":
-            self.notify(event.message, title="controller", timeout=6)
-        elif kind == "move_done" and int(payload.get("move_id", -1)) == 0:
-            status = str(payload.get("status", ""))
-            moves = self.tab("moves")
-            assert isinstance(moves, MovesTab)
-            moves.initialised(status)
-            self.notify(f"initialise: {status}")
+            case Fault(kind=kind, message=text):
+                self._fault(kind, f"{text}. {FAULT_ADVICE.get(kind, '')}".strip())
+            case Died(message=text):
+                self._died()
+                self._fault("died", text)
+            case Notice() | Refused() as record:
+                self.notify(record.message, title="controller", timeout=6)
+            case Initialised(status=status):
+                moves = self.tab("moves")
+                assert isinstance(moves, MovesTab)
+                moves.initialised(status)
+                self.notify(f"initialise: {status}")
 
     def _fault(self, kind: str, message: str) -> None:
         self.fault_kind = kind

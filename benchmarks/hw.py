@@ -18,9 +18,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # ahead of benchmarks/, where this file would shadow the hw package
 
-from hw.gray import gray_to_binary  # noqa: E402
 from hw.machine import Machine, load_machine  # noqa: E402
 from hw.sim.backend import SimBackend  # noqa: E402
+from hw.transmission import Transmission, valve_duty  # noqa: E402
 
 TICK_NS = 1_000_000
 MOVE_S = 10.0
@@ -52,6 +52,8 @@ def unimate_move(machine: Machine) -> tuple[float, list[float], list[int]]:
     goal = [1800.0, 60.0, 20.0, -60.0, 45.0, 90.0]
     pi = machine.coefficients["thesis_pi"]
     raw, duty, q, integral = [0] * n, [0.0] * n, list(start), [0.0] * n
+    transmission = Transmission(machine)
+    zero, actuator, reading, output = [0] * n, [0.0] * n, [0.0] * n, [0.0] * n
     late_error = [0.0] * n
     ticks = round(MOVE_S * 1e9 / TICK_NS)
     sim.open()
@@ -59,13 +61,11 @@ def unimate_move(machine: Machine) -> tuple[float, list[float], list[int]]:
     for k in range(ticks):
         sim.read(raw)
         blend = 0.5 - 0.5 * math.cos(math.pi * min(k / (0.8 * ticks), 1.0))
+        transmission.actuators_from_words(raw, zero, actuator)
+        transmission.joints_from_actuators(actuator, reading)
         for j, joint in enumerate(machine.joints):
-            cal = joint.encoder
-            reading = cal.gradient * gray_to_binary(raw[j]) + cal.constant
-            if cal.coupled_to is not None:
-                reading += cal.coupling * q[cal.coupled_to]
-            if abs(reading - q[j]) < 5.0 * joint.tolerance + joint.max_speed * 2e-3:
-                q[j] = reading  # a jump no joint can make is a glitch: keep the last reading
+            if abs(reading[j] - q[j]) < 5.0 * joint.tolerance + joint.max_speed * 2e-3:
+                q[j] = reading[j]  # a jump no joint can make is a glitch: keep the last one
             error = start[j] + blend * (goal[j] - start[j]) - q[j]
             if k >= ticks - 1000:
                 late_error[j] = max(late_error[j], abs(error))
@@ -75,7 +75,8 @@ def unimate_move(machine: Machine) -> tuple[float, list[float], list[int]]:
                 u = (1.0 - joint.min_pwm_pos / 100.0) * u + joint.min_pwm_pos
             elif u < 0.0:
                 u = (1.0 - joint.min_pwm_neg / 100.0) * u - joint.min_pwm_neg
-            duty[j] = u * joint.polarity
+            output[j] = u
+        transmission.valve_duties(output, duty)
         sim.write(duty)
         sim.clock.sleep_until(sim.clock.now_ns() + TICK_NS)
     return time.perf_counter() - t0, late_error, sim.wrong_readings()
@@ -107,7 +108,7 @@ def rig_steps(machine: Machine) -> tuple[float, float, float]:
         integral = min(max(integral + pid.ki[0] * errors[0] * 1e-3, -50.0), 50.0)
         u = pid.kp[0][0] * errors[0] + pid.kd[0] * derivative / (pid.filter_divisor * 1e-3)
         u = min(max(u + integral, -100.0), 100.0)
-        sim.write([u if u >= 0.0 else u * joint.down_scale])
+        sim.write([valve_duty(joint, u)])
         sim.clock.sleep_until(sim.clock.now_ns() + TICK_NS)
         if k >= ticks // 2 and arrived is None and position <= 200.5:
             arrived = k

@@ -29,6 +29,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from control import ControlClient
 from control.client import SPIN_US
 from control.layout import HIST_BIN_NS
+from hw.transmission import valve_duty
 
 TABLE_2_1 = {"min_us": 11.5, "mean_us": 13.97, "max_us": 54.0, "ticks": 100_290}
 
@@ -100,7 +101,7 @@ def command_latency(client: ControlClient, samples: int = 300) -> np.ndarray:
         duty = 5.0 + i % 2  # small: the joint barely moves
         client.jog_joint(0, duty)
         t0 = time.perf_counter()
-        target = joint.polarity * duty
+        target = valve_duty(joint, duty)
         while client.status().valve[0] != target:
             if time.perf_counter() - t0 > 1.0:
                 break

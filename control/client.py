@@ -32,6 +32,25 @@ import numpy as np
 
 import control
 from control import process, shm
+from control.commands import (
+    MOVE_KINDS,
+    Command,
+    EmergencyStop,
+    Heartbeat,
+    Hold,
+    Initialise,
+    Inject,
+    JogPosition,
+    Manual,
+    Reset,
+    SetCoefficients,
+    Shutdown,
+    StartMove,
+    check_coefficients,
+    finite,
+    joint_index,
+)
+from control.events import ControllerEvent, Crash, Died, Fault, MoveDone, Ready
 from control.layout import ControlLayout, LatencyHistogram, MoveLayout, Status
 from control.recorder import Run, RunFiles, coefficients_record, default_data_dir, save_run
 from control.runs import run_from_record, start_stamp
@@ -50,16 +69,23 @@ class ControllerError(RuntimeError):
 
 @dataclass(frozen=True)
 class Event:
-    """Something the controller (or the client's watchdog) reported."""
+    """Something the controller (or the client's watchdog) reported: a typed record from
+    ``control.events`` and when it arrived. ``kind`` and ``payload`` are the record's."""
 
-    kind: str
-    payload: dict
+    record: ControllerEvent
     wall: float = field(default_factory=time.monotonic)
 
     @property
+    def kind(self) -> str:
+        return self.record.KIND
+
+    @property
+    def payload(self) -> dict[str, object]:
+        return self.record.payload
+
+    @property
     def message(self) -> str:
-        return str(self.payload.get("message") or self.payload.get("status")
-                   or self.payload.get("reason") or self.kind)
+        return str(self.record.message)
 
 
 @dataclass(frozen=True)
@@ -187,7 +213,7 @@ class ControlClient:
         self._stopping = True
         if not self.dead:
             with contextlib.suppress(OSError, ValueError):
-                self._send("stop")
+                self._send(Shutdown())
             with contextlib.suppress(subprocess.TimeoutExpired):
                 self._process.wait(timeout=3.0)
         self._closing.set()
@@ -205,17 +231,16 @@ class ControlClient:
         while time.monotonic() < deadline:
             if self._conn.poll(0.05):
                 try:
-                    kind, payload = self._conn.recv()
+                    record = self._conn.recv()
                 except EOFError:
                     break
-                if kind == "ready":
-                    self.notice = str(payload.get("notice", ""))
-                    self.realtime = bool(payload.get("realtime"))
+                if isinstance(record, Ready):
+                    self.notice = record.notice
+                    self.realtime = record.realtime
                     return
-                if kind == "crash":
-                    raise ControllerError(f"control process failed to start: "
-                                          f"{payload['message']}")
-                self._dispatch(Event(kind, payload))
+                if isinstance(record, Crash):
+                    raise ControllerError(f"control process failed to start: {record.message}")
+                self._dispatch(Event(record))
             elif not self.alive:
                 break
         code = self._process.poll()
@@ -225,11 +250,15 @@ class ControlClient:
 
     def _last_words(self) -> str:
         """The last line the controller wrote to stderr (its traceback's summary)."""
-        with contextlib.suppress(OSError):
+        lines = self.controller_log().strip().splitlines()
+        return lines[-1] if lines else "no output"
+
+    def controller_log(self) -> str:
+        """Everything the control process has written to its stderr so far."""
+        with contextlib.suppress(OSError, ValueError):
             self._stderr.seek(0)
-            lines = self._stderr.read().decode("utf-8", "replace").strip().splitlines()
-            return lines[-1] if lines else "no output"
-        return "no output"
+            return self._stderr.read().decode("utf-8", "replace")
+        return ""
 
     def _shutdown_process(self) -> None:
         for stop in (self._process.terminate, self._process.kill):
@@ -256,14 +285,13 @@ class ControlClient:
             if self.dead or self._stopping:
                 return
             with contextlib.suppress(OSError, ValueError, ControllerError):
-                self._send("hb")
+                self._send(Heartbeat())
 
     def _watch(self) -> None:
         while not self._closing.is_set():
             try:
                 if self._conn.poll(0.01):
-                    kind, payload = self._conn.recv()
-                    self._dispatch(Event(kind, payload))
+                    self._dispatch(Event(self._conn.recv()))
             except (EOFError, OSError):
                 self._died("the control process closed its channel")
             if not self.dead and not self.alive:
@@ -274,8 +302,7 @@ class ControlClient:
     def _drain(self) -> None:
         with contextlib.suppress(EOFError, OSError):
             while self._conn.poll():
-                kind, payload = self._conn.recv()
-                self._dispatch(Event(kind, payload))
+                self._dispatch(Event(self._conn.recv()))
 
     def _died(self, why: str) -> None:
         if self.dead or self._stopping:
@@ -284,16 +311,16 @@ class ControlClient:
                      "watchdog; restart servodesk to continue")
         for handle in list(self._moves.values()):
             self._finish(handle, "interrupted: controller died", None)
-        self._dispatch(Event("died", {"message": self.dead}))
+        self._dispatch(Event(Died(self.dead)))
 
     def _dispatch(self, event: Event) -> None:
-        if event.kind == "move_done":
-            handle = self._moves.get(int(event.payload["move_id"]))
+        record = event.record
+        if isinstance(record, MoveDone):
+            handle = self._moves.get(record.move_id)
             if handle is not None:
-                self._finish(handle, str(event.payload["status"]), event.payload.get("saved"))
-        elif event.kind == "crash":
-            event = Event("fault", {"kind": "crash", "joint": -1,
-                                    "message": f"controller crashed: {event.payload['message']}"})
+                self._finish(handle, record.status, record.saved)
+        elif isinstance(record, Crash):
+            event = Event(Fault("crash", -1, f"controller crashed: {record.message}"))
         self.events.put(event)
         if self.on_event is not None:
             self.on_event(event)
@@ -322,58 +349,60 @@ class ControlClient:
 
     # -- commands ------------------------------------------------------------------------
 
-    def _send(self, *message: object) -> None:
+    def _send(self, command: Command) -> None:
         if self.dead:
             raise ControllerError(self.dead)
         with self._send_lock:
-            self._conn.send(message)
+            self._conn.send(command)
 
     def hold(self) -> None:
         """Abort any move and hold every joint where it is (the thesis's default mode)."""
-        self._send("hold")
+        self._send(Hold())
 
     def estop(self) -> None:
         """Latch every valve closed until ``reset``."""
-        self._send("estop")
+        self._send(EmergencyStop())
 
     def reset(self) -> None:
         """Release a latched E-stop (refused while the E-stop input is pressed)."""
-        self._send("reset")
+        self._send(Reset())
 
     def initialise(self) -> None:
         """Rig: drive the ram to the bottom and zero the encoder (section 3.5)."""
-        self._send("initialise")
+        self._send(Initialise())
 
     def inject(self, method: str, *args: object) -> None:
         """Simulator only: drive a simulated input, e.g. ``inject("press_estop", True)``."""
-        self._send("inject", method, *args)
+        self._send(Inject(method, args))
 
     def jog(self, duty: Sequence[float]) -> None:
-        """Manual actuation: open-loop duty per joint in %, in each joint's positive sense."""
-        values = [float(d) for d in duty]
-        if len(values) != self.machine.n_joints or not all(np.isfinite(values)):
-            raise ValueError(f"jog needs {self.machine.n_joints} finite duties, got {duty!r}")
-        self._manual = [max(-100.0, min(100.0, v)) for v in values]
-        self._send("manual", self._manual)
+        """Manual actuation: open-loop duty per joint in %, in each joint's positive sense.
 
-    def jog_joint(self, joint: int, duty: float) -> None:
-        """Set one joint's manual duty, keeping the others'."""
+        Raises ValueError (nothing sent) unless there is one finite duty per joint."""
+        command = Manual.of(self.machine, duty)
+        self._send(command)
+        self._manual = list(command.duty)
+
+    def jog_joint(self, joint: int | str, duty: float) -> None:
+        """Set one joint's manual duty (joint by index or name), keeping the others'."""
         manual = list(self._manual)
-        manual[joint] = duty
+        manual[joint_index(self.machine, joint)] = finite("jog duty", duty)
         self.jog(manual)
 
-    def jog_position(self, joint: int, delta: float) -> None:
+    def jog_position(self, joint: int | str, delta: float) -> None:
         """Closed-loop jog: move the hold target of one joint by ``delta`` (mm or deg)."""
-        if not np.isfinite(delta):
-            raise ValueError(f"position jog step must be a number, got {delta}")
-        self._send("jog_position", int(joint), float(delta))
+        self._send(JogPosition.of(self.machine, joint, delta))
 
     def set_coefficients(self, which: str, coefficients: Coefficients) -> None:
-        """Replace the hold or track set; applied at once, even during a move (section 6.3)."""
+        """Replace the hold or track set; applied at once, even during a move (section 6.3).
+
+        Raises ValueError (nothing applied) for an unknown set or a number that is not finite."""
+        command = SetCoefficients(which)
+        check_coefficients(coefficients, self.machine.n_joints)
         encoded = self.layout.coefficients.encode(coefficients)
         self._coefficient_writers[which].write(*encoded)
         self.coefficients[which] = coefficients
-        self._send("coefficients", which)
+        self._send(command)
 
     def move(self, desired: np.ndarray, kind: str = "path", meta: dict | None = None) -> MoveHandle:
         """follow_track: track ``desired (N, J)`` (mm, deg) each tick, then hold at its end."""
@@ -410,6 +439,8 @@ class ControlClient:
 
     def _start(self, path: np.ndarray | None, profile: np.ndarray | None, kind: str,
                meta: dict | None) -> MoveHandle:
+        if kind not in MOVE_KINDS:
+            raise ValueError(f"unknown move kind {kind!r} (kinds: {', '.join(sorted(MOVE_KINDS))})")
         samples = len(path if path is not None else profile)
         layout = MoveLayout(samples, self.machine.n_joints)
         move_id = next(self._ids)
@@ -428,7 +459,7 @@ class ControlClient:
         handle = MoveHandle(move_id, kind, samples, full_meta, segment, layout)
         self._moves[move_id] = handle
         try:
-            self._send("move", move_id, segment.name, kind, path is None, full_meta)
+            self._send(StartMove(move_id, segment.name, kind, path is None, full_meta))
         except BaseException:
             self._moves.pop(move_id, None)
             shm.release(segment, unlink=True)

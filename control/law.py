@@ -8,9 +8,10 @@ and the coefficient set's duty limit. Taps are newest first (errata #21). With
 eq. 3.3; with ``w`` non-empty, the observer controller of section 3.6.2.
 
 Inputs per tick: joint index and error e(k) = desired − actual in joint units
-(mm, deg). Output: u(k+1) in percent, before down-scaling and polarity, which
-``valve_duty`` applies. The tick path uses plain floats and fixed-length lists
-shifted in place: six joints at 1 kHz cost microseconds (``benchmarks/law.py``).
+(mm, deg). Output: u(k+1) in percent, before down-scaling and polarity, which the
+machine's transmission (``hw.transmission``) applies. The tick path uses plain
+floats and fixed-length lists shifted in place: six joints at 1 kHz cost
+microseconds (``benchmarks/law.py``).
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from numbers import Real
 from operator import mul
 
 from hw.machine import Coefficients, Joint, Machine
+from hw.transmission import output_min_pwm
 
 EQ33_FILTER = (11.0, -18.0, 9.0, -2.0)  # eq. 3.3: 4-point backward difference of e
 EQ33_DIVISOR = 6.0  # eq. 3.3: divided by 6·Δt (errata #1, #20)
@@ -149,14 +151,6 @@ class DifferenceLaw:
         return u
 
 
-def valve_duty(joint: Joint, u: float) -> float:
-    """Valve duty in % from controller output: down_scale on negative output (section 3.6,
-    errata #11), then the joint's polarity (errata #17)."""
-    if u < 0.0:
-        u *= joint.down_scale
-    return joint.polarity * u
-
-
 def pid(machine: Machine, kp: float | Sequence[float], ki: float | Sequence[float],
         kd: float | Sequence[float], *, integral_limit: float = INTEGRAL_LIMIT,
         duty_limit: float = SATURATION, name: str = "pid", note: str = "") -> Coefficients:
@@ -200,18 +194,6 @@ def preset(name: str, machine: Machine) -> Coefficients:
         have = ", ".join(machine.coefficients)
         raise KeyError(f"machine {machine.name} has no coefficient set {name!r} "
                        f"(it has: {have})") from None
-
-
-def output_min_pwm(joint: Joint) -> tuple[float, float]:
-    """Minimum PWM (%) for a positive and for a negative output u.
-
-    Section 5.4.1 measured the minimums per valve side, and the valve duty is
-    polarity·u (errata #27), so on a joint with polarity −1 a positive u opens
-    the valve's negative side.
-    """
-    if joint.polarity > 0:
-        return joint.min_pwm_pos, joint.min_pwm_neg
-    return joint.min_pwm_neg, joint.min_pwm_pos
 
 
 def _prepare(joint: Joint, c: Coefficients, j: int, dt: float) -> _JointGains:

@@ -16,11 +16,16 @@ from __future__ import annotations
 import struct
 from dataclasses import dataclass
 from enum import IntEnum, IntFlag
+from operator import attrgetter
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from hw.backend import LinkCounters
 from hw.machine import Coefficients
+
+if TYPE_CHECKING:
+    from control.latency import LatencyStats
 
 LAYOUT_VERSION = 1
 CONTROL_MAGIC = b"SDSK"
@@ -105,13 +110,29 @@ class Status:
 
 
 class StatusLayout:
-    """The packed status record for ``n`` joints and its decoding."""
+    """The packed status record for ``n`` joints: its field order, encoding and decoding."""
 
     def __init__(self, n: int) -> None:
         self.n = n
         self.struct = struct.Struct(
             f"<qqqiiqqqqqqqqqq{n}d{n}d{n}d{n}d{n}q{n}q{len(LINK_FIELDS)}q{FAULT_TEXT}s"
         )
+        self._link = attrgetter(*LINK_FIELDS)
+        self._fault = ("", b"")  # the last fault text and its bytes: it rarely changes
+
+    def encode(self, tick: int, time_ns: int, wall_ns: int, mode: int, flags: int,
+               move_id: int, move_done: int, move_total: int, latency: LatencyStats,
+               position: list[float], desired: list[float], duty: list[float],
+               valve: list[float], raw: list[int], glitches: list[int], link: LinkCounters,
+               fault: str) -> tuple:
+        """The values of one record in struct order (the loop's ``publish``, every tick)."""
+        if fault != self._fault[0]:
+            self._fault = (fault, fault.encode()[:FAULT_TEXT])
+        return (tick, time_ns, wall_ns, mode, flags, move_id, move_done, move_total,
+                latency.late_ns, latency.late_max_ns, latency.overruns, latency.compute_ns,
+                latency.compute_max_ns, latency.compute_total_ns, latency.io_total_ns,
+                *position, *desired, *duty, *valve, *raw, *glitches, *self._link(link),
+                self._fault[1])
 
     def decode(self, values: tuple) -> Status:
         n = self.n

@@ -17,6 +17,7 @@ from multiprocessing.connection import Connection
 from pathlib import Path
 
 from control import shm
+from control.events import Crash, Ready
 from control.layout import ControlLayout
 from control.loop import Controller, LoopConfig
 from control.realtime import enter_realtime
@@ -80,8 +81,8 @@ def main(config: ProcessConfig, conn: Connection) -> None:
             controller.realtime = bool(report and report.fifo)
             controller.start()
             notice = report.notice if report else "real-time scheduling off (lockstep or asked)"
-            controller.event("ready", realtime=controller.realtime, notice=notice)
-            controller.flush_events()
+            controller.outbox.put(Ready(controller.realtime, notice))
+            controller.outbox.flush()
             controller.run()
         finally:
             with contextlib.suppress(Exception):
@@ -89,8 +90,7 @@ def main(config: ProcessConfig, conn: Connection) -> None:
             backend.close()
     except Exception as exc:
         with contextlib.suppress(Exception):
-            conn.send(("crash", {"message": f"{type(exc).__name__}: {exc}",
-                                 "traceback": traceback.format_exc()}))
+            conn.send(Crash(f"{type(exc).__name__}: {exc}", traceback.format_exc()))
         raise
     finally:
         orphaned = controller is None or controller.orphaned

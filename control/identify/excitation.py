@@ -48,6 +48,7 @@ from numpy.typing import ArrayLike
 
 from control.identify.sysid import DeadbandModel, nominal
 from hw.machine import Joint, Machine
+from hw.transmission import Transmission
 
 MARGIN = 1.5  # the velocity line's gain may be off by this factor either way
 SLACK = 3.0  # and its deadband by this much duty (%)
@@ -272,9 +273,7 @@ class _Plan:
 
     def actuator_start(self) -> float:
         """The joint's start in actuator coordinates (a coupled reading undone)."""
-        enc = self.joint.encoder
-        q = float(self.start[self.index])
-        return q if enc.coupled_to is None else q - enc.coupling * float(self.start[enc.coupled_to])
+        return float(Transmission(self.machine).actuators_of(self.start)[self.index])
 
     def room(self) -> tuple[float, float]:
         """Travel available below and above the start (units), less the clearance at the
@@ -314,13 +313,11 @@ def _check_reading(machine: Machine, j: int, start: np.ndarray, low: np.ndarray,
     """Refuse a worst-case reading of joint ``j`` (its travel plus a coupled joint's) past
     its limits less the clearance."""
     spec = machine.joints[j]
-    lo, hi = low[:, j].copy(), high[:, j].copy()
-    c = spec.encoder.coupled_to
-    if c is not None:
-        k = spec.encoder.coupling
-        lo += np.minimum(k * low[:, c], k * high[:, c])
-        hi += np.maximum(k * low[:, c], k * high[:, c])
-    why = ("(worst case)" if c is None
+    transmission = Transmission(machine)
+    lows, highs = transmission.reading_bounds(low, high)
+    lo, hi = lows[:, j], highs[:, j]
+    c = transmission.coupled_to[j]
+    why = ("(worst case)" if c < 0
            else f"(worst case of its reading, which includes {machine.joints[c].name})")
     _refuse_outside(spec, float(start[j]) + float(lo.min()), float(start[j]) + float(hi.max()),
                     clearance(spec, _peak_speed(lo, hi, dt)), why)

@@ -52,6 +52,7 @@ from scipy import optimize, signal
 
 from control.recorder import Run
 from hw.machine import Joint, Machine
+from hw.transmission import Transmission, output_min_pwm
 
 DEFAULT_CUTOFF_HZ = 30.0  # identification band: above it Gray-code quantisation noise dominates
 MAX_DELAY_S = 0.005
@@ -180,9 +181,7 @@ def joint_series(run: Run, machine: Machine, joint: int | str) -> JointSeries:
     position); a coupled encoder's reading is turned back into its actuator's coordinate."""
     j = machine.joint_index(joint) if isinstance(joint, str) else int(joint)
     spec = machine.joints[j]
-    position = np.asarray(run.actual[:, j], dtype=float)
-    if spec.encoder.coupled_to is not None:  # rtshare.h joint_dep
-        position = position - spec.encoder.coupling * run.actual[:, spec.encoder.coupled_to]
+    position = Transmission(machine).actuators_of(run.actual)[:, j]  # rtshare.h joint_dep
     return series(run.duty[:, j], position, run.sample_time_s, spec.name, spec.unit)
 
 
@@ -208,8 +207,7 @@ def series(duty: ArrayLike, position: ArrayLike, dt: float, name: str = "joint",
 def nominal(joint: Joint) -> DeadbandModel:
     """The machine file's prior in controller-output terms: deadband = the valve's minimum
     PWM (section 5.4.1) on the side the polarity maps u to, 100 % duty ≈ ``max_speed``."""
-    d_pos = joint.min_pwm_pos if joint.polarity > 0 else joint.min_pwm_neg
-    d_neg_valve = joint.min_pwm_neg if joint.polarity > 0 else joint.min_pwm_pos
+    d_pos, d_neg_valve = output_min_pwm(joint)
     d_neg = d_neg_valve / joint.down_scale  # negative output is scaled down (section 3.6)
     return DeadbandModel(
         name=joint.name, unit=joint.unit,

@@ -11,7 +11,7 @@ compensation matching the deadband, the joint sees u through the slope
 discretised with a zero-order hold at the loop's sample time, plus
 ``LOOP_DELAY_SAMPLES`` (an encoder word up to one scan old and the PWM
 written at the next valve period). The larger slope is the stability worst
-case. ``p±`` are the minimums **the law adds** (``control.law.output_min_pwm``), whichever
+case. ``p±`` are the minimums **the law adds** (``hw.transmission.output_min_pwm``), whichever
 they are.
 
 PI design (``design_pi``): maximise the integral gain ki subject to the
@@ -58,8 +58,9 @@ from numpy.typing import ArrayLike
 from scipy import signal
 
 from control.identify.sysid import DeadbandModel
-from control.law import DifferenceLaw, output_min_pwm, valve_duty
+from control.law import DifferenceLaw
 from hw.machine import Coefficients, Joint, Machine
+from hw.transmission import Transmission, output_min_pwm, output_of, valve_duty
 
 DEFAULT_MS = 2.0
 LOOP_DELAY_SAMPLES = 1
@@ -277,22 +278,23 @@ def simulate(models: Sequence[DeadbandModel | None], machine: Machine,
     q0 = d[0] if initial is None else np.asarray(initial, dtype=float)
     step = machine.sample_time_s if dt is None else dt
     law = DifferenceLaw(machine, coefficients, step)
-    couplings = [(j.encoder.coupled_to, j.encoder.coupling) for j in machine.joints]
-    start = [float(q0[j]) - (0.0 if c is None else k * float(q0[c]))
-             for j, (c, k) in enumerate(couplings)]
-    plants = [None if m is None else _Plant(m, joint, step, machine.valve_resolution_pct, q)
-              for m, joint, q in zip(models, machine.joints, start, strict=True)]
-    order = sorted(range(machine.n_joints), key=lambda j: couplings[j][0] is not None)
+    transmission = Transmission(machine)
+    follows = transmission.actuators_of(d)  # joints without a model: their actuators follow
+    start = transmission.actuators_of(q0)
+    plants = [None if m is None else _Plant(m, joint, step, machine.valve_resolution_pct, a)
+              for m, joint, a in zip(models, machine.joints, start, strict=True)]
+    actuator = [0.0] * machine.n_joints
+    reading = [0.0] * machine.n_joints
     position = d.copy()
     duty = np.zeros_like(d)
     for k in range(len(d)):
-        for j in order:
-            plant, (c, gain) = plants[j], couplings[j]
-            own = d[k, j] if plant is None else plant.position
-            position[k, j] = own if c is None or plant is None else own + gain * position[k, c]
+        for j, plant in enumerate(plants):
+            actuator[j] = follows[k, j] if plant is None else plant.position
+        transmission.joints_from_actuators(actuator, reading)
+        position[k] = reading
         for j, plant in enumerate(plants):
             if plant is not None:
-                duty[k, j] = law.update(j, d[k, j] - position[k, j])
+                duty[k, j] = law.update(j, d[k, j] - reading[j])
                 plant.step(duty[k, j])
     return ClosedLoop(np.arange(len(d)) * step, d, position, duty)
 
@@ -317,9 +319,7 @@ class _Plant:
         """Apply law output ``u`` (%) for one tick."""
         valve = valve_duty(self.joint, u)
         applied = math.trunc(valve / self.resolution) * self.resolution  # UPP truncation
-        u_applied = applied * self.joint.polarity
-        if u_applied < 0.0:
-            u_applied /= self.joint.down_scale
+        u_applied = output_of(self.joint, applied)
         self.lag.insert(0, float(self.model.steady(u_applied)))
         self.lag.pop()
         w1, w2 = self.lag[-2], self.lag[-1]

@@ -49,6 +49,7 @@ from statistics import NormalDist
 from hw.gray import binary_to_gray
 from hw.machine import Machine, MachineError
 from hw.sim.plant import MACHINE_KEYS, PlantKeys
+from hw.transmission import Transmission
 
 STANDARD_NORMAL = NormalDist()
 
@@ -126,7 +127,7 @@ class GrayEncoderBoard:
             raise ValueError(f"scan_period_s must be > 0, got {period_s:g}")
         self.n = machine.n_joints
         self.top = (1 << machine.encoder_bits) - 1
-        self.cal = tuple((j.encoder.gradient, j.encoder.constant) for j in machine.joints)
+        self.transmission = Transmission(machine)
         self.lamp = Lamp.from_machine(machine)
         self._period_ns = max(round(period_s * 1e9), self.n)
         self._origin_ns = start_ns
@@ -168,8 +169,7 @@ class GrayEncoderBoard:
 
     def encode(self, joint: int, position: float) -> int:
         """Gray word the disk shows at actuator ``position`` (joint units), clipped to the disk."""
-        gradient, constant = self.cal[joint]
-        b = math.floor((position - constant) / gradient + 0.5)
+        b = math.floor(self.transmission.count_of(joint, position) + 0.5)
         if b < 0:
             b = 0
         elif b > self.top:

@@ -67,6 +67,7 @@ from dataclasses import dataclass
 
 from hw.machine import Joint, Machine, MachineError
 from hw.sim.valve import Valve
+from hw.transmission import Transmission
 
 GRAVITY = 9.81  # m/s^2
 VAPOUR_PA = -1.0e5  # gauge pressure at which oil cavitates (absolute zero)
@@ -172,12 +173,12 @@ class ActuatorParams:
     coulomb: float
     stiction: float
     viscous: float
-    polarity: int
+    polarity: float  # the transmission's: which chamber positive valve duty feeds
     valve: Valve
 
     @classmethod
     def from_joint(cls, machine: Machine, index: int, hyd: Hydraulics,
-                   load_kg: float | None = None) -> ActuatorParams:
+                   load_kg: float | None, polarity: float) -> ActuatorParams:
         joint = machine.joints[index]
         where = f"joints[{index}].plant"
         if joint.kind == "prismatic":
@@ -217,7 +218,7 @@ class ActuatorParams:
             coulomb=coulomb,
             stiction=keys.number(friction[1], coulomb, low=coulomb),
             viscous=keys.number(friction[2], 0.0, low=0.0),
-            polarity=joint.polarity,
+            polarity=polarity,
             valve=_valve(keys, joint, machine, hyd),
         )
         params.check_holds(hyd, joint, machine)
@@ -442,21 +443,23 @@ def _friction_step(v: float, force: float, h: float, mass: float, coulomb: float
 class Plant:
     """All joints of a machine: actuator coordinates, transmissions and one ``step`` for all.
 
-    Actuator coordinates are what each encoder measures; a joint coupled to
-    another (``encoder.coupled_to``, rtshare.h joint_dep: the Yaw chain drive
-    runs through the Bend joint) reads ``q = actuator + coupling * q[coupled_to]``.
+    Actuator coordinates are what each encoder measures; the machine's
+    transmission (``hw.transmission``) maps them to joint readings (the Yaw
+    chain drive runs through the Bend joint) and gives each valve's polarity.
     Hard end stops act on the actuator, at the joint's limits.
     """
 
     def __init__(self, machine: Machine, *, initial: Sequence[float] | None = None,
                  load_kg: float | None = None, supply_mpa: float | None = None) -> None:
+        self.transmission = Transmission(machine)
         self.hydraulics = Hydraulics.from_machine(machine, supply_mpa)
-        self.params = tuple(ActuatorParams.from_joint(machine, i, self.hydraulics, load_kg)
+        self.params = tuple(ActuatorParams.from_joint(machine, i, self.hydraulics, load_kg,
+                                                      self.transmission.polarity[i])
                             for i in range(machine.n_joints))
-        self.coupling = tuple(_coupling(machine, i) for i in range(machine.n_joints))
         start = self.actuator_start(machine, initial)
         self.actuators = tuple(Actuator(p, self.hydraulics, a * p.unit_si)
                                for p, a in zip(self.params, start, strict=True))
+        self._actuator = [0.0] * machine.n_joints
 
     def actuator_start(self, machine: Machine, initial: Sequence[float] | None) -> list[float]:
         """Actuator coordinates (joint units) of joint positions ``initial``, default mid-range."""
@@ -467,7 +470,8 @@ class Plant:
             if len(q) != machine.n_joints:
                 raise ValueError(f"expected {machine.n_joints} initial positions for "
                                  f"{machine.name}, got {len(q)}")
-        a = [q[i] - c * q[k] for i, (k, c) in enumerate(self.coupling)]
+        a = [0.0] * machine.n_joints
+        self.transmission.actuators_from_joints(q, a)
         for joint, value in zip(machine.joints, a, strict=True):
             if not joint.lower <= value <= joint.upper:
                 raise ValueError(f"{joint.name} initial actuator position {value:g}{joint.symbol}"
@@ -486,26 +490,11 @@ class Plant:
 
     def joint_positions(self, out: list[float]) -> None:
         """Fill ``out`` with joint positions in joint units, couplings included."""
-        self.actuator_positions(out)
-        for i, (k, c) in enumerate(self.coupling):
-            if c:
-                out[i] += c * out[k]
+        self.actuator_positions(self._actuator)
+        self.transmission.joints_from_actuators(self._actuator, out)
 
     def joint_velocities(self, out: list[float]) -> None:
         """Fill ``out`` with joint velocities in joint units per second, couplings included."""
         for i, (actuator, p) in enumerate(zip(self.actuators, self.params, strict=True)):
-            out[i] = actuator.v / p.unit_si
-        for i, (k, c) in enumerate(self.coupling):
-            if c:
-                out[i] += c * out[k]
-
-
-def _coupling(machine: Machine, index: int) -> tuple[int, float]:
-    """(coupled joint, coefficient) of joint ``index``; (index, 0.0) when uncoupled."""
-    cal = machine.joints[index].encoder
-    if cal.coupled_to is None or cal.coupling == 0.0:
-        return index, 0.0
-    if cal.coupled_to > index:
-        raise MachineError(f"{machine.path.name}: joints[{index}].encoder.coupled_to: the "
-                           f"simulator couples a joint only to an earlier one")
-    return cal.coupled_to, cal.coupling
+            self._actuator[i] = actuator.v / p.unit_si
+        self.transmission.joints_from_actuators(self._actuator, out)

@@ -118,7 +118,7 @@ def test_estop_closes_every_valve_on_the_tick_it_arrives(realtime: ControlClient
     status = realtime.status()
     assert status.estop and status.valve == (0.0,) * 6 and status.duty == (0.0,) * 6
     realtime.jog([40.0] * 6)
-    assert "refused: E-stop latched" in realtime.wait_event("notice", 2.0).message
+    assert "refused: E-stop latched" in realtime.wait_event("refused", 2.0).message
     assert realtime.status().valve == (0.0,) * 6
     realtime.reset()
     wait_until(lambda: not realtime.status().estop, 1.0, "E-stop released")
@@ -132,7 +132,7 @@ def test_estop_input_latches_and_blocks_reset_while_pressed(realtime: ControlCli
     assert event.payload["reason"] == "E-stop input pressed"
     assert realtime.status().valve == (0.0,) * 6
     realtime.reset()
-    assert "still pressed" in realtime.wait_event("notice", 2.0).message
+    assert "still pressed" in realtime.wait_event("refused", 2.0).message
     assert realtime.status().estop
     realtime.inject("press_estop", False)
     realtime.reset()
@@ -265,10 +265,10 @@ def test_the_rig_refuses_moves_until_initialised_then_steps(tmp_path: Path) -> N
     with ControlClient(rig, lockstep=True, data_dir=tmp_path, heartbeat_timeout_s=3.0,
                        sim_options={"initial": [400.0]}) as client:
         assert not client.status().homed
-        path = moves.step(client.status().position, 0, 100.0, duration=2.0, dt=client.dt)
+        path = moves.step(client.status().position, 0, 100.0, duration=2.0, machine=rig)
         assert client.wait(client.move(path), 10).status == "refused: not initialised"
         client.initialise()
-        done = client.wait_event("move_done", 60.0, lambda e: e.payload["move_id"] == 0)
+        done = client.wait_event("initialised", 60.0)
         assert done.payload["status"].startswith("complete: initialised")
         status = client.status()
         assert status.homed and abs(status.position[0]) < 1.0
@@ -277,3 +277,32 @@ def test_the_rig_refuses_moves_until_initialised_then_steps(tmp_path: Path) -> N
         assert result.complete
         assert abs(result.run.actual[-1, 0] - 400.0) < 5.0
     assert our_segments(os.getpid()) == []
+
+
+@pytest.mark.parametrize(("call", "args"), [
+    ("jog_position", (-1, 10.0)),
+    ("jog_position", (6, 1.0)),
+    ("jog_position", ("elbow", 1.0)),
+    ("jog_position", (1, float("nan"))),
+    ("jog_joint", (6, 10.0)),
+    ("jog_joint", (-1, 10.0)),
+    ("jog_joint", (0, float("inf"))),
+    ("jog", ([10.0] * 5,)),
+])
+def test_a_joint_that_does_not_exist_or_a_bad_number_is_a_value_error_and_sends_nothing(
+        realtime: ControlClient, call: str, args: tuple) -> None:
+    before = realtime.status()
+    with pytest.raises(ValueError, match=r"no joint|number|duties"):
+        getattr(realtime, call)(*args)
+    realtime.hold()  # a command behind it: anything sent before it would have been handled
+    wait_until(lambda: realtime.status().tick > before.tick + 50, 3.0, "ticks after the call")
+    status = realtime.status()
+    assert not status.estop and status.mode == Mode.HOLD, status.fault
+    assert [e for e in realtime.poll_events() if e.kind in ("refused", "estop")] == []
+
+
+def test_a_joint_may_be_named(realtime: ControlClient) -> None:
+    start = realtime.status().position[2]
+    realtime.jog_position("updown", 1.0)
+    wait_until(lambda: abs(realtime.status().position[2] - (start + 1.0)) < 0.2, 5.0,
+               "Up/Down to move 1° by name")

@@ -9,8 +9,9 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from control.law import DifferenceLaw, output_min_pwm, pi, pid, preset, valve_duty
+from control.law import DifferenceLaw, pi, pid, preset
 from hw.machine import Coefficients, Machine, load_machine
+from hw.transmission import output_min_pwm
 
 RIG = load_machine("rig")
 UNIMATE = load_machine("unimate2000b")
@@ -110,13 +111,6 @@ def test_minimum_pwm_maps_onto_the_starting_duty_of_the_valve_side() -> None:
     assert output_min_pwm(RIG.joints[0]) == (0.0, 0.0) and rig.update(0, 1e-9) > 0
 
 
-def test_output_min_pwm_follows_polarity() -> None:
-    for joint in UNIMATE.joints:
-        up, down = output_min_pwm(joint)
-        assert valve_duty(joint, up) in (joint.min_pwm_pos, -joint.min_pwm_neg)
-        assert (up if joint.polarity < 0 else down) == joint.min_pwm_neg
-
-
 def test_duty_limit_after_saturation() -> None:
     law = DifferenceLaw(RIG, RIG.hold, RIG.sample_time_s)  # Kp 0.5, Ki 0.05, duty ≤ 20 %
     # 100 mm = 1000 counts: 0.5·1000 = 500 → 100 → 20
@@ -166,16 +160,6 @@ def test_the_w_taps_weigh_the_final_output() -> None:
     # and 15, the value sent, is what the next tick weighs: k=4: 0.5·15 + 0 = 7.5
     assert run(law, [1.0, 1.0, 1.0, 0.0]) == pytest.approx([10.0, 15.0, 15.0, 7.5])
     assert law.state(0).outputs == (7.5,)
-
-
-def test_valve_duty_scales_downward_output_then_applies_polarity() -> None:
-    (ram,) = RIG.joints
-    assert valve_duty(ram, 50.0) == 50.0
-    assert valve_duty(ram, -50.0) == pytest.approx(-26.9)  # 0.538·(−50), section 3.6
-    inout = UNIMATE.joints[0]  # polarity −1, errata #17
-    assert valve_duty(inout, 50.0) == -50.0
-    assert valve_duty(inout, -50.0) == 50.0
-    assert valve_duty(inout, 0.0) == 0.0
 
 
 def test_unimate_hold_acts_per_joint() -> None:

@@ -17,11 +17,15 @@ from multiprocessing.connection import Connection
 import pytest
 
 from control import shm
+from control.commands import JogPosition, Manual
+from control.events import Notice
 from control.layout import ControlLayout, Mode
-from control.loop import OUTBOX_LIMIT, Controller, LoopConfig
+from control.loop import Controller, LoopConfig
+from control.outbox import OUTBOX_LIMIT
 from hw.backend import LinkCounters, StepClock
 from hw.gray import binary_to_gray
 from hw.machine import Machine, load_machine
+from hw.transmission import Transmission
 
 UNIMATE = load_machine("unimate2000b")
 HOME = [1500.0, 0.0, 0.0, 0.0, 0.0, 0.0]
@@ -32,6 +36,7 @@ class ScriptedBackend:
 
     def __init__(self, machine: Machine) -> None:
         self.machine = machine
+        self.transmission = Transmission(machine)
         self.clock = StepClock()
         self.counters = LinkCounters()
         self.estop = False
@@ -45,11 +50,9 @@ class ScriptedBackend:
         return self.clock.now_ns()
 
     def word(self, j: int) -> int:
-        cal = self.machine.joints[j].encoder
-        q = self.positions[j]
-        if cal.coupled_to is not None:
-            q -= cal.coupling * self.positions[cal.coupled_to]
-        return binary_to_gray(round((q - cal.constant) / cal.gradient))
+        actuator = [0.0] * self.machine.n_joints
+        self.transmission.actuators_from_joints(self.positions, actuator)
+        return binary_to_gray(round(self.transmission.count_of(j, actuator[j])))
 
     def open(self) -> None: ...
 
@@ -105,7 +108,8 @@ def ticks(controller: Controller, backend: ScriptedBackend, n: int) -> None:
 def events(client: Connection) -> list[tuple[str, dict]]:
     out = []
     while client.poll(0.05):
-        out.append(client.recv())
+        event = client.recv()
+        out.append((event.KIND, event.payload))
     return out
 
 
@@ -113,10 +117,10 @@ def test_events_never_block_a_client_that_stopped_reading(rig) -> None:
     controller, backend, _client = rig
     started = time.monotonic()
     for i in range(20_000):
-        controller.event("notice", message=f"flood {i} " + "x" * 200)
-        controller.flush_events()
+        controller.outbox.put(Notice(f"flood {i} " + "x" * 200))
+        controller.outbox.flush()
     assert time.monotonic() - started < 30, "flushing waited on the reader"
-    assert len(controller.outbox) <= OUTBOX_LIMIT
+    assert len(controller.outbox.queue) <= OUTBOX_LIMIT
     ticks(controller, backend, 5)
     assert controller.tick_count >= 5
 
@@ -125,11 +129,11 @@ def test_a_glitch_is_rejected_and_counted_then_a_real_jump_is_believed(rig) -> N
     controller, backend, _client = rig
     backend.positions[0] = HOME[0] + 500.0  # In/Out cannot move 500 mm in 1 ms
     ticks(controller, backend, 1)
-    assert controller.position[0] == pytest.approx(HOME[0], abs=0.3)
-    assert controller.glitches[0] == 1
+    assert controller.encoders.position[0] == pytest.approx(HOME[0], abs=0.3)
+    assert controller.encoders.glitches[0] == 1
     ticks(controller, backend, 5)  # still there after the resync count: it is real
-    assert controller.position[0] == pytest.approx(HOME[0] + 500.0, abs=0.3)
-    assert controller.glitches[0] == 5
+    assert controller.encoders.position[0] == pytest.approx(HOME[0] + 500.0, abs=0.3)
+    assert controller.encoders.glitches[0] == 5
 
 
 def test_a_word_wider_than_the_encoder_is_decoded_and_judged_not_a_crash(rig) -> None:
@@ -139,18 +143,17 @@ def test_a_word_wider_than_the_encoder_is_decoded_and_judged_not_a_crash(rig) ->
     good = backend.word
     backend.word = lambda j: good(j) | (1 << 20) if j == 1 else good(j)
     ticks(controller, backend, 1)
-    assert not controller.estop_latched, controller.fault
-    assert controller.glitches[1] == 1 and controller.position[1] == pytest.approx(HOME[1],
-                                                                                    abs=0.1)
+    assert not controller.guards.latched, controller.guards.reason
+    assert controller.encoders.glitches[1] == 1
+    assert controller.encoders.position[1] == pytest.approx(HOME[1], abs=0.1)
 
 
 def test_a_gray_encoder_too_wide_for_the_table_is_decoded_word_by_word() -> None:
     wide = replace(UNIMATE, encoder_bits=24)
     with controller_on(wide) as (controller, backend, _client):
-        assert controller.gray_table == []
         ticks(controller, backend, 3)
-        assert controller.position == pytest.approx(HOME, abs=0.3)
-        assert controller.glitches == [0] * 6
+        assert controller.encoders.position == pytest.approx(HOME, abs=0.3)
+        assert controller.encoders.glitches == [0] * 6
 
 
 def test_a_plausible_move_is_never_a_glitch(rig) -> None:
@@ -158,19 +161,19 @@ def test_a_plausible_move_is_never_a_glitch(rig) -> None:
     for _ in range(100):
         backend.positions[1] += 0.05  # 50°/s, inside Rotate's 60°/s
         ticks(controller, backend, 1)
-    assert controller.glitches[1] == 0
-    assert controller.position[1] == pytest.approx(backend.positions[1], abs=0.05)
+    assert controller.encoders.glitches[1] == 0
+    assert controller.encoders.position[1] == pytest.approx(backend.positions[1], abs=0.05)
 
 
 def test_an_exception_in_a_tick_closes_the_valves_and_latches(rig) -> None:
     controller, backend, client = rig
-    controller.cmd_manual([40.0] * 6)
+    controller.handle(Manual((40.0,) * 6))
     ticks(controller, backend, 2)
     assert all(backend.written)
     backend.fail_reads = 1
     ticks(controller, backend, 1)
     assert backend.written == [0.0] * 6
-    assert controller.estop_latched and "scripted read failure" in controller.fault
+    assert controller.guards.latched and "scripted read failure" in controller.guards.reason
     ticks(controller, backend, 3)
     assert backend.written == [0.0] * 6
     assert any(name == "estop" for name, _ in events(client))
@@ -178,21 +181,51 @@ def test_an_exception_in_a_tick_closes_the_valves_and_latches(rig) -> None:
 
 def test_following_error_while_holding_closes_the_valves(rig) -> None:
     controller, backend, client = rig
-    controller.hold_target[3] = 80.0  # Bend told to hold 80° but it sits at 0° and won't move
+    controller.modes.hold_target[3] = 80.0  # Bend told to hold 80° but it sits at 0° and won't move
     ticks(controller, backend, 600)
-    assert controller.estop_latched and backend.written == [0.0] * 6
+    assert controller.guards.latched and backend.written == [0.0] * 6
     faults = [p for name, p in events(client) if name == "fault"]
     assert faults[0]["kind"] == "following_error" and faults[0]["joint"] == 3
     assert "while holding; valves closed" in faults[0]["message"]
-    assert controller.mode == Mode.HOLD
+    assert controller.modes.mode == Mode.HOLD
 
 
 def test_stop_at_limits_in_manual(rig) -> None:
     controller, backend, client = rig
     backend.positions[2] = 29.99  # Up/Down one count below its 30° limit
     ticks(controller, backend, 6)
-    controller.cmd_manual([0.0, 0.0, 50.0, 0.0, 0.0, -50.0])
+    controller.handle(Manual((0.0, 0.0, 50.0, 0.0, 0.0, -50.0)))
     ticks(controller, backend, 2)
-    assert controller.duty[2] == 0.0 and controller.duty[5] == -50.0
+    assert controller.modes.duty[2] == 0.0 and controller.modes.duty[5] == -50.0
     (limit,) = [p for name, p in events(client) if name == "fault"]
     assert limit["kind"] == "limit" and limit["joint"] == 2
+
+
+def _bypassing_checks(cls: type, **fields: object) -> object:
+    """A record built as unpickling builds it: no ``__init__``, so no checks ran."""
+    record = object.__new__(cls)
+    for name, value in fields.items():
+        object.__setattr__(record, name, value)
+    return record
+
+
+@pytest.mark.parametrize("command", [
+    _bypassing_checks(JogPosition, joint=6, delta=1.0),
+    _bypassing_checks(JogPosition, joint=-1, delta=10.0),
+    _bypassing_checks(JogPosition, joint=1, delta=float("nan")),
+    _bypassing_checks(Manual, duty=(40.0,) * 5),
+    _bypassing_checks(Manual, duty=(float("inf"),) * 6),
+    ("jog_position", -1, 10.0),
+    "estop",
+], ids=["joint 6", "joint -1", "nan step", "five duties", "inf duty", "a tuple", "a string"])
+def test_a_command_that_fails_its_checks_on_arrival_is_refused_and_moves_nothing(
+        rig, command: object) -> None:
+    controller, backend, client = rig
+    before = list(controller.modes.hold_target)
+    controller.handle(command)
+    ticks(controller, backend, 3)
+    (refused,) = [p for name, p in events(client) if name == "refused"]
+    assert refused["reason"], refused
+    assert not controller.guards.latched, controller.guards.reason
+    assert controller.modes.mode == Mode.HOLD
+    assert controller.modes.hold_target == before

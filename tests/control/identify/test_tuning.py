@@ -19,6 +19,7 @@ from control.identify.sysid import DeadbandModel
 from control.law import DifferenceLaw, pi, pid
 from control.motion import moves, trajectory
 from hw.machine import Coefficients, Machine, load_machine
+from hw.transmission import output_min_pwm
 
 UNIMATE = load_machine("unimate2000b")
 DT = UNIMATE.sample_time_s
@@ -90,7 +91,7 @@ def test_a_proposal_is_a_pi_set_with_the_integrator_clamped_at_the_duty_limit() 
 
 def test_feed_forward_inverts_the_identified_line_through_the_compensation() -> None:
     joint = UNIMATE.joints[1]  # polarity −1: u > 0 opens the valve's 18 % side, u < 0 its 22 %
-    assert tuning.output_min_pwm(joint) == (18.0, 22.0)
+    assert output_min_pwm(joint) == (18.0, 22.0)
     ff = tuning.feed_forward(ROTATE, joint)
     assert ff.kv_pos == pytest.approx(1.0 / (0.74 * 0.82))
     assert ff.offset_pos == pytest.approx(0.0)  # the compensation meets the deadband exactly

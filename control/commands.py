@@ -1,0 +1,236 @@
+"""Commands to the controller: frozen records, validated when built and again on arrival.
+
+The thesis's ``option`` program wrote commands into an rtf FIFO; ours are
+records sent through the command channel and dispatched by type. Each checks
+what it can alone when built (every number finite, kinds and sets known); the
+ones that name a joint are built with ``of(machine, ...)``, which accepts a
+joint index or name and refuses one the machine does not have. The controller
+calls ``check(n_joints)`` on everything it receives, so a record that bypassed
+the builders is refused with a reason, never acted on.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+from hw.machine import Coefficients, Machine
+
+COEFFICIENT_SETS = ("hold", "track")
+MOVE_KINDS = frozenset({
+    "step", "multi_step", "ramp", "sine", "path", "end_point", "cartesian", "via_points",
+    "go_to", "set_pulse", "tracking_actuate",
+})
+INJECTABLE = ("press_estop",)  # simulator inputs a test may drive
+
+
+class CommandError(ValueError):
+    """A command that cannot be carried out as given; the message says why."""
+
+
+def joint_index(machine: Machine, joint: int | str) -> int:
+    """The index of ``joint``, given by index (0…n-1) or by key or name (``"updown"``)."""
+    n = machine.n_joints
+    if isinstance(joint, str):
+        try:
+            return machine.joint_index(joint)
+        except KeyError as exc:
+            raise CommandError(exc.args[0]) from None
+    if isinstance(joint, bool) or not isinstance(joint, int) or not 0 <= joint < n:
+        names = ", ".join(f"{i} {j.name}" for i, j in enumerate(machine.joints))
+        raise CommandError(f"no joint {joint!r} on machine {machine.name} (joints: {names})")
+    return joint
+
+
+def finite(what: str, value: object) -> float:
+    """``value`` as a float, or a CommandError naming ``what`` if it is not a finite number."""
+    if isinstance(value, bool):
+        raise CommandError(f"{what} must be a number, got {value!r}")
+    try:
+        number = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise CommandError(f"{what} must be a number, got {value!r}") from None
+    if not math.isfinite(number):
+        raise CommandError(f"{what} must be a finite number, got {number}")
+    return number
+
+
+@dataclass(frozen=True)
+class Command:
+    """Something the client asks of the controller."""
+
+    NAME: ClassVar[str] = "command"
+
+    def __post_init__(self) -> None:
+        """Check what the record can check alone (numbers, kinds); CommandError if not."""
+
+    def check(self, n_joints: int) -> None:
+        """Raise CommandError unless this record, as it arrived, fits ``n_joints`` joints.
+
+        Unpickling bypasses ``__init__``, so the controller re-runs every check here.
+        """
+        self.__post_init__()
+        self.fits(n_joints)
+
+    def fits(self, n_joints: int) -> None:
+        """Raise CommandError if a joint this record names is not one of ``n_joints``."""
+
+
+@dataclass(frozen=True)
+class Heartbeat(Command):
+    """The client is alive (sent every 50 ms; 250 ms of silence makes the controller hold)."""
+
+    NAME: ClassVar[str] = "heartbeat"
+
+
+@dataclass(frozen=True)
+class Shutdown(Command):
+    """End any move, close the valves and exit."""
+
+    NAME: ClassVar[str] = "shutdown"
+
+
+@dataclass(frozen=True)
+class Hold(Command):
+    """Abort any move and hold every joint where it is (the thesis's default mode)."""
+
+    NAME: ClassVar[str] = "hold"
+
+
+@dataclass(frozen=True)
+class EmergencyStop(Command):
+    """Latch every valve closed until a reset."""
+
+    NAME: ClassVar[str] = "E-stop"
+
+
+@dataclass(frozen=True)
+class Reset(Command):
+    """Release a latched E-stop (reconnecting a lost link first)."""
+
+    NAME: ClassVar[str] = "reset"
+
+
+@dataclass(frozen=True)
+class Initialise(Command):
+    """Rig: drive the ram to the bottom stop and zero the encoder (section 3.5)."""
+
+    NAME: ClassVar[str] = "initialise"
+
+
+@dataclass(frozen=True)
+class Manual(Command):
+    """manual_actuate: open-loop duty per joint, % in each joint's positive sense."""
+
+    NAME: ClassVar[str] = "manual actuation"
+    duty: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        duty = tuple(finite(f"manual duty {i}", d) for i, d in enumerate(self.duty))
+        object.__setattr__(self, "duty", tuple(max(-100.0, min(100.0, d)) for d in duty))
+
+    @classmethod
+    def of(cls, machine: Machine, duty: Sequence[float]) -> Manual:
+        command = cls(tuple(duty))
+        command.fits(machine.n_joints)
+        return command
+
+    def fits(self, n_joints: int) -> None:
+        if len(self.duty) != n_joints:
+            raise CommandError(f"manual actuation needs {n_joints} duties, got {len(self.duty)}")
+
+
+@dataclass(frozen=True)
+class JogPosition(Command):
+    """Closed-loop jog: move one joint's hold target by ``delta`` (mm or deg)."""
+
+    NAME: ClassVar[str] = "position jog"
+    joint: int
+    delta: float
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "delta", finite("position jog step", self.delta))
+
+    @classmethod
+    def of(cls, machine: Machine, joint: int | str, delta: float) -> JogPosition:
+        return cls(joint_index(machine, joint), delta)
+
+    def fits(self, n_joints: int) -> None:
+        _check_joint(self.joint, n_joints)
+
+
+@dataclass(frozen=True)
+class SetCoefficients(Command):
+    """The hold or track set in shared memory changed: apply it (section 6.3)."""
+
+    NAME: ClassVar[str] = "coefficient change"
+    which: str
+
+    def __post_init__(self) -> None:
+        if self.which not in COEFFICIENT_SETS:
+            raise CommandError(f"coefficient set {self.which!r} is not one of "
+                               f"{', '.join(COEFFICIENT_SETS)}")
+
+
+@dataclass(frozen=True)
+class StartMove(Command):
+    """follow_track (a desired path) or tracking_actuate (a duty profile) from a move segment."""
+
+    NAME: ClassVar[str] = "move"
+    move_id: int
+    segment: str
+    kind: str
+    tracking: bool
+    meta: dict[str, object] = field(default_factory=dict)  # run metadata, saved with the run
+
+    def __post_init__(self) -> None:
+        if isinstance(self.move_id, bool) or not isinstance(self.move_id, int) or self.move_id < 1:
+            raise CommandError(f"move id must be a positive integer, got {self.move_id!r}")
+        if self.kind not in MOVE_KINDS:
+            raise CommandError(f"unknown move kind {self.kind!r} (kinds: "
+                               f"{', '.join(sorted(MOVE_KINDS))})")
+        if not isinstance(self.segment, str) or not self.segment:
+            raise CommandError(f"move {self.move_id}: no segment name")
+        if not isinstance(self.meta, dict):
+            raise CommandError(f"move {self.move_id}: metadata must be a dict")
+
+
+@dataclass(frozen=True)
+class Inject(Command):
+    """Simulator only: drive a simulated input from a test (``press_estop``)."""
+
+    NAME: ClassVar[str] = "inject"
+    method: str
+    args: tuple[object, ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.method not in INJECTABLE:
+            raise CommandError(f"{self.method!r} cannot be injected (only "
+                               f"{', '.join(INJECTABLE)})")
+
+
+def _check_joint(joint: object, n_joints: int) -> None:
+    if isinstance(joint, bool) or not isinstance(joint, int) or not 0 <= joint < n_joints:
+        raise CommandError(f"no joint {joint!r}: joints are 0…{n_joints - 1}")
+
+
+def check_coefficients(coefficients: Coefficients, n_joints: int) -> None:
+    """Raise CommandError unless the set has every joint's taps and every number is finite."""
+    c = coefficients
+    for name in ("kp", "w", "ki", "kd"):
+        if len(getattr(c, name)) != n_joints:
+            raise CommandError(f"coefficient set {c.name!r}: {name} has "
+                               f"{len(getattr(c, name))} joints, the machine {n_joints}")
+    if c.kv and len(c.kv) != n_joints:
+        raise CommandError(f"coefficient set {c.name!r}: kv has {len(c.kv)} joints, the "
+                           f"machine {n_joints}")
+    numbers = {"ki": c.ki, "kd": c.kd, "kv": c.kv, "filter": c.filter,
+               "filter_divisor": (c.filter_divisor,), "integral_limit": (c.integral_limit,),
+               "duty_limit": (c.duty_limit,)}
+    numbers.update({f"kp[{j}]": taps for j, taps in enumerate(c.kp)})
+    numbers.update({f"w[{j}]": taps for j, taps in enumerate(c.w)})
+    for name, values in numbers.items():
+        for value in values:
+            finite(f"coefficient set {c.name!r}: {name}", value)

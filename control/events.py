@@ -1,0 +1,120 @@
+"""Events from the controller: frozen records, one per kind, sent after the tick's status.
+
+``KIND`` names each for the client's ``Event.kind``; the fields are its payload;
+``message`` (a field or a property on every kind) says it in a sentence.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import ClassVar
+
+
+@dataclass(frozen=True)
+class ControllerEvent:
+    KIND: ClassVar[str] = "event"
+
+    @property
+    def payload(self) -> dict[str, object]:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class Ready(ControllerEvent):
+    """The loop runs; ``notice`` says how it is scheduled."""
+
+    KIND: ClassVar[str] = "ready"
+    realtime: bool
+    notice: str
+
+    @property
+    def message(self) -> str:
+        return self.notice
+
+
+@dataclass(frozen=True)
+class Notice(ControllerEvent):
+    KIND: ClassVar[str] = "notice"
+    message: str
+
+
+@dataclass(frozen=True)
+class Refused(ControllerEvent):
+    """A command the controller did not carry out, and why."""
+
+    KIND: ClassVar[str] = "refused"
+    command: str
+    reason: str
+
+    @property
+    def message(self) -> str:
+        return f"{self.command} refused: {self.reason}"
+
+
+@dataclass(frozen=True)
+class MoveDone(ControllerEvent):
+    """A move ended: complete, aborted, refused, interrupted; ``saved`` is the run's JSON path
+    when the controller saved it itself (its client gone)."""
+
+    KIND: ClassVar[str] = "move_done"
+    move_id: int
+    status: str
+    recorded: int
+    saved: str = ""
+
+    @property
+    def message(self) -> str:
+        return self.status
+
+
+@dataclass(frozen=True)
+class Initialised(ControllerEvent):
+    """The rig's initialise ended (section 3.5): zeroed at the bottom, or why not."""
+
+    KIND: ClassVar[str] = "initialised"
+    status: str
+
+    @property
+    def message(self) -> str:
+        return self.status
+
+
+@dataclass(frozen=True)
+class Fault(ControllerEvent):
+    """Something stopped motion: ``kind`` is limit, following_error, ui_lost, …; ``joint`` is
+    -1 when no joint is to blame."""
+
+    KIND: ClassVar[str] = "fault"
+    kind: str
+    joint: int
+    message: str
+
+
+@dataclass(frozen=True)
+class EStop(ControllerEvent):
+    """The E-stop latched or was released."""
+
+    KIND: ClassVar[str] = "estop"
+    latched: bool
+    reason: str
+
+    @property
+    def message(self) -> str:
+        return self.reason
+
+
+@dataclass(frozen=True)
+class Crash(ControllerEvent):
+    """The control process failed outside the loop (at start, or for good)."""
+
+    KIND: ClassVar[str] = "crash"
+    message: str
+    traceback: str
+
+
+@dataclass(frozen=True)
+class Died(ControllerEvent):
+    """The client's watchdog: the control process is gone (raised in the client, not sent)."""
+
+    KIND: ClassVar[str] = "died"
+    message: str

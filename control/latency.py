@@ -1,0 +1,57 @@
+"""Latency statistics of the loop: wake-up lateness histogram (Table 2.1), compute, overruns."""
+
+from __future__ import annotations
+
+from control.layout import HIST_BIN_NS, HIST_BINS
+
+
+class LatencyStats:
+    """Tallies kept in the process (shared memory costs per access); the histogram and its
+    min/max/sum/count cells are written to shared memory for the client."""
+
+    def __init__(self, hist: memoryview, period_ns: int) -> None:
+        self.hist = hist  # HIST_BINS + 1 bins, then min, max, sum, count (int64)
+        self.period_ns = period_ns
+        self.late_ns = 0
+        self.late_max_ns = 0
+        self.late_min_ns = -1  # none yet
+        self.late_sum_ns = 0
+        self.late_count = 0
+        self.overruns = 0
+        self.compute_ns = 0
+        self.compute_max_ns = 0
+        self.compute_total_ns = 0
+        self.io_total_ns = 0  # time inside backend.read/write, part of compute
+
+    def woke(self, late: int) -> None:
+        """Tally a wake-up ``late`` ns after its deadline."""
+        late = max(0, late)
+        self.late_ns = late
+        hist = self.hist
+        hist[min(late // HIST_BIN_NS, HIST_BINS)] += 1
+        base = HIST_BINS + 1
+        if late < self.late_min_ns or self.late_min_ns < 0:
+            self.late_min_ns = hist[base] = late
+        if late > self.late_max_ns:
+            self.late_max_ns = hist[base + 1] = late
+        self.late_sum_ns += late
+        self.late_count += 1
+        hist[base + 2] = self.late_sum_ns
+        hist[base + 3] = self.late_count
+
+    def computed(self, ns: int) -> None:
+        self.compute_ns = ns
+        if ns > self.compute_max_ns:
+            self.compute_max_ns = ns
+        self.compute_total_ns += ns
+
+    def next_deadline(self, deadline: int, now: int) -> int:
+        """The next grid point after ``deadline``; one already past is an overrun, skipped."""
+        period = self.period_ns
+        deadline += period
+        behind = now - deadline
+        if behind > 0:
+            missed = behind // period + 1
+            self.overruns += missed
+            deadline += missed * period
+        return deadline

@@ -1,0 +1,206 @@
+"""The mode machine (section 5.1.1): hold, follow_track, manual_actuate, tracking_actuate, and
+the rig's initialise (section 3.4.1), each turning positions into controller output.
+
+Inputs: the encoder input's believed positions, the active move's segment, the
+operator's manual duty and hold target. Outputs: ``desired`` (nan when open
+loop) and ``duty`` per joint, and each tick's row in the move's record.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from control import shm
+from control.commands import StartMove
+from control.encoder_input import EncoderInput
+from control.events import Fault, Initialised
+from control.guards import Guards
+from control.law import DifferenceLaw
+from control.layout import Mode, MoveLayout
+from control.outbox import Outbox
+from hw.machine import Coefficients, Machine
+from hw.transmission import Transmission
+
+MS = 1_000_000
+
+
+@dataclass
+class ActiveMove:
+    """The move in progress and its segment views."""
+
+    move_id: int
+    kind: str
+    meta: dict
+    segment: object
+    layout: MoveLayout
+    cells: memoryview  # float64 view of the whole segment
+    recorded: memoryview  # uint64 progress counter
+    tracking: bool
+    index: int = 0
+    start_ns: int = 0
+
+    @classmethod
+    def attach(cls, command: StartMove, now: int) -> ActiveMove:
+        """Open the move segment the client filled (``docs/shared_memory.md``)."""
+        seg = shm.attach(command.segment)
+        recorded = seg.buf[MoveLayout.RECORDED_OFFSET:MoveLayout.RECORDED_OFFSET + 8].cast("Q")
+        return cls(move_id=command.move_id, kind=command.kind, meta=dict(command.meta),
+                   segment=seg, layout=MoveLayout.read_header(seg.buf), cells=seg.buf.cast("d"),
+                   recorded=recorded, tracking=command.tracking, start_ns=now)
+
+
+@dataclass(frozen=True)
+class InitialiseConfig:
+    duty: float = 20.0  # function.c Initialise(): -20 % with Max 20
+    timeout_ns: int = 60_000 * MS
+
+
+@dataclass
+class InitialiseRun:
+    started_ns: int
+    reference_q: float
+    reference_ns: int
+
+
+@dataclass
+class ModeMachine:
+    machine: Machine
+    transmission: Transmission
+    encoders: EncoderInput
+    guards: Guards
+    outbox: Outbox
+    dt: float
+    initialise_config: InitialiseConfig
+    mode: Mode = Mode.HOLD
+    move: ActiveMove | None = None
+    init_run: InitialiseRun | None = None
+    coefficients: dict[str, Coefficients] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        n = self.n = self.machine.n_joints
+        self.coefficients = {"hold": self.machine.hold, "track": self.machine.track}
+        self.law = DifferenceLaw(self.machine, self.machine.hold, self.dt)
+        self.position = self.encoders.position  # the same list: read once a tick, shared
+        self.desired = [0.0] * n
+        self.duty = [0.0] * n
+        self.velocity = [0.0] * n
+        self.actuator_velocity = [0.0] * n
+        self.manual = [0.0] * n
+        self.hold_target = [0.0] * n
+        self.initialise_duty = [-self.initialise_config.duty] * n
+
+    # -- entering modes ------------------------------------------------------------------
+
+    def hold_at(self, target: list[float]) -> None:
+        homed, clamp = self.encoders.homed, self.guards.clamp
+        self.hold_target[:] = [clamp(j, target[j], homed) for j in range(self.n)]
+        self.mode = Mode.HOLD
+        self.law.set_coefficients(self.coefficients["hold"])
+
+    def hold_here(self) -> None:
+        self.hold_at(self.position)
+
+    def start_manual(self) -> None:
+        self.mode = Mode.MANUAL_ACTUATE
+
+    def start_move(self, move: ActiveMove) -> None:
+        self.move = move
+        self.mode = Mode.TRACKING_ACTUATE if move.tracking else Mode.FOLLOW_TRACK
+        self.law.set_coefficients(self.coefficients["track"])
+
+    def start_initialise(self, now: int) -> None:
+        self.mode = Mode.INITIALISE
+        self.init_run = InitialiseRun(now, self.position[0], now)
+
+    def set_coefficients(self, which: str, coefficients: Coefficients) -> None:
+        """Replace a set; the law takes it at once if it is the set in use (section 6.3)."""
+        self.coefficients[which] = coefficients
+        if (which == "hold") == (self.mode == Mode.HOLD):
+            self.law.set_coefficients(coefficients)
+
+    # -- each tick ---------------------------------------------------------------------
+
+    def control(self, latched: bool, now: int) -> None:
+        mode = self.mode
+        if latched:
+            self.zero_duty()
+        elif mode == Mode.HOLD:
+            self.closed_loop(self.hold_target, None)
+        elif mode == Mode.FOLLOW_TRACK:
+            self.follow_track()
+        elif mode == Mode.MANUAL_ACTUATE:
+            self.open_loop(self.manual)
+        elif mode == Mode.TRACKING_ACTUATE:
+            self.tracking_actuate()
+        else:
+            self.initialise(now)
+
+    def closed_loop(self, target: list[float], velocity: list[float] | None) -> None:
+        update, position, desired, duty = self.law.update, self.position, self.desired, self.duty
+        for j in range(self.n):
+            desired[j] = target[j]
+            duty[j] = update(j, target[j] - position[j], velocity[j] if velocity else 0.0)
+
+    def open_loop(self, source: list[float]) -> None:
+        desired, duty = self.desired, self.duty
+        for j in range(self.n):
+            desired[j] = math.nan
+            duty[j] = source[j]
+
+    def follow_track(self) -> None:
+        move = self.move
+        n, k, last, cells = self.n, move.index, move.layout.samples - 1, move.cells
+        row = move.layout.desired_offset // 8 + k * n
+        before = row - n if k > 0 else row  # central difference, one-sided at the ends
+        after = row + n if k < last else row
+        span = max((after - before) // n, 1) * self.dt
+        homed, clamp, desired, velocity = self.encoders.homed, self.guards.clamp, self.desired, \
+            self.velocity
+        for j in range(n):
+            desired[j] = clamp(j, cells[row + j], homed)
+            velocity[j] = (cells[after + j] - cells[before + j]) / span
+        self.transmission.actuators_from_joints(velocity, self.actuator_velocity)
+        self.closed_loop(desired, self.actuator_velocity)
+
+    def tracking_actuate(self) -> None:
+        move = self.move
+        row = move.layout.profile_offset // 8 + move.index * self.n
+        desired, duty, cells = self.desired, self.duty, move.cells
+        for j in range(self.n):
+            desired[j] = math.nan
+            duty[j] = cells[row + j]
+
+    def initialise(self, now: int) -> None:
+        """Drive the rig's ram down until it rests on the bottom stop, then zero (section 3.5)."""
+        self.open_loop(self.initialise_duty)
+        run = self.init_run
+        if now - run.reference_ns < 200 * MS:
+            return
+        if abs(self.position[0] - run.reference_q) < 0.5 and now - run.started_ns > 500 * MS:
+            self.encoders.zero()
+            self.hold_here()
+            self.outbox.put(Initialised("complete: initialised at the bottom"))
+        elif now - run.started_ns > self.initialise_config.timeout_ns:
+            self.hold_here()
+            self.outbox.put(Fault("initialise", 0, "initialise did not reach the bottom stop in "
+                                                   "time; holding"))
+        else:
+            run.reference_q, run.reference_ns = self.position[0], now
+
+    def record(self, now: int) -> bool:
+        """Append this tick to the move's record (after the guards: the duty the valves get);
+        True after its last sample."""
+        move = self.move
+        layout = move.layout
+        layout.row.pack_into(move.segment.buf, layout.record_offset + move.index * layout.row.size,
+                             (now - move.start_ns) / 1e9, *self.desired, *self.position,
+                             *self.duty)
+        move.index += 1
+        move.recorded[0] = move.index
+        return move.index >= layout.samples
+
+    def zero_duty(self) -> None:
+        duty = self.duty
+        for j in range(self.n):
+            duty[j] = 0.0

@@ -1,0 +1,40 @@
+"""The event outbox: events queue during a tick and go out after its status, never blocking."""
+
+from __future__ import annotations
+
+import select
+from multiprocessing.connection import Connection
+
+from control.events import ControllerEvent
+
+OUTBOX_LIMIT = 256
+
+
+class Outbox:
+    """A frozen client stops reading and the loop must go on: events wait while the channel is
+    full, and the oldest are dropped past ``OUTBOX_LIMIT``."""
+
+    def __init__(self, conn: Connection) -> None:
+        self.conn = conn
+        self.open = True
+        self.queue: list[ControllerEvent] = []
+        self.writable = select.poll()  # a unix socket polls writable with 3/4 of its buffer free
+        self.writable.register(conn.fileno(), select.POLLOUT)
+
+    def put(self, event: ControllerEvent) -> None:
+        self.queue.append(event)
+
+    def flush(self) -> None:
+        """Send what the channel takes now; a broken channel closes the outbox."""
+        queue = self.queue
+        if not self.open:
+            queue.clear()
+            return
+        while queue and self.writable.poll(0):
+            try:
+                self.conn.send(queue.pop(0))
+            except OSError:
+                self.open = False
+                queue.clear()
+                return
+        del queue[:-OUTBOX_LIMIT]
