@@ -1,9 +1,15 @@
-"""Suite-wide settings and the I/O board emulator every serial test starts.
+"""Suite-wide settings, what each test costs, and the I/O board emulator every serial test starts.
 
 Under CI, hypothesis replays a fixed set of examples. Locally every run explores
 new examples (that is how the bugs in docs/errata.md and the fault suite were
 found); in CI a run must not fail on an example no one has seen, so ``CI=true``
 selects a derandomized profile.
+
+Cost: a test that starts a process (the control subprocess through
+``ControlClient``, the emulator, a CLI, tmux) or the TUI is marked ``slow`` here,
+centrally (``pytest_collection_modifyitems``), so that ``pytest -m "not slow"``
+is the inner loop. Every other test is watched: one that starts a process
+anyway fails at teardown, naming what it started and where to mark it.
 """
 
 from __future__ import annotations
@@ -17,6 +23,7 @@ import subprocess
 import sys
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
+from typing import Any
 
 import pytest
 from hypothesis import settings
@@ -27,6 +34,88 @@ EMULATOR_START_S = 60.0
 settings.register_profile("ci", derandomize=True, deadline=None)
 if os.environ.get("CI"):
     settings.load_profile("ci")
+
+
+# -- cost: the slow marker -------------------------------------------------------------------
+
+# Folders and modules where every test starts a process or the TUI.
+SLOW_PATHS = (
+    "tests/faults/",                   # real controllers and emulators, faults injected
+    "tests/app/test_smoke_tmux.py",    # the app in a tmux session
+    "tests/control/test_client.py",    # the control subprocess, for real
+    "tests/control/test_process.py",   # the control subprocess's imports
+)
+# Fixtures that start one, with the file that defines them (they are visible in its folder
+# when it is a conftest.py, in that file alone otherwise).
+SLOW_FIXTURES = {
+    "emulator": "tests/conftest.py",                   # servodesk emulate
+    "controller": "tests/faults/conftest.py",          # ControlClient
+    "tui": "tests/app/conftest.py",                    # the TUI under Pilot, and its controller
+    "runs": "tests/control/identify/test_sysid.py",    # ControlClient's excitation runs
+    "robot": "tests/control/identify/test_tuning.py",  # ControlClient
+}
+# Single tests that start one in their body.
+SLOW_TESTS = (
+    "tests/control/test_seqlock.py::test_reader_never_sees_a_torn_record",  # spawned writer
+    "tests/control/test_shm.py::test_orphan_of_a_killed_process_is_cleaned_up",
+)
+# Audit events (PEP 578) of a process start. A multiprocessing "spawn" start raises none
+# (CPython 3.11): such a test must be listed above by hand, as test_seqlock's is.
+PROCESS_EVENTS = frozenset({"subprocess.Popen", "os.fork", "os.forkpty", "os.posix_spawn",
+                            "os.spawn", "os.system", "os.exec"})
+
+
+def _starts_processes(item: pytest.Item) -> bool:
+    path = item.path.relative_to(ROOT).as_posix()
+    if path.startswith(SLOW_PATHS) or item.nodeid.split("[")[0] in SLOW_TESTS:
+        return True
+    for name in set(getattr(item, "fixturenames", ())) & SLOW_FIXTURES.keys():
+        defined = SLOW_FIXTURES[name]
+        scope = defined.removesuffix("conftest.py") if defined.endswith("conftest.py") else defined
+        if path.startswith(scope):
+            return True
+    return False
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    for item in items:
+        if _starts_processes(item):
+            item.add_marker(pytest.mark.slow)
+
+
+class ProcessWatch:
+    """The process starts seen while a test not marked slow runs (an audit hook, PEP 578)."""
+
+    def __init__(self) -> None:
+        self.watching = False
+        self.started: list[str] = []
+
+    def __call__(self, event: str, args: tuple[Any, ...]) -> None:
+        if self.watching and event in PROCESS_EVENTS:
+            self.started.append(f"{event} {args!r:.160}")
+
+
+WATCH = ProcessWatch()
+sys.addaudithook(WATCH)
+
+
+@pytest.fixture(autouse=True)
+def _says_its_cost(request: pytest.FixtureRequest) -> Iterator[None]:
+    """Fail a test that starts a process without being marked slow."""
+    if request.node.get_closest_marker("slow"):
+        yield
+        return
+    WATCH.started.clear()
+    WATCH.watching = True
+    try:
+        yield
+    finally:
+        WATCH.watching = False
+    if WATCH.started:
+        pytest.fail(f"{request.node.nodeid} started a process but is not marked slow: "
+                    f"{'; '.join(WATCH.started)}. Add it to tests/conftest.py's SLOW_PATHS, "
+                    "SLOW_FIXTURES or SLOW_TESTS, so that `pytest -m \"not slow\"` stays fast",
+                    pytrace=False)
 
 
 # -- the I/O board emulator -------------------------------------------------------------------
