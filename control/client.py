@@ -52,6 +52,8 @@ from control.commands import (
 )
 from control.events import ControllerEvent, Crash, Died, Fault, MoveDone, Ready
 from control.layout import ControlLayout, LatencyHistogram, MoveLayout, Status
+from control.motion.moves import StepSummary
+from control.motion.plan import MovePlan, summaries
 from control.recorder import Run, RunFiles, coefficients_record, default_data_dir, save_run
 from control.runs import run_from_record, start_stamp
 from control.seqlock import SeqlockReader, SeqlockWriter
@@ -90,17 +92,26 @@ class Event:
 
 @dataclass(frozen=True)
 class MoveResult:
-    """A finished move: its status, its run, and where the run was saved."""
+    """A finished move: its status, its run, where the run was saved, and the plan it ran."""
 
     move_id: int
     status: str
     run: Run
     files: RunFiles | None
     save_error: str = ""
+    plan: MovePlan | None = None
+    machine: Machine | None = None
 
     @property
     def complete(self) -> bool:
         return self.status == "complete"
+
+    def summaries(self) -> list[tuple[str, StepSummary]]:
+        """``(label, summary)`` per joint that moved, the approach left out
+        (``control.motion.plan.summaries``)."""
+        if self.plan is None or self.machine is None:
+            return []
+        return summaries(self.plan, self.run, self.machine)
 
 
 @dataclass
@@ -111,6 +122,7 @@ class MoveHandle:
     kind: str
     samples: int
     meta: dict
+    plan: MovePlan
     segment: object
     layout: MoveLayout
     done: threading.Event = field(default_factory=threading.Event)
@@ -343,7 +355,8 @@ class ControlClient:
             except OSError as exc:
                 error = (f"run not saved ({exc}); it is kept in memory: save it elsewhere from "
                          "the Runs tab")
-        handle.result = MoveResult(handle.move_id, status, run, files, error)
+        handle.result = MoveResult(handle.move_id, status, run, files, error, handle.plan,
+                                   self.machine)
         shm.release(handle.segment, unlink=True)
         handle.done.set()
 
@@ -405,10 +418,21 @@ class ControlClient:
         self._send(command)
 
     def move(self, desired: np.ndarray, kind: str = "path", meta: dict | None = None) -> MoveHandle:
-        """follow_track: track ``desired (N, J)`` (mm, deg) each tick, then hold at its end."""
+        """follow_track: track ``desired (N, J)`` (mm, deg) each tick, then hold at its end; a
+        path that starts away from the joints gets an approach ramp first (``run``)."""
         path = np.asarray(desired, dtype=np.float64)
         self._check_path(path)
-        return self._start(path, None, kind, meta)
+        return self.run(MovePlan.of_path(path, kind, meta))
+
+    def run(self, plan: MovePlan) -> MoveHandle:
+        """Run a planned move (``control.motion.plan``): its path, with an approach from where
+        the joints are now when it starts elsewhere, or its duty profile."""
+        if plan.path is None and plan.profile is None:
+            raise ValueError(f"plan {plan.title!r} has neither a path nor a duty profile")
+        if plan.path is not None:
+            self._check_path(np.asarray(plan.path, dtype=np.float64))
+            plan = plan.approached(np.array(self.status().position), self.machine, self.dt)
+        return self._start(plan)
 
     def actuate(self, profile: np.ndarray, kind: str = "tracking_actuate",
                 meta: dict | None = None) -> MoveHandle:
@@ -421,7 +445,9 @@ class ControlClient:
             k, j = bad[0]
             raise ValueError(f"{self.machine.joints[j].name} duty {duty[k, j]} at sample {k} is "
                              "not a number in -100…100 %")
-        return self._start(None, duty, kind, meta)
+        moving = tuple(int(j) for j in np.flatnonzero(np.any(duty != 0, axis=0)))
+        return self._start(MovePlan(kind, kind, profile=duty, meta=dict(meta or {}),
+                                    moving=moving))
 
     def _check_path(self, path: np.ndarray) -> None:
         n = self.machine.n_joints
@@ -437,8 +463,8 @@ class ControlClient:
             except ValueError as exc:
                 raise ValueError(f"{exc} at sample {k} (t = {k * self.dt:.3f} s)") from None
 
-    def _start(self, path: np.ndarray | None, profile: np.ndarray | None, kind: str,
-               meta: dict | None) -> MoveHandle:
+    def _start(self, plan: MovePlan) -> MoveHandle:
+        kind, path, profile = plan.kind, plan.path, plan.profile
         if kind not in MOVE_KINDS:
             raise ValueError(f"unknown move kind {kind!r} (kinds: {', '.join(sorted(MOVE_KINDS))})")
         samples = len(path if path is not None else profile)
@@ -454,9 +480,9 @@ class ControlClient:
             "backend": self.backend,
             "start_time": start_stamp(),
             "coefficients": {k: coefficients_record(c) for k, c in self.coefficients.items()},
-            **(meta or {}),
+            **plan.meta,
         }
-        handle = MoveHandle(move_id, kind, samples, full_meta, segment, layout)
+        handle = MoveHandle(move_id, kind, samples, full_meta, plan, segment, layout)
         self._moves[move_id] = handle
         try:
             self._send(StartMove(move_id, segment.name, kind, path is None, full_meta))

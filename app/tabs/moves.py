@@ -16,9 +16,7 @@ the result summary. The wait for the end runs in a worker; the summary
 
 from __future__ import annotations
 
-import itertools
 import math
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import ClassVar
 
@@ -60,53 +58,15 @@ from app.widgets.run_plot import draw_path
 from control.client import MoveHandle, MoveResult
 from control.motion import moves
 from control.motion.path_files import PathFileError, PathPoints, read_path, resample
+from control.motion.plan import APPROACH_SPEED, MovePlan, moving_joints
 from control.motion.robot_model import has_unimate_model
 from hw.machine import Machine
 from kinematics import Unreachable
 
-APPROACH_SPEED = 0.5  # approach ramps run at half of each joint's max_speed
-APPROACH_SETTLE_S = 0.5
 PREVIEW_DELAY_S = 0.25
 MAX_SEQUENCE = 10
 POSE_FIELDS = (("x", "mm", "x"), ("y", "mm", "y"), ("z", "mm", "z"), ("γ", "°", "gamma"),
                ("β", "°", "beta"), ("α", "°", "alpha"))
-
-
-@dataclass(frozen=True)
-class MovePlan:
-    """What Run sends: a desired ``path`` (follow_track) or a duty ``profile`` (open loop)."""
-
-    kind: str
-    title: str
-    path: np.ndarray | None = None
-    profile: np.ndarray | None = None
-    meta: dict = field(default_factory=dict)
-    approach: int = 0  # samples of the approach ramp at the start of ``path``
-    moving: tuple[int, ...] = ()
-    note: str = ""
-
-    @property
-    def samples(self) -> int:
-        data = self.path if self.path is not None else self.profile
-        return 0 if data is None else len(data)
-
-
-def with_approach(current: np.ndarray, path: np.ndarray, machine: Machine,
-                  dt: float) -> tuple[np.ndarray, int]:
-    """``path`` with a ramp from ``current`` to its first row in front, if they differ."""
-    start = path[0]
-    gap = np.abs(start - current)
-    if all(g <= j.tolerance for g, j in zip(gap, machine.joints, strict=True)):
-        return path, 0
-    speeds = np.array([APPROACH_SPEED * j.max_speed for j in machine.joints])
-    ramp_time = max(0.2, float(np.max(gap / speeds)))
-    approach = moves.ramp(current, start, ramp_time, ramp_time + APPROACH_SETTLE_S, dt=dt)
-    approach = np.clip(approach, machine.lower, machine.upper)
-    return np.concatenate([approach, path]), len(approach)
-
-
-def moving_joints(path: np.ndarray) -> tuple[int, ...]:
-    return tuple(int(j) for j in np.flatnonzero(np.ptp(path, axis=0) > 0))
 
 
 class MoveForm(VerticalScroll):
@@ -197,11 +157,10 @@ class StepForm(MoveForm):
         target = self.field("target").value()
         duration = self.field("duration").value()
         path = moves.step(start, j, target, duration, dt=dt, machine=self.machine)
-        path, approach = with_approach(current, path, self.machine, dt)
         joint = self.machine.joints[j]
         return MovePlan("step", f"step {joint.name} to {target:g}{joint.symbol}", path,
                         meta={"joint": joint.name, "start": float(start[j]),
-                              "target": float(target)}, approach=approach, moving=(j,))
+                              "target": float(target)}, moving=(j,))
 
 
 class MultiStepForm(MoveForm):
@@ -312,12 +271,11 @@ class RampForm(StartEndForm):
         ramp_time = self.field("ramp_time").value()
         path = moves.ramp(start, end, ramp_time, self.field("total").value(), dt=dt,
                           machine=self.machine)
-        path, approach = with_approach(current, path, self.machine, dt)
         joint = self.machine.joints[j]
         return MovePlan("ramp", f"ramp {joint.name} to {end[j]:g}{joint.symbol}", path,
                         meta={"joint": joint.name, "start": float(start[j]),
                               "end": float(end[j]), "ramp_time": ramp_time},
-                        approach=approach, moving=(j,))
+                        moving=(j,))
 
 
 class SineForm(StartEndForm):
@@ -335,13 +293,12 @@ class SineForm(StartEndForm):
         j, start, end = self.ends(current)
         period, duration = self.field("period").value(), self.field("duration").value()
         path = moves.sine(start, end, period, duration, dt=dt, machine=self.machine)
-        path, approach = with_approach(current, path, self.machine, dt)
         joint = self.machine.joints[j]
         return MovePlan("sine", f"sine {joint.name} {start[j]:g}↔{end[j]:g}{joint.symbol}",
                         path, meta={"joint": joint.name, "start": float(start[j]),
                                     "end": float(end[j]), "period": period,
                                     "duration": duration},
-                        approach=approach, moving=(j,))
+                        moving=(j,))
 
 
 class EndPointForm(MoveForm):
@@ -484,12 +441,9 @@ class PathFileForm(MoveForm):
         if self.points is None or wanted != self.loaded_from:
             raise ValueError("load the file first: type its path and press Enter")
         path = resample(self.points, dt)
-        path, approach = with_approach(current, path, self.machine, dt)
-        note = (f"a {approach * dt:.2f} s approach to the file's first point comes first"
-                if approach else "")
         return MovePlan("path", f"path {Path(self.loaded_from).name}", path,
                         meta={"file": str(Path(self.loaded_from).expanduser().resolve())},
-                        approach=approach, moving=moving_joints(path), note=note)
+                        moving=moving_joints(path))
 
 
 class ViaPointsForm(MoveForm):
@@ -727,7 +681,8 @@ class MovesTab(TabPage):
         current = self.current()
         if isinstance(form, EndPointForm):
             form.solve(current)
-        return form.plan(current, self.machine.sample_time_s)
+        dt = self.machine.sample_time_s
+        return form.plan(current, dt).approached(current, self.machine, dt)
 
     def preview(self) -> None:
         title = self.query_one("#move-preview-title", Static)
@@ -796,10 +751,7 @@ class MovesTab(TabPage):
                 self._state(Text("initialising: driving down to the bottom stop…", "cyan"))
             return
         try:
-            if plan.path is not None:
-                handle = client.move(plan.path, plan.kind, plan.meta)
-            else:
-                handle = client.actuate(plan.profile, plan.kind, plan.meta)
+            handle = client.run(plan)
         except Exception as exc:  # ControllerError, ValueError from the client's checks
             error.update(Text(f"{exc}", "bold red"))
             self.notify(f"not run: {exc}", severity="error")
@@ -812,34 +764,7 @@ class MovesTab(TabPage):
     @work(thread=True, group="move-wait")
     def _wait(self, client: object, handle: MoveHandle, plan: MovePlan) -> None:
         result = client.wait(handle)  # type: ignore[attr-defined]
-        summaries = self._summaries(result, plan)
-        self.servodesk.later(self.finished, result, plan, summaries)
-
-    def _summaries(self, result: MoveResult, plan: MovePlan
-                   ) -> list[tuple[str, moves.StepSummary]]:
-        """``(label, summary)`` per joint that moved; a sequence gets one row per step."""
-        run = result.run
-        first = min(plan.approach, max(0, run.samples - 1))
-        if run.samples - first < 2 or plan.path is None:
-            return []
-        joints = self.machine.joints
-        if "steps" not in plan.meta:
-            summaries = moves.summary(run.t[first:], run.desired[first:], run.actual[first:],
-                                      joints)
-            order = [*plan.moving, *(j for j in range(len(joints)) if j not in plan.moving)]
-            return [(summaries[j].joint, summaries[j]) for j in order
-                    if j in plan.moving or summaries[j].step != 0]
-        # function.c MultiStep: each step of the sequence is a step response of its own
-        d = run.desired[first:, 0]
-        starts = [0, *(np.flatnonzero(np.diff(d) != 0) + 1).tolist(), len(d)]
-        rows = []
-        for a, b in itertools.pairwise(starts):
-            a0 = max(first, first + a - 1)  # one sample before the change: the step's start
-            s = moves.summary(run.t[a0:first + b], run.desired[a0:first + b],
-                              run.actual[a0:first + b], joints)[0]
-            if s.step != 0:
-                rows.append((f"{s.joint} step {len(rows) + 1}", s))
-        return rows
+        self.servodesk.later(self.finished, result, plan, result.summaries())
 
     def finished(self, result: MoveResult, plan: MovePlan,
                  summaries: list[tuple[str, moves.StepSummary]]) -> None:

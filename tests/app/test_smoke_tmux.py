@@ -44,18 +44,18 @@ def tmux(*args: str) -> str:
 
 
 class Terminal:
-    def __init__(self, session: str) -> None:
+    def __init__(self, session: str, status_file: Path) -> None:
         self.session = session
+        self.status_file = status_file
 
     def screen(self) -> str:
         return tmux("capture-pane", "-p", "-t", self.session)
 
     def exit_status(self) -> int | None:
-        """The app's exit status once it has exited (the pane stays: remain-on-exit), else
-        None."""
-        shown = tmux("display", "-p", "-t", self.session, "#{pane_dead} #{pane_dead_status}")
-        dead, _, status = shown.strip().partition(" ")
-        return int(status or -1) if dead == "1" else None
+        """The app's exit status once it has exited, else None: the session's shell writes
+        it to a file (tmux may mark the pane dead before it learns the status)."""
+        text = self.status_file.read_text() if self.status_file.exists() else ""
+        return int(text) if text.endswith("\n") else None
 
     def keys(self, *keys: str) -> None:
         tmux("send-keys", "-t", self.session, *keys)
@@ -84,14 +84,15 @@ def jog_duty(screen: str, duty: str) -> bool:
 
 def test_servodesk_runs_in_a_real_terminal(tmp_path: Path) -> None:
     session = f"servodesk-smoke-{os.getpid()}"
+    status = tmp_path / "exit-status"
     command = (f"cd {shlex.quote(str(REPO))} && PYTHONPATH={shlex.quote(str(REPO))} "
                f"{shlex.quote(sys.executable)} -m app --data-dir "
-               f"{shlex.quote(str(tmp_path / 'runs'))}")
+               f"{shlex.quote(str(tmp_path / 'runs'))}; echo $? > {shlex.quote(str(status))}")
     started = time.monotonic()
-    # remain-on-exit keeps the pane, and its exit status, after the app ends
+    # remain-on-exit keeps the last screen for the failure message if the app exits early
     tmux("start-server", ";", "set-option", "-g", "remain-on-exit", "on", ";",
          "new-session", "-d", "-s", session, "-x", str(WIDTH), "-y", str(HEIGHT), command)
-    term = Terminal(session)
+    term = Terminal(session, status)
     assert tmux("display", "-p", "-t", session, "#{window_width}x#{window_height}").strip() \
         == f"{WIDTH}x{HEIGHT}"
     try:

@@ -99,6 +99,22 @@ def test_follow_track_completes_and_the_run_is_saved(lockstep: ControlClient,
     np.testing.assert_allclose(status.desired, path[-1], atol=1e-9)
 
 
+def test_a_path_that_starts_away_gets_an_approach_and_the_tuis_summary(
+        lockstep: ControlClient) -> None:
+    here = np.array(lockstep.status().position)
+    start = here.copy()
+    start[1] += 20.0  # Rotate 20° away from where it is
+    path = moves.step(start, 2, start[2] + 5.0, duration=3.0, machine=UNIMATE)
+    result = lockstep.wait(lockstep.move(path, kind="step"), timeout=60)
+    assert result.complete, result.status
+    plan = result.plan
+    assert plan.approach > 0 and result.run.samples == plan.approach + len(path)
+    assert abs(result.run.desired[0, 1] - here[1]) < 1.0  # the approach starts where Rotate was
+    rows = result.summaries()
+    assert [label for label, _ in rows] == ["Up/Down"]  # Rotate moved only in the approach
+    assert rows[0][1].step == pytest.approx(5.0)
+
+
 def test_jog_duty_reaches_the_backend(realtime: ControlClient) -> None:
     realtime.jog_joint(2, 40.0)
     polarity = UNIMATE.joints[2].polarity

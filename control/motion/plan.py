@@ -1,0 +1,104 @@
+"""A move as planned, before it is sent: its path or duty profile, the approach in front of
+it, and how its result is summarised afterwards.
+
+The thesis's ``move()`` first drove the robot to a move's start position; here a
+path that begins away from where the joints are gets an approach ramp in front
+(``approached``), at half of each joint's ``max_speed``, which the result's
+summary leaves out. ``ControlClient.run`` applies it to every plan, so a script
+and the TUI run, and summarise, the same move.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from control.motion import moves
+from control.recorder import Run
+from hw.machine import Machine
+
+APPROACH_SPEED = 0.5  # approach ramps run at this fraction of each joint's max_speed
+APPROACH_MIN_S = 0.2
+APPROACH_SETTLE_S = 0.5
+
+
+@dataclass(frozen=True)
+class MovePlan:
+    """What a run sends: a desired ``path (N, J)`` (follow_track) or a duty ``profile (N, J)``
+    (tracking_actuate, open loop); neither for the rig's initialise."""
+
+    kind: str
+    title: str
+    path: np.ndarray | None = None
+    profile: np.ndarray | None = None
+    meta: dict = field(default_factory=dict)
+    approach: int = 0  # samples of the approach ramp at the start of ``path``
+    moving: tuple[int, ...] = ()  # the joints the move means to move (summarised first)
+    note: str = ""
+
+    @classmethod
+    def of_path(cls, path: np.ndarray, kind: str = "path", meta: dict | None = None
+                ) -> MovePlan:
+        """A plan for a bare path: titled by its kind, moving the joints whose desired moves."""
+        return cls(kind, kind, path=path, meta=dict(meta or {}), moving=moving_joints(path))
+
+    @property
+    def samples(self) -> int:
+        data = self.path if self.path is not None else self.profile
+        return 0 if data is None else len(data)
+
+    def approached(self, current: np.ndarray, machine: Machine, dt: float) -> MovePlan:
+        """This plan with an approach ramp from ``current`` in front of its path, when its first
+        row is farther than a joint's tolerance from where the joint is; else itself."""
+        if self.path is None:
+            return self
+        ramp = approach_ramp(np.asarray(current, dtype=float), self.path[0], machine, dt)
+        if not len(ramp):
+            return self
+        return replace(self, path=np.concatenate([ramp, self.path]),
+                       approach=self.approach + len(ramp))
+
+
+def approach_ramp(current: np.ndarray, start: np.ndarray, machine: Machine,
+                  dt: float) -> np.ndarray:
+    """``(M, J)`` from ``current`` to ``start`` at ``APPROACH_SPEED`` and a short settle, or
+    ``(0, J)`` when every joint is already within its tolerance of the start."""
+    gap = np.abs(start - current)
+    if all(g <= j.tolerance for g, j in zip(gap, machine.joints, strict=True)):
+        return np.zeros((0, machine.n_joints))
+    speeds = np.array([APPROACH_SPEED * j.max_speed for j in machine.joints])
+    ramp_time = max(APPROACH_MIN_S, float(np.max(gap / speeds)))
+    ramp = moves.ramp(current, start, ramp_time, ramp_time + APPROACH_SETTLE_S, dt=dt)
+    return np.clip(ramp, machine.lower, machine.upper)
+
+
+def moving_joints(path: np.ndarray) -> tuple[int, ...]:
+    """The joints whose desired position changes along ``path``."""
+    return tuple(int(j) for j in np.flatnonzero(np.ptp(path, axis=0) > 0))
+
+
+def summaries(plan: MovePlan, run: Run, machine: Machine
+              ) -> list[tuple[str, moves.StepSummary]]:
+    """``(label, summary)`` per joint that moved, the approach left out; a rig sequence
+    (function.c MultiStep, ``steps`` in its meta) gets one row per step."""
+    first = min(plan.approach, max(0, run.samples - 1))
+    if run.samples - first < 2 or plan.path is None:
+        return []
+    joints = machine.joints
+    if "steps" not in plan.meta:
+        rows = moves.summary(run.t[first:], run.desired[first:], run.actual[first:], joints)
+        order = [*plan.moving, *(j for j in range(len(joints)) if j not in plan.moving)]
+        return [(rows[j].joint, rows[j]) for j in order
+                if j in plan.moving or rows[j].step != 0]
+    d = run.desired[first:, 0]  # each step of the sequence is a step response of its own
+    starts = [0, *(np.flatnonzero(np.diff(d) != 0) + 1).tolist(), len(d)]
+    rows = []
+    for a, b in itertools.pairwise(starts):
+        a0 = max(first, first + a - 1)  # one sample before the change: the step's start
+        s = moves.summary(run.t[a0:first + b], run.desired[a0:first + b],
+                          run.actual[a0:first + b], joints)[0]
+        if s.step != 0:
+            rows.append((f"{s.joint} step {len(rows) + 1}", s))
+    return rows
