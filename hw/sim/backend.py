@@ -18,7 +18,7 @@ from collections.abc import Sequence
 from hw.backend import LinkCounters, RealClock, StepClock
 from hw.machine import Machine
 from hw.sim.encoders import GrayEncoderBoard, QuadratureEncoder
-from hw.sim.plant import MAX_STEP_S, Plant
+from hw.sim.plant import STEP_S, Plant
 from hw.sim.valve import next_period_ns, quantise_duty
 
 MAX_CATCH_UP_NS = 1_000_000_000  # a plant left alone longer is simulated for the last second only
@@ -46,7 +46,7 @@ class SimBackend:
         self.plant = Plant(machine, initial=initial, load_kg=load_kg, supply_mpa=supply_mpa)
         n = machine.n_joints
         self._n = n
-        self._step_ns = round(MAX_STEP_S * 1e9)
+        self._step_ns = round(STEP_S * 1e9)
         self._period_ns = round(machine.valve_period_us * 1e3)
         self._resolution = machine.valve_resolution_pct
         self._t_ns = self.clock.now_ns()
@@ -174,7 +174,8 @@ class SimBackend:
         if now - self._t_ns > MAX_CATCH_UP_NS:
             self._t_ns = now - MAX_CATCH_UP_NS
         t0 = self._t_ns
-        steps = -(-(now - t0) // self._step_ns)
+        # whole steps of 0.5…1.5 nominal: a real-time tick a few µs over 1 ms is one step
+        steps = max(1, (now - t0 + self._step_ns // 2) // self._step_ns)
         for k in range(1, steps + 1):
             self._step_to(t0 + (now - t0) * k // steps)
 

@@ -71,7 +71,7 @@ from hw.transmission import Transmission
 
 GRAVITY = 9.81  # m/s^2
 VAPOUR_PA = -1.0e5  # gauge pressure at which oil cavitates (absolute zero)
-MAX_STEP_S = 1.0e-3  # longest integration step
+STEP_S = 1.0e-3  # nominal plant step; each actuator subdivides it as its stability needs
 
 # machine-level [plant] keys; the lamp_* and photocell_* keys are read by hw.sim.encoders
 MACHINE_KEYS = {"supply_mpa", "relief_mpa", "bulk_modulus_mpa", "column_loss_ms",
