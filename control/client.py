@@ -36,7 +36,6 @@ from control.commands import (
     MOVE_KINDS,
     Command,
     EmergencyStop,
-    Heartbeat,
     Hold,
     Initialise,
     Inject,
@@ -51,7 +50,14 @@ from control.commands import (
     joint_index,
 )
 from control.events import ControllerEvent, Crash, Died, Fault, MoveDone, Ready
-from control.layout import ControlLayout, LatencyHistogram, MoveLayout, Status
+from control.layout import (
+    ESTOP_WORD,
+    HEARTBEAT_WORD,
+    ControlLayout,
+    LatencyHistogram,
+    MoveLayout,
+    Status,
+)
 from control.motion.moves import StepSummary
 from control.motion.plan import MovePlan, summaries
 from control.recorder import Run, RunFiles, coefficients_record, default_data_dir, save_run
@@ -60,6 +66,8 @@ from control.seqlock import SeqlockReader, SeqlockWriter
 from hw.machine import Coefficients, Machine, load_machine
 
 HEARTBEAT_S = 0.05
+OUTGOING = 64  # commands waiting for the channel; more means the controller is not reading
+CLOSE_WAIT_S = 1.0  # close(): how long the controller may take to stop before it is killed
 DEATH_S = 0.25
 _SESSIONS = itertools.count(1)  # several clients in one process get their own segments
 SPIN_US = 150.0  # spin before each deadline: keeps the core and its caches (benchmarks/loop.py)
@@ -157,7 +165,7 @@ class ControlClient:
         self.dead = ""
         self._moves: dict[int, MoveHandle] = {}
         self._ids = itertools.count(1)
-        self._send_lock = threading.Lock()
+        self._outgoing: queue.Queue[Command] = queue.Queue(OUTGOING)
         self._closing = threading.Event()
         self._stopping = False
         self._manual = [0.0] * self.machine.n_joints
@@ -167,6 +175,8 @@ class ControlClient:
         self._segment = shm.create(f"ctl{next(_SESSIONS)}", self.layout.size)
         buf = self._segment.buf
         self.layout.write_header(buf)
+        self._words = self.layout.client_words(buf)
+        self._words[HEARTBEAT_WORD] = time.monotonic_ns()
         self._status = SeqlockReader(buf, self.layout.status_offset, self.layout.status.struct)
         self._coefficient_writers = {
             which: SeqlockWriter(buf, self.layout.coefficient_offset(which),
@@ -199,8 +209,10 @@ class ControlClient:
                                          daemon=True)
         self._heart = threading.Thread(target=self._beat, name="servodesk-heartbeat",
                                        daemon=True)
-        self._monitor.start()
-        self._heart.start()
+        self._sender = threading.Thread(target=self._deliver, name="servodesk-commands",
+                                        daemon=True)
+        for thread in (self._monitor, self._heart, self._sender):
+            thread.start()
 
     # -- lifecycle -------------------------------------------------------------------
 
@@ -219,21 +231,22 @@ class ControlClient:
         return self._process.poll() is None
 
     def close(self) -> None:
-        """Stop the controller (valves closed), save what it finished, unlink every segment."""
+        """Stop the controller (valves closed), save what it finished, unlink every segment.
+        A controller that does not stop within ``CLOSE_WAIT_S`` (frozen, flooded) is killed."""
         if self._closing.is_set():
             return
         self._stopping = True
         if not self.dead:
-            with contextlib.suppress(OSError, ValueError):
+            with contextlib.suppress(ControllerError):
                 self._send(Shutdown())
             with contextlib.suppress(subprocess.TimeoutExpired):
-                self._process.wait(timeout=3.0)
+                self._process.wait(timeout=CLOSE_WAIT_S)
         self._closing.set()
-        for thread in (self._monitor, self._heart):
-            if thread.is_alive():
-                thread.join(timeout=2.0)
-        self._drain()
         self._shutdown_process()
+        for thread in (self._monitor, self._heart, self._sender):
+            if thread.is_alive():
+                thread.join(timeout=0.2)
+        self._drain()
         for handle in list(self._moves.values()):
             self._finish(handle, "interrupted: client closed", None)
         self._release()
@@ -278,9 +291,10 @@ class ControlClient:
                 break
             stop()
             with contextlib.suppress(subprocess.TimeoutExpired):
-                self._process.wait(timeout=2.0)
+                self._process.wait(timeout=0.3)
 
     def _release(self) -> None:
+        self._words.release()
         self._status.release()
         for writer in self._coefficient_writers.values():
             writer.release()
@@ -292,12 +306,24 @@ class ControlClient:
     # -- the monitor thread: heartbeats out, events in, death noticed -------------------
 
     def _beat(self) -> None:
-        """Heartbeats on their own thread, so saving a run or a busy UI never silences them."""
+        """Heartbeats on their own thread, written into shared memory (no channel to fill), so
+        saving a run, a busy UI or a frozen controller never silences or blocks them."""
         while not self._closing.wait(HEARTBEAT_S):
             if self.dead or self._stopping:
                 return
-            with contextlib.suppress(OSError, ValueError, ControllerError):
-                self._send(Heartbeat())
+            self._words[HEARTBEAT_WORD] = time.monotonic_ns()
+
+    def _deliver(self) -> None:
+        """Send queued commands in order; only this thread ever waits on the channel."""
+        while not self._closing.is_set():
+            try:
+                command = self._outgoing.get(timeout=0.05)
+            except queue.Empty:
+                continue
+            try:
+                self._conn.send(command)
+            except (OSError, ValueError):
+                return  # the channel is gone: the monitor thread reports the death
 
     def _watch(self) -> None:
         while not self._closing.is_set():
@@ -363,18 +389,27 @@ class ControlClient:
     # -- commands ------------------------------------------------------------------------
 
     def _send(self, command: Command) -> None:
+        """Queue ``command`` for the channel; never waits. ControllerError if the controller is
+        dead or has not taken the last ``OUTGOING`` commands (frozen or flooded)."""
         if self.dead:
             raise ControllerError(self.dead)
-        with self._send_lock:
-            self._conn.send(command)
+        try:
+            self._outgoing.put_nowait(command)
+        except queue.Full:
+            raise ControllerError(f"the controller has not taken the last {OUTGOING} commands "
+                                  "(frozen or overloaded): E-stop still works") from None
 
     def hold(self) -> None:
         """Abort any move and hold every joint where it is (the thesis's default mode)."""
         self._send(Hold())
 
     def estop(self) -> None:
-        """Latch every valve closed until ``reset``."""
-        self._send(EmergencyStop())
+        """Latch every valve closed until ``reset``. Never waits: the E-stop count in shared
+        memory reaches the controller on its next tick whatever the channel holds; the message
+        behind it is best effort."""
+        self._words[ESTOP_WORD] += 1
+        with contextlib.suppress(ControllerError):
+            self._send(EmergencyStop())
 
     def reset(self) -> None:
         """Release a latched E-stop (refused while the E-stop input is pressed)."""

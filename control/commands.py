@@ -23,7 +23,8 @@ MOVE_KINDS = frozenset({
     "step", "multi_step", "ramp", "sine", "path", "end_point", "cartesian", "via_points",
     "go_to", "set_pulse", "tracking_actuate",
 })
-INJECTABLE = ("press_estop",)  # simulator inputs a test may drive
+STEP_KINDS = frozenset({"step", "multi_step"})  # may jump from row to row, as the thesis's did
+INJECTABLE = ("press_estop", "jam_valve", "freeze_encoder", "stick_bit")  # simulator faults
 
 
 class CommandError(ValueError):
@@ -76,13 +77,6 @@ class Command:
 
     def fits(self, n_joints: int) -> None:
         """Raise CommandError if a joint this record names is not one of ``n_joints``."""
-
-
-@dataclass(frozen=True)
-class Heartbeat(Command):
-    """The client is alive (sent every 50 ms; 250 ms of silence makes the controller hold)."""
-
-    NAME: ClassVar[str] = "heartbeat"
 
 
 @dataclass(frozen=True)
@@ -199,7 +193,8 @@ class StartMove(Command):
 
 @dataclass(frozen=True)
 class Inject(Command):
-    """Simulator only: drive a simulated input from a test (``press_estop``)."""
+    """Simulator only: drive a simulated input or fault from a test (``press_estop``,
+    ``jam_valve``, ``freeze_encoder``, ``stick_bit``)."""
 
     NAME: ClassVar[str] = "inject"
     method: str

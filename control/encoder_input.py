@@ -3,11 +3,14 @@
 Section 6.2: the multiplexed encoders sometimes read a wrong word. Each word
 becomes its actuator's coordinate through the transmission, and each actuator's
 reading is judged there, where a wrong word shows alone: a jump further than
-the actuator can move since its last good reading is rejected and counted, and
-after ``resync`` rejections in a row the reading is believed (the actuator
-really is there). The believed actuator coordinates then become joint
-positions (the Yaw reading includes Bend), so a wrong Bend word leaves Yaw's
-position as right as Bend's.
+the actuator can move since its last good reading is rejected and counted. The
+thesis saw two or three wrong readings at a time (Figure 6.1); ``glitch_limit``
+rejections in a row are not a glitch but a lying encoder (a stuck bit, a cut
+cable), and a feedback fault: no jump is ever believed, except the first
+reading and the first after a reset (``resync``), and no believed position may
+lie past the joint's range by more than ``range_margin_counts`` once homed. The
+believed actuator coordinates then become joint positions (the Yaw reading
+includes Bend), so a wrong Bend word leaves Yaw's position as right as Bend's.
 """
 
 from __future__ import annotations
@@ -22,18 +25,24 @@ class EncoderInput:
     ``raw`` words and ``glitches`` per joint. ``homed`` is False until a quadrature
     encoder is zeroed."""
 
-    def __init__(self, machine: Machine, transmission: Transmission, margin: float,
-                 resync: int) -> None:
+    def __init__(self, machine: Machine, transmission: Transmission, margin: float) -> None:
         n = self.n = machine.n_joints
+        self.joints = machine.joints
         self.transmission = transmission
-        self.resync_after = resync
+        self.glitch_limit = machine.supervision.glitch_limit
+        margin_counts = machine.supervision.range_margin_counts
+        self.low = [j.lower - margin_counts * abs(j.encoder.gradient) for j in machine.joints]
+        self.high = [j.upper + margin_counts * abs(j.encoder.gradient) for j in machine.joints]
+        self.fault = ""  # why the feedback cannot be believed, naming the joint
+        self.fault_joint = -1
         self.raw = [0] * n
         self.offset = [0] * n  # quadrature counts at the zero (set by the rig's initialise)
         self.reading = [0.0] * n  # this tick's actuator readings, unfiltered
         self.actuator = [0.0] * n  # believed actuator coordinates
         self.position = [0.0] * n  # believed joint positions
         self.glitches = [0] * n
-        self.rejects = [resync] * n  # believe the first reading
+        self.rejects = [0] * n
+        self.believe = [True] * n  # the first reading is believed
         self.last_ok_ns = [0] * n
         self.speed_per_ns = [j.max_speed * 1e-9 * margin for j in machine.joints]
         self.step_floor = [3 * abs(j.encoder.gradient) for j in machine.joints]  # 3 counts
@@ -44,23 +53,40 @@ class EncoderInput:
         backend.read(raw)
         now = backend.sample_ns  # a late serial reply re-reads old words: time them so
         self.transmission.actuators_from_words(raw, self.offset, reading)
-        rejects, last_ok, resync = self.rejects, self.last_ok_ns, self.resync_after
+        rejects, last_ok, believe = self.rejects, self.last_ok_ns, self.believe
         speed, floor = self.speed_per_ns, self.step_floor
         for j in range(self.n):
             a = reading[j]
-            if (abs(a - actuator[j]) <= speed[j] * (now - last_ok[j]) + floor[j]
-                    or rejects[j] >= resync):
+            if abs(a - actuator[j]) <= speed[j] * (now - last_ok[j]) + floor[j] or believe[j]:
                 actuator[j] = a
                 last_ok[j] = now
                 rejects[j] = 0
+                believe[j] = False
+                if self.homed and not self.low[j] <= a <= self.high[j]:
+                    self.implausible(j, f"reads {a:.2f}{self.joints[j].symbol}, outside its "
+                                        f"range {self.joints[j].limit_text()}")
             else:
                 rejects[j] += 1
                 self.glitches[j] += 1
+                if rejects[j] >= self.glitch_limit:
+                    self.implausible(j, f"read {rejects[j]} jumps in a row (to "
+                                        f"{a:.2f}{self.joints[j].symbol} from "
+                                        f"{actuator[j]:.2f}{self.joints[j].symbol}), more than "
+                                        "it can move: a stuck bit or a bad cable")
         self.transmission.joints_from_actuators(actuator, self.position)
 
+    def implausible(self, j: int, what: str) -> None:
+        """Record the first feedback fault: the controller latches the E-stop on it."""
+        if not self.fault:
+            self.fault_joint = j
+            self.fault = f"feedback fault: {self.joints[j].name}'s encoder {what}"
+
     def resync(self, backend: Backend) -> None:
-        """Believe the next reading outright: the joints may have moved while nobody watched."""
-        self.rejects = [self.resync_after] * self.n
+        """Believe the next reading outright (the joints may have moved while nobody watched)
+        and forget a feedback fault; the reading is judged again."""
+        self.believe = [True] * self.n
+        self.rejects = [0] * self.n
+        self.fault, self.fault_joint = "", -1
         self.read(backend)
 
     def zero(self) -> None:

@@ -61,6 +61,7 @@ class MoveDone(ControllerEvent):
     status: str
     recorded: int
     saved: str = ""
+    gaps: tuple[tuple[float, float], ...] = ()  # (t s, length s): controller stalls in the run
 
     @property
     def message(self) -> str:
@@ -81,8 +82,8 @@ class Initialised(ControllerEvent):
 
 @dataclass(frozen=True)
 class Fault(ControllerEvent):
-    """Something stopped motion: ``kind`` is limit, following_error, ui_lost, …; ``joint`` is
-    -1 when no joint is to blame."""
+    """Something stopped motion: ``kind`` is limit, following_error, feedback, path_row,
+    overrun, ui_lost, …; ``joint`` is -1 when no joint is to blame."""
 
     KIND: ClassVar[str] = "fault"
     kind: str

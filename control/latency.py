@@ -9,9 +9,12 @@ class LatencyStats:
     """Tallies kept in the process (shared memory costs per access); the histogram and its
     min/max/sum/count cells are written to shared memory for the client."""
 
-    def __init__(self, hist: memoryview, period_ns: int) -> None:
+    def __init__(self, hist: memoryview, period_ns: int, overrun_fraction: float) -> None:
         self.hist = hist  # HIST_BINS + 1 bins, then min, max, sum, count (int64)
         self.period_ns = period_ns
+        self.overrun_fraction = overrun_fraction
+        self.window_start_ns = 0  # the current one-second window of the overload watch
+        self.window_overruns = 0
         self.late_ns = 0
         self.late_max_ns = 0
         self.late_min_ns = -1  # none yet
@@ -55,3 +58,14 @@ class LatencyStats:
             self.overruns += missed
             deadline += missed * period
         return deadline
+
+    def overloaded(self, now: int) -> float:
+        """Once a second: the fraction of that second's periods overrun if it is more than
+        ``overrun_fraction`` (a board flooding the link, a starved CPU), else 0."""
+        if now - self.window_start_ns < 1_000_000_000:
+            return 0.0
+        periods = (now - self.window_start_ns) / self.period_ns
+        fraction = (self.overruns - self.window_overruns) / periods if self.window_start_ns else 0
+        self.window_start_ns, self.window_overruns = now, self.overruns
+        return fraction if fraction > self.overrun_fraction else 0.0
+

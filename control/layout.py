@@ -27,7 +27,7 @@ from hw.machine import Coefficients
 if TYPE_CHECKING:
     from control.latency import LatencyStats
 
-LAYOUT_VERSION = 1
+LAYOUT_VERSION = 2
 CONTROL_MAGIC = b"SDSK"
 MOVE_MAGIC = b"SDMV"
 MAX_TAPS = 8
@@ -35,6 +35,8 @@ HIST_BIN_NS = 5_000  # 5 µs bins, Table 2.1
 HIST_BINS = 400  # 0-2 ms, plus one overflow bin
 FAULT_TEXT = 160
 LINK_FIELDS = tuple(LinkCounters().as_dict())
+CLIENT_WORDS = ("estop", "heartbeat")  # ESTOP_WORD, HEARTBEAT_WORD
+ESTOP_WORD, HEARTBEAT_WORD = 0, 1
 
 
 class Mode(IntEnum):
@@ -200,8 +202,11 @@ class ControlLayout:
     """Offsets of the control segment for ``n`` joints.
 
     header (64 B): magic, version, joint count, controller pid, then the status
-    seqlock, the hold and track coefficient seqlocks and the histogram
-    (``HIST_BINS + 1`` counts, then min, max, sum and count of lateness in ns).
+    seqlock, the hold and track coefficient seqlocks, the histogram
+    (``HIST_BINS + 1`` counts, then min, max, sum and count of lateness in ns), and
+    the client's words: its E-stop count and its heartbeat (monotonic ns), each one
+    aligned 8-byte store that the controller reads every tick, so neither waits on
+    the command channel.
     """
 
     HEADER = struct.Struct("<4sIII")
@@ -215,7 +220,8 @@ class ControlLayout:
         self.hold_offset = _align(self.status_offset + 8 + self.status.struct.size)
         self.track_offset = _align(self.hold_offset + 8 + self.coefficients.struct.size)
         self.hist_offset = _align(self.track_offset + 8 + self.coefficients.struct.size)
-        self.size = self.hist_offset + 8 * (HIST_BINS + 1 + 4)
+        self.client_offset = self.hist_offset + 8 * (HIST_BINS + 1 + 4)
+        self.size = self.client_offset + 8 * len(CLIENT_WORDS)
 
     def coefficient_offset(self, which: str) -> int:
         if which not in ("hold", "track"):
@@ -230,6 +236,10 @@ class ControlLayout:
         if magic != CONTROL_MAGIC or version != LAYOUT_VERSION or n != self.n:
             raise ValueError(f"control segment is {magic!r} v{version} for {n} joints; expected "
                              f"{CONTROL_MAGIC!r} v{LAYOUT_VERSION} for {self.n}")
+
+    def client_words(self, buf: memoryview) -> memoryview:
+        """The client's words as a ``q`` view, in ``CLIENT_WORDS`` order."""
+        return buf[self.client_offset:self.client_offset + 8 * len(CLIENT_WORDS)].cast("q")
 
     def histogram(self, buf: memoryview) -> np.ndarray:
         """A (HIST_BINS + 5,) int64 view: counts, then min, max, sum, count."""

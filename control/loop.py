@@ -1,42 +1,44 @@
 """The control loop of the control subprocess (the thesis's ``RT.o``/``PDcontrol.o``).
 
 Every tick, on an absolute deadline grid: ``read`` the encoders into joint
-units through the glitch filter, ``poll`` the command channel, ``control``
-(the mode machine and the eq. 5.1 law), ``guard`` (E-stop, limits, following
-error), ``write`` the valves, ``publish`` the status and record the move. On
-an overrun the loop skips to the next grid point; it never catches up with a
-burst of ticks. Each stage's state lives in its component: ``EncoderInput``,
-``ModeMachine``, ``Guards``, ``LatencyStats``, ``Outbox``.
+units through the glitch filter, ``poll`` the client (its E-stop and heartbeat
+words, then the command channel), ``control`` (the mode machine and the eq. 5.1
+law), ``guard`` (E-stop, feedback, limits, the supervisor), record the move,
+``write`` the valves, ``publish`` the status. On an overrun the loop skips to
+the next grid point; it never catches up with a burst of ticks, and it never
+blocks: no file I/O (runs are kept and saved after the loop, ``RunSaver``),
+events wait in the ``Outbox``. Each stage's state lives in its component:
+``EncoderInput``, ``ClientWatch``, ``ModeMachine``, ``Guards``, ``Supervisor``,
+``LatencyStats``, ``Outbox``.
 """
 
 from __future__ import annotations
 
-import time
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
 from pathlib import Path
 
 from control import commands as cmd
-from control import shm
-from control.channel import CommandChannel, command_name
+from control.channel import CommandChannel
 from control.encoder_input import EncoderInput
 from control.events import EStop, Fault, MoveDone, Notice, Refused
-from control.guards import Guards, Trip
+from control.guards import Guards
 from control.heartbeat import ClientWatch
 from control.latency import LatencyStats
-from control.layout import HIST_BINS, ControlLayout, Flag, Mode
+from control.layout import HIST_BINS, ControlLayout, Mode
 from control.modes import ActiveMove, InitialiseConfig, ModeMachine
 from control.outbox import Outbox
-from control.saver import RunSaver
-from control.seqlock import SeqlockReader, SeqlockWriter
+from control.publisher import Publisher
+from control.saver import RunSaver, release
+from control.seqlock import SeqlockReader
+from control.supervisor import Supervisor
 from hw.backend import Backend
 from hw.machine import Machine
 from hw.transmission import Transmission
 
 MS = 1_000_000
-ESTOP_LATCHED, ESTOP_INPUT, HOMED, UI_LOST, LINK_FAULT, REALTIME, MOVING, FAULT = (
-    int(f) for f in Flag)  # in Flag's order; plain ints, as enum ORs cost µs
+NOT_HOMED = ("not initialised: the encoder is not zeroed: run Initialise first (drives the ram "
+             "to the bottom and zeroes the encoder)")
 
 
 @dataclass(frozen=True)
@@ -45,8 +47,6 @@ class LoopConfig:
     heartbeat_timeout_ns: int = 250 * MS
     orphan_timeout_ns: int = 5_000 * MS
     glitch_margin: float = 1.5  # plausible jump = margin x max_speed x elapsed + 3 counts
-    glitch_resync: int = 5  # consecutive rejections after which a reading is believed
-    ferror_window_ns: int = 250 * MS
     initialise: InitialiseConfig = field(default_factory=InitialiseConfig)
     data_dir: Path | None = None
 
@@ -63,8 +63,6 @@ class Controller:
         self.clock = backend.clock
         n = self.n = machine.n_joints
         self.layout = ControlLayout(n)
-        self.status_writer = SeqlockWriter(control_buf, self.layout.status_offset,
-                                           self.layout.status.struct)
         self.coefficient_readers = {
             which: SeqlockReader(control_buf, self.layout.coefficient_offset(which),
                                  self.layout.coefficients.struct)
@@ -73,28 +71,28 @@ class Controller:
                            self.layout.hist_offset + 8 * (HIST_BINS + 5)].cast("q")
         self.transmission = Transmission(machine)
         self.outbox = Outbox(conn)
-        self.latency = LatencyStats(hist, config.period_ns)
-        self.encoders = EncoderInput(machine, self.transmission, config.glitch_margin,
-                                     config.glitch_resync)
-        self.guards = Guards(machine, self.outbox, config.ferror_window_ns)
+        self.latency = LatencyStats(hist, config.period_ns, machine.supervision.overrun_fraction)
+        self.encoders = EncoderInput(machine, self.transmission, config.glitch_margin)
+        self.guards = Guards(machine, self.outbox)
+        self.supervisor = Supervisor(machine, config.period_ns)
         self.modes = ModeMachine(machine, self.transmission, self.encoders, self.guards,
                                  self.outbox, config.period_ns / 1e9, config.initialise)
         self.saver = RunSaver(machine, config.data_dir, config.period_ns / 1e9)
         self.valve = [0.0] * n
-        self.client = ClientWatch(config.heartbeat_timeout_ns, config.orphan_timeout_ns)
+        self.client = ClientWatch(self.layout.client_words(control_buf),
+                                  config.heartbeat_timeout_ns, config.orphan_timeout_ns)
         self.running = True
         self.realtime = False
         self.tick_count = 0
-        self.started_ns = self.clock.now_ns()
+        self.publisher = Publisher(control_buf, self.layout, self.clock.now_ns())
         self.deadline = 0
-        self.channel = CommandChannel(conn, self.outbox, self.client)
-        self.handlers: dict[type[cmd.Command], Callable] = {
-            cmd.Heartbeat: lambda _: None, cmd.Shutdown: self.on_shutdown,
+        self.channel = CommandChannel(conn, self.outbox, self.client, n, {
+            cmd.Shutdown: self.on_shutdown,
             cmd.Hold: self.on_hold, cmd.EmergencyStop: self.on_estop, cmd.Reset: self.on_reset,
             cmd.Initialise: self.on_initialise, cmd.Manual: self.on_manual,
             cmd.JogPosition: self.on_jog_position, cmd.SetCoefficients: self.on_coefficients,
             cmd.StartMove: self.on_move, cmd.Inject: self.on_inject,
-        }
+        })
 
     # -- the loop ---------------------------------------------------------------
 
@@ -133,7 +131,7 @@ class Controller:
         self.latency.woke(woke - self.deadline)
         self.read()
         self.poll()
-        self.watch_heartbeat()
+        self.watch(woke)
         self.modes.control(self.guards.latched, woke)
         self.guard(woke)
         if self.modes.move is not None and self.modes.record(self.clock.now_ns()):
@@ -149,31 +147,22 @@ class Controller:
         self.encoders.read(self.backend)
         self.latency.io_total_ns += self.clock.now_ns() - before
 
-    # -- poll: typed commands from the client (the FIFO analogue) -----------------
+    # -- poll: the client's E-stop word, then its commands (the FIFO analogue) -----
 
     def poll(self) -> None:
-        for command in self.channel.receive():
-            self.handle(command)
+        if self.client.estop_pressed() and not self.guards.latched:
+            self.latch_estop("operator E-stop")
+        self.channel.poll()
 
-    def handle(self, command: object) -> None:
-        """Check what arrived and carry it out by its type; what fails is refused, never
-        raised, and latches nothing."""
-        handler = self.handlers.get(type(command))
-        if handler is None:
-            self.outbox.put(Refused(command_name(command), "not a command this controller knows"))
-            return
-        try:
-            command.check(self.n)
-            handler(command)
-        except Exception as exc:  # a record that bypassed its builder, or a value that broke
-            self.outbox.put(Refused(command_name(command), f"{type(exc).__name__}: {exc}"))
-            if isinstance(command, cmd.StartMove):
-                self.outbox.put(MoveDone(command.move_id, f"refused: {exc}", 0))
-
-    def refuse_when_stopped(self, command: cmd.Command) -> bool:
-        if not self.guards.latched:
+    def refused(self, command: cmd.Command, closed_loop: bool = False) -> bool:
+        """Refuse ``command`` while the E-stop is latched, or a closed-loop one before the
+        rig's encoder is zeroed (it would steer by unknown counts); True if refused."""
+        if self.guards.latched:
+            reason = f"E-stop latched ({self.guards.reason}); reset first"
+        elif closed_loop and not self.encoders.homed:
+            reason = NOT_HOMED
+        else:
             return False
-        reason = f"E-stop latched ({self.guards.reason}); reset first"
         if isinstance(command, cmd.StartMove):
             self.outbox.put(MoveDone(command.move_id, f"refused: {reason}", 0))
         else:
@@ -186,7 +175,7 @@ class Controller:
 
     def on_hold(self, _: cmd.Hold) -> None:
         self.end_move("aborted by operator")
-        self.modes.hold_here()
+        self.hold_here()
 
     def on_estop(self, _: cmd.EmergencyStop) -> None:
         self.latch_estop("operator E-stop")
@@ -201,12 +190,12 @@ class Controller:
         self.guards.release()
         self.modes.law.reset()
         self.encoders.resync(self.backend)
-        self.modes.hold_here()
+        self.hold_here()
         self.outbox.put(EStop(False, "reset by operator"))
 
     def reconnect(self) -> bool:
-        """Reopen a faulted link on the operator's reset, valves closed. This blocks while the
-        board answers (ticks overrun, counted): latched, with no link, there is nothing to do."""
+        """Reopen a faulted link on reset, valves closed; it blocks while the board answers
+        (latched, with no link, the loop has nothing else to do)."""
         try:
             self.backend.reconnect()
         except OSError as exc:
@@ -219,21 +208,23 @@ class Controller:
         return True
 
     def on_manual(self, command: cmd.Manual) -> None:
-        if self.refuse_when_stopped(command):
+        if self.refused(command):
             return
         if self.modes.mode != Mode.MANUAL_ACTUATE:
             self.end_move("aborted: manual actuation")
             self.modes.start_manual()
-            self.guards.rearm()
-        self.modes.manual[:] = command.duty
+            self.rearm()
+        if not self.modes.set_manual(command.duty):
+            self.outbox.put(Notice(f"manual duty limited to ±{self.config.initialise.duty:g} % "
+                                   "until the encoder is zeroed: run Initialise"))
 
     def on_jog_position(self, command: cmd.JogPosition) -> None:
-        if self.refuse_when_stopped(command):
+        if self.refused(command, closed_loop=True):
             return
         modes = self.modes
         if modes.mode != Mode.HOLD:
             self.end_move("aborted: position jog")
-            modes.hold_here()
+            self.hold_here()
         j = command.joint
         modes.hold_target[j] = self.guards.clamp(j, modes.hold_target[j] + command.delta,
                                                  self.encoders.homed)
@@ -245,7 +236,7 @@ class Controller:
         self.modes.set_coefficients(command.which, coefficients)
 
     def on_initialise(self, command: cmd.Initialise) -> None:
-        if self.refuse_when_stopped(command):
+        if self.refused(command):
             return
         if self.machine.encoder_kind == "gray":
             self.outbox.put(Refused(command.NAME, "absolute encoders need no initialise"))
@@ -254,57 +245,63 @@ class Controller:
         self.modes.start_initialise(self.clock.now_ns())
 
     def on_move(self, command: cmd.StartMove) -> None:
-        if self.refuse_when_stopped(command):
-            return
-        if not command.tracking and not self.encoders.homed:
-            self.outbox.put(MoveDone(command.move_id, "refused: not initialised", 0))
-            self.outbox.put(Fault("not_initialised", -1,
-                             "the encoder is not zeroed: run Initialise first (drives the ram to "
-                             "the bottom and zeroes the encoder)"))
+        if self.refused(command, closed_loop=not command.tracking):
             return
         self.end_move("superseded by a new move")
         self.modes.start_move(ActiveMove.attach(command, self.clock.now_ns()))
-        self.guards.rearm()
+        self.rearm()
 
     def on_inject(self, command: cmd.Inject) -> None:
         """Drive a simulator-only input (``press_estop``) from a test; refused on real hardware."""
         inject = getattr(self.backend, command.method, None)
         if inject is None:
-            self.outbox.put(Refused(command.NAME, f"{command.method} cannot be injected into this "
-                                             "backend"))
+            self.outbox.put(Refused(command.NAME, f"{command.method} needs the simulator"))
             return
         inject(*command.args)
 
-    # -- guard: E-stop, limits, following error -----------------------------------
+    # -- guard: E-stop, feedback, limits, the supervisor ----------------------------
 
     def guard(self, now: int) -> None:
-        backend, guards, modes = self.backend, self.guards, self.modes
-        if backend.estop and not guards.latched:
-            self.latch_estop("E-stop input pressed")
-        if backend.fault and not guards.latched:
-            self.latch_estop(f"link fault: {backend.fault}")
-        if guards.latched or not self.encoders.homed:
+        backend, guards, modes, encoders = self.backend, self.guards, self.modes, self.encoders
+        if guards.latched:
             return
-        mode = modes.mode
-        if mode == Mode.MANUAL_ACTUATE or mode == Mode.TRACKING_ACTUATE:
-            guards.stop_at_limits(modes.position, modes.duty)
-        elif mode == Mode.HOLD or mode == Mode.FOLLOW_TRACK:
-            trip = guards.following_error(modes.desired, modes.position, now)
-            if trip is not None:
-                self.following_error(trip)
+        if backend.estop:
+            self.latch_estop("E-stop input pressed")
+        elif backend.fault:
+            self.latch_estop(f"link fault: {backend.fault}")
+        elif encoders.fault:
+            self.feedback_fault(encoders.fault_joint, encoders.fault)
+        elif modes.fault:
+            self.abort(Fault("path_row", modes.fault_joint, f"{modes.fault}; move aborted"))
+            modes.fault = ""
+        elif encoders.homed and modes.mode != Mode.INITIALISE:
+            closed = modes.mode == Mode.HOLD or modes.mode == Mode.FOLLOW_TRACK
+            guards.stop_at_limits(encoders.position, modes.duty, closed)
+            trip = self.supervisor.sample(now, encoders.actuator, encoders.position,
+                                          modes.desired, modes.velocity, modes.duty, closed)
+            if trip is None:
+                return
+            if trip.feedback:
+                self.feedback_fault(trip.joint, trip.message)
+            elif modes.move is not None or modes.mode != Mode.HOLD:
+                self.abort(Fault("following_error", trip.joint, trip.message + "; holding"))
+            else:
+                self.outbox.put(Fault("following_error", trip.joint,
+                                      f"{trip.message} while holding; valves closed: check "
+                                      "the joint, then reset"))
+                self.latch_estop(f"{trip.message} while holding")
 
-    def following_error(self, trip: Trip) -> None:
-        """FERROR: abort a move into hold; a joint that cannot even hold gets its valves closed."""
-        if self.modes.move is not None:
-            message = f"{trip.message}; move aborted, holding"
-            self.end_move(f"fault: {message}")
-            self.modes.hold_here()
-            self.outbox.put(Fault("following_error", trip.joint, message))
-        else:
-            self.outbox.put(Fault("following_error", trip.joint,
-                             f"{trip.message} while holding; valves closed: check the joint, "
-                             "then reset"))
-            self.latch_estop(f"{trip.message} while holding")
+    def feedback_fault(self, joint: int, message: str) -> None:
+        """Feedback that cannot be believed: every valve closed, the E-stop latched."""
+        self.outbox.put(Fault("feedback", joint, f"{message}; valves closed: check it, then "
+                                                 "reset"))
+        self.latch_estop(message)
+
+    def abort(self, fault: Fault) -> None:
+        """End the move (if any) and hold where the joints are; tell the client why."""
+        self.end_move(f"fault: {fault.message}")
+        self.hold_here()
+        self.outbox.put(fault)
 
     def latch_estop(self, reason: str) -> None:
         self.guards.latch(reason)
@@ -312,6 +309,14 @@ class Controller:
         self.modes.zero_duty()
         self.modes.mode = Mode.HOLD
         self.outbox.put(EStop(True, reason))
+
+    def hold_here(self) -> None:
+        self.modes.hold_here()
+        self.rearm()
+
+    def rearm(self) -> None:
+        self.guards.rearm()
+        self.supervisor.rearm()
 
     # -- write and publish ----------------------------------------------------------
 
@@ -330,42 +335,40 @@ class Controller:
         self.backend.write(self.valve)
 
     def publish(self) -> None:
-        modes, guards, backend, latency = self.modes, self.guards, self.backend, self.latency
-        move = modes.move
-        flags = ((ESTOP_LATCHED if guards.latched else 0)
-                 | (ESTOP_INPUT if backend.estop else 0)
-                 | (HOMED if self.encoders.homed else 0)
-                 | (UI_LOST if self.client.lost_since else 0)
-                 | (LINK_FAULT if backend.fault else 0)
-                 | (REALTIME if self.realtime else 0)
-                 | (MOVING if move is not None else 0)
-                 | (FAULT if guards.reason else 0))
-        self.status_writer.write(*self.layout.status.encode(
-            self.tick_count, self.clock.now_ns() - self.started_ns, time.monotonic_ns(),
-            modes.mode, flags, move.move_id if move else 0, move.index if move else 0,
-            move.layout.samples if move else 0, latency, modes.position, modes.desired,
-            modes.duty, self.valve, self.encoders.raw, self.encoders.glitches,
-            backend.counters, guards.reason))
+        self.publisher.publish(self.tick_count, self.clock.now_ns(), self.modes, self.guards,
+                               self.encoders, self.backend, self.latency, self.valve,
+                               bool(self.client.lost_since), self.realtime)
 
     def release(self) -> None:
-        """Let go of the shared memory: end any move, drop every view into the segments."""
+        """After the loop: end any move, save what the client left behind, drop every view
+        into the segments."""
         self.end_move("stopped: controller shut down")
+        for saved in self.saver.save_kept():
+            self.outbox.put(Notice(f"saved a run its client left: {saved}"))
         self.outbox.flush()
-        self.status_writer.release()
+        self.client.release()
+        self.publisher.release()
         for reader in self.coefficient_readers.values():
             reader.release()
         self.latency.hist.release()
 
-    # -- heartbeats: the client may vanish -------------------------------------------
+    # -- watch: the client may vanish, the machine may be overloaded --------------------
 
-    def watch_heartbeat(self) -> None:
-        lost, orphaned = self.client.check()
+    def watch(self, now: int) -> None:
+        lost, back, orphaned = self.client.check()
         if lost:
             self.end_move("interrupted: client silent")
-            self.modes.hold_here()
+            self.hold_here()
             self.outbox.put(Fault("ui_lost", -1, "client silent for 250 ms: holding position"))
+        elif back:
+            self.saver.drop()
+            self.outbox.put(Notice("client is back; holding position"))
         elif orphaned:
             self.running = False
+        overloaded = self.latency.overloaded(now)
+        if overloaded:
+            self.abort(Fault("overrun", -1, f"{overloaded:.0%} of the last second's ticks were "
+                                            "late (a flooded link or a starved CPU): holding"))
 
     @property
     def orphaned(self) -> bool:
@@ -375,23 +378,23 @@ class Controller:
     # -- moves ending ---------------------------------------------------------------
 
     def finish_move(self) -> None:
-        """The last sample is recorded: hold at the path's end (or where an open-loop move left
-        the joints)."""
-        following = self.modes.mode == Mode.FOLLOW_TRACK
+        """After the last sample: hold at the path's end, or where an open-loop move left it."""
+        target = self.modes.desired if self.modes.mode == Mode.FOLLOW_TRACK else None
         self.end_move("complete")
-        if following:
-            self.modes.hold_at(self.modes.desired)
-        else:
-            self.modes.hold_here()
+        self.modes.hold_at(target or self.modes.position)
+        self.rearm()
 
     def end_move(self, status: str) -> None:
-        """Finish the move in progress (if any): tell the client, or save it if orphaned."""
+        """Finish the move (if any), tell the client; if it is gone, keep it for the saver."""
         move = self.modes.move
         if move is None:
             return
         self.modes.move = None
-        saved = self.saver.save(move, status) if self.orphaned else ""
-        self.outbox.put(MoveDone(move.move_id, status, move.index, saved))
-        move.cells.release()
-        move.recorded.release()
-        shm.release(move.segment, unlink=self.orphaned)
+        if move.gaps:
+            total = sum(length for _, length in move.gaps)
+            status += f", with a {total:.1f} s controller stall"
+        self.outbox.put(MoveDone(move.move_id, status, move.index, gaps=tuple(move.gaps)))
+        if self.orphaned:
+            self.saver.keep(move, status)
+        else:
+            release(move, unlink=False)

@@ -3,7 +3,14 @@ the rig's initialise (section 3.4.1), each turning positions into controller out
 
 Inputs: the encoder input's believed positions, the active move's segment, the
 operator's manual duty and hold target. Outputs: ``desired`` (nan when open
-loop) and ``duty`` per joint, and each tick's row in the move's record.
+loop) and ``duty`` per joint, each tick's row in the move's record, and
+``fault`` when a row of the segment cannot be trusted.
+
+Nothing read from a move segment is trusted: a desired row must be finite,
+inside the limits and, for a smooth kind, no farther from the previous one
+than the joint can move in a tick (step kinds jump, as the thesis's did); a
+duty row must be finite and within ±100 %. Until the rig's encoder is zeroed
+open-loop duty is limited to the initialise duty (section 3.5).
 """
 
 from __future__ import annotations
@@ -12,9 +19,9 @@ import math
 from dataclasses import dataclass, field
 
 from control import shm
-from control.commands import StartMove
+from control.commands import STEP_KINDS, StartMove
 from control.encoder_input import EncoderInput
-from control.events import Fault, Initialised
+from control.events import Fault, Initialised, Notice
 from control.guards import Guards
 from control.law import DifferenceLaw
 from control.layout import Mode, MoveLayout
@@ -37,8 +44,11 @@ class ActiveMove:
     cells: memoryview  # float64 view of the whole segment
     recorded: memoryview  # uint64 progress counter
     tracking: bool
+    smooth: bool  # its rows may not jump (commands.STEP_KINDS may)
     index: int = 0
     start_ns: int = 0
+    last_row_ns: int = 0
+    gaps: list[tuple[float, float]] = field(default_factory=list)  # (t s, length s) stalls
 
     @classmethod
     def attach(cls, command: StartMove, now: int) -> ActiveMove:
@@ -47,7 +57,8 @@ class ActiveMove:
         recorded = seg.buf[MoveLayout.RECORDED_OFFSET:MoveLayout.RECORDED_OFFSET + 8].cast("Q")
         return cls(move_id=command.move_id, kind=command.kind, meta=dict(command.meta),
                    segment=seg, layout=MoveLayout.read_header(seg.buf), cells=seg.buf.cast("d"),
-                   recorded=recorded, tracking=command.tracking, start_ns=now)
+                   recorded=recorded, tracking=command.tracking,
+                   smooth=command.kind not in STEP_KINDS, start_ns=now, last_row_ns=now)
 
 
 @dataclass(frozen=True)
@@ -89,6 +100,17 @@ class ModeMachine:
         self.manual = [0.0] * n
         self.hold_target = [0.0] * n
         self.initialise_duty = [-self.initialise_config.duty] * n
+        joints = self.machine.joints
+        self.lower = [j.lower for j in joints]
+        self.upper = [j.upper for j in joints]
+        counts = [abs(j.encoder.gradient) for j in joints]
+        row_speed = [1.5 * j.max_speed * self.dt for j in joints]  # per row, with slack
+        self.row_step = [v + 2 * c for v, c in zip(row_speed, counts, strict=True)]
+        self.first_row_step = [v + 2 * j.tolerance for v, j in zip(self.row_step, joints,
+                                                                   strict=True)]
+        self.stall_ns = round(self.machine.supervision.stall_s * 1e9)
+        self.fault = ""  # a row that cannot be trusted: the controller aborts into hold
+        self.fault_joint = -1
 
     # -- entering modes ------------------------------------------------------------------
 
@@ -103,6 +125,12 @@ class ModeMachine:
 
     def start_manual(self) -> None:
         self.mode = Mode.MANUAL_ACTUATE
+
+    def set_manual(self, duty: tuple[float, ...]) -> bool:
+        """The operator's open-loop duty; False if it had to be limited (rig not zeroed)."""
+        limit = 100.0 if self.encoders.homed else self.initialise_config.duty
+        self.manual[:] = [max(-limit, min(limit, d)) for d in duty]
+        return all(abs(d) <= limit for d in duty)
 
     def start_move(self, move: ActiveMove) -> None:
         self.move = move
@@ -152,24 +180,57 @@ class ModeMachine:
         move = self.move
         n, k, last, cells = self.n, move.index, move.layout.samples - 1, move.cells
         row = move.layout.desired_offset // 8 + k * n
+        if not self.row_trusted(move, cells, row):
+            return
         before = row - n if k > 0 else row  # central difference, one-sided at the ends
         after = row + n if k < last else row
         span = max((after - before) // n, 1) * self.dt
-        homed, clamp, desired, velocity = self.encoders.homed, self.guards.clamp, self.desired, \
-            self.velocity
+        desired, velocity = self.desired, self.velocity
         for j in range(n):
-            desired[j] = clamp(j, cells[row + j], homed)
+            desired[j] = cells[row + j]
             velocity[j] = (cells[after + j] - cells[before + j]) / span
         self.transmission.actuators_from_joints(velocity, self.actuator_velocity)
         self.closed_loop(desired, self.actuator_velocity)
+
+    def row_trusted(self, move: ActiveMove, cells: memoryview, row: int) -> bool:
+        """Whether this tick's desired row is finite, in the limits and (smooth kinds) no
+        jump from the last; if not, ``fault`` says why and nothing moves."""
+        lower, upper = self.lower, self.upper
+        first = move.index == 0
+        previous = self.position if first else self.desired
+        allowed = self.first_row_step if first else self.row_step
+        for j in range(self.n):
+            x = cells[row + j]
+            if lower[j] <= x <= upper[j] and not (move.smooth
+                                                  and abs(x - previous[j]) > allowed[j]):
+                continue
+            joint = self.machine.joints[j]
+            why = (f"{x:g}{joint.symbol} is outside {joint.limit_text()}"
+                   if not lower[j] <= x <= upper[j] else
+                   f"jumps {x - previous[j]:+.3g}{joint.symbol} from "
+                   f"{previous[j]:.2f}{joint.symbol}, more than a {move.kind} may in a tick")
+            self.reject_row(move, j, f"{joint.name} {why}")
+            return False
+        return True
+
+    def reject_row(self, move: ActiveMove, j: int, why: str) -> None:
+        self.fault_joint = j
+        self.fault = f"move {move.move_id} row {move.index}: {why}"
+        self.zero_duty()
 
     def tracking_actuate(self) -> None:
         move = self.move
         row = move.layout.profile_offset // 8 + move.index * self.n
         desired, duty, cells = self.desired, self.duty, move.cells
+        limit = 100.0 if self.encoders.homed else self.initialise_config.duty
         for j in range(self.n):
+            u = cells[row + j]
+            if not -100.0 <= u <= 100.0:
+                self.reject_row(move, j, f"{self.machine.joints[j].name} duty {u:g} % is not "
+                                         "in -100…100 %")
+                return
             desired[j] = math.nan
-            duty[j] = cells[row + j]
+            duty[j] = u if -limit <= u <= limit else math.copysign(limit, u)
 
     def initialise(self, now: int) -> None:
         """Drive the rig's ram down until it rests on the bottom stop, then zero (section 3.5)."""
@@ -190,12 +251,19 @@ class ModeMachine:
 
     def record(self, now: int) -> bool:
         """Append this tick to the move's record (after the guards: the duty the valves get);
-        True after its last sample."""
+        True after its last sample. A gap longer than ``stall_s`` is listed in ``gaps``."""
         move = self.move
         layout = move.layout
+        t = (now - move.start_ns) / 1e9
+        if now - move.last_row_ns > self.stall_ns and move.index:
+            gap = (now - move.last_row_ns) / 1e9
+            move.gaps.append((round(t - gap, 4), round(gap, 4)))
+            self.outbox.put(Notice(f"controller stalled {gap:.3f} s during move "
+                                   f"{move.move_id} at t = {t - gap:.2f} s: the run lists the "
+                                   "gap"))
+        move.last_row_ns = now
         layout.row.pack_into(move.segment.buf, layout.record_offset + move.index * layout.row.size,
-                             (now - move.start_ns) / 1e9, *self.desired, *self.position,
-                             *self.duty)
+                             t, *self.desired, *self.position, *self.duty)
         move.index += 1
         move.recorded[0] = move.index
         return move.index >= layout.samples

@@ -1,30 +1,75 @@
-"""Saving a run the controller finished on its own, its client gone (orphaned)."""
+"""Saving the runs the controller finished on its own, its client gone — never in the tick.
+
+While its client is silent the controller keeps each finished move's segment
+(``keep``: no file I/O, nothing unlinked). If the client comes back it is told
+of the move and saves it itself (``drop``). Once the loop has ended — valves
+closed, nothing real-time left to do — ``save_kept`` writes what is still kept.
+A controller killed before that leaves the segments in /dev/shm, where the next
+client start finds them.
+"""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
+from control import shm
 from control.modes import ActiveMove
 from control.recorder import save_run
 from control.runs import run_from_record
 from hw.machine import Machine
 
 
+@dataclass
+class KeptRun:
+    move: ActiveMove
+    status: str
+
+
 class RunSaver:
-    """Writes an orphaned move's record as a run in ``data_dir`` (none: nothing is saved)."""
+    """Keeps an orphaned move's segment; writes it as a run in ``data_dir`` after the loop."""
 
     def __init__(self, machine: Machine, data_dir: Path | None, dt: float) -> None:
         self.machine = machine
         self.data_dir = data_dir
         self.dt = dt
+        self.kept: list[KeptRun] = []
+
+    def keep(self, move: ActiveMove, status: str) -> None:
+        self.kept.append(KeptRun(move, status))
+
+    def drop(self) -> None:
+        """The client is back and will save what it is told of: let go of the segments."""
+        for kept in self.kept:
+            release(kept.move, unlink=False)
+        self.kept.clear()
+
+    def save_kept(self) -> list[str]:
+        """After the loop: save every kept run and unlink its segment; the JSON paths."""
+        saved = []
+        for kept in self.kept:
+            path = self.save(kept.move, kept.status)
+            if path:
+                saved.append(path)
+            release(kept.move, unlink=bool(path))
+        self.kept.clear()
+        return saved
 
     def save(self, move: ActiveMove, status: str) -> str:
-        """Save ``move`` as recorded so far; return the run's JSON path, or "" if not saved."""
+        """Save ``move`` as recorded; its JSON path, or "" if it could not be saved."""
         if self.data_dir is None:
             return ""
         record = move.layout.record(move.segment.buf)[:move.index].copy()
-        run = run_from_record(self.machine, move.kind, status, move.meta, record, self.dt)
+        meta = {**move.meta, "gaps": [list(g) for g in move.gaps]} if move.gaps else move.meta
+        run = run_from_record(self.machine, move.kind, status, meta, record, self.dt)
         try:
             return str(save_run(run, self.data_dir).json)
         except OSError:
             return ""
+
+
+def release(move: ActiveMove, unlink: bool) -> None:
+    """Drop every view of the move's segment, then close (and maybe unlink) it."""
+    move.cells.release()
+    move.recorded.release()
+    shm.release(move.segment, unlink=unlink)

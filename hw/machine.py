@@ -21,6 +21,7 @@ from typing import Any
 BUILTIN = {"unimate2000b": "unimate2000b.toml", "unimate": "unimate2000b.toml", "rig": "rig.toml"}
 JOINT_KINDS = {"prismatic": "mm", "revolute": "deg"}
 ENCODER_KINDS = ("gray", "quadrature")
+MIN_FERROR_DIVISOR = 10.0  # min_following_error defaults to following_error / 10
 
 
 class MachineError(ValueError):
@@ -57,11 +58,12 @@ class Joint:
     max_speed: float
     max_accel: float
     tolerance: float
-    following_error: float
+    following_error: float  # LinuxCNC's FERROR: the limit at max_speed (units)
     encoder: EncoderCal
     down_scale: float = 1.0
     gain_unit: float = 1.0
     plant: Mapping[str, float] = field(default_factory=lambda: MappingProxyType({}))
+    min_following_error: float = 0.0  # MIN_FERROR: the limit at standstill (units)
 
     @property
     def symbol(self) -> str:
@@ -108,6 +110,29 @@ class Coefficients:
 
 
 @dataclass(frozen=True)
+class Supervision:
+    """How the controller's supervisor judges the joints (``docs/supervisor.md``).
+
+    ``window_s``: a joint is judged over this much time (closing, moving, still).
+    ``closing_fraction``: beyond its following-error limit a joint must close on its
+    target at least this fraction of the speed its duty should give.
+    ``open_margin_pct``: a valve counts as well open at its minimum PWM plus this.
+    ``range_margin_counts``: a believed position this far past a limit is implausible.
+    ``glitch_limit``: this many rejected readings in a row are a feedback fault.
+    ``overrun_fraction``: more than this fraction of ticks late over a second holds.
+    ``stall_s``: a gap this long in a move's record is a stall, listed in the run.
+    """
+
+    window_s: float = 0.2
+    closing_fraction: float = 0.25
+    open_margin_pct: float = 10.0
+    range_margin_counts: float = 20.0
+    glitch_limit: int = 5
+    overrun_fraction: float = 0.2
+    stall_s: float = 0.05
+
+
+@dataclass(frozen=True)
 class DHRow:
     """A standard DH link, eq. 4.02; the variable of joint ``joint`` adds to theta or d."""
 
@@ -134,6 +159,7 @@ class Machine:
     kinematics_model: str | None
     dh: tuple[DHRow, ...]
     plant: Mapping[str, float]
+    supervision: Supervision = field(default_factory=Supervision)
 
     @property
     def n_joints(self) -> int:
@@ -280,7 +306,7 @@ class _Reader:
 
     def machine(self, doc: Mapping[str, Any], path: Path) -> Machine:
         self.only(doc, "", {"machine", "valve", "encoder", "kinematics", "joints",
-                            "coefficients", "plant"})
+                            "coefficients", "plant", "supervisor"})
         head = self.table(doc, "", "machine")
         self.only(head, "machine", {"name", "title", "sample_time_ms"})
         valve = self.table(doc, "", "valve")
@@ -317,6 +343,33 @@ class _Reader:
             kinematics_model=self.kinematics_model(doc),
             dh=self.dh(doc, keys),
             plant=self.plant(doc, ""),
+            supervision=self.supervision(doc),
+        )
+
+    def supervision(self, doc: Mapping[str, Any]) -> Supervision:
+        table = self.table(doc, "", "supervisor", optional=True)
+        key = "supervisor"
+        self.only(table, key, {"window_ms", "closing_fraction", "open_margin_pct",
+                               "range_margin_counts", "glitch_limit", "overrun_fraction",
+                               "stall_ms"})
+        d = Supervision()
+        glitch_limit = self.number(table, key, "glitch_limit", d.glitch_limit, low=1, high=1000)
+        if glitch_limit != int(glitch_limit):
+            raise self.fail(f"{key}.glitch_limit", f"must be a whole number, got {glitch_limit:g}")
+        return Supervision(
+            window_s=self.number(table, key, "window_ms", d.window_s * 1e3, low=10,
+                                 high=1000) / 1e3,
+            closing_fraction=self.number(table, key, "closing_fraction", d.closing_fraction,
+                                         low=0, high=1, strict_low=True),
+            open_margin_pct=self.number(table, key, "open_margin_pct", d.open_margin_pct,
+                                        low=0, high=100),
+            range_margin_counts=self.number(table, key, "range_margin_counts",
+                                            d.range_margin_counts, low=1, high=1e6),
+            glitch_limit=int(glitch_limit),
+            overrun_fraction=self.number(table, key, "overrun_fraction", d.overrun_fraction,
+                                         low=0, high=1, strict_low=True),
+            stall_s=self.number(table, key, "stall_ms", d.stall_s * 1e3, low=2,
+                                high=10_000) / 1e3,
         )
 
     def joint(self, doc: Any, index: int, keys: list[str]) -> Joint:
@@ -325,7 +378,8 @@ class _Reader:
             raise self.fail(key, "must be a table")
         self.only(doc, key, {"key", "name", "kind", "unit", "limits", "min_pwm", "polarity",
                              "max_speed", "max_accel", "tolerance", "following_error",
-                             "encoder", "down_scale", "gain_unit", "plant"})
+                             "min_following_error", "encoder", "down_scale", "gain_unit",
+                             "plant"})
         name = self.string(doc, key, "name")
         kind = self.string(doc, key, "kind", choices=tuple(JOINT_KINDS))
         unit = self.string(doc, key, "unit", choices=(JOINT_KINDS[kind],))
@@ -345,7 +399,11 @@ class _Reader:
             max_speed=self.number(doc, key, "max_speed", low=0, strict_low=True),
             max_accel=self.number(doc, key, "max_accel", low=0, strict_low=True),
             tolerance=self.number(doc, key, "tolerance", low=0, strict_low=True),
-            following_error=self.number(doc, key, "following_error", low=0, strict_low=True),
+            following_error=(ferror := self.number(doc, key, "following_error", low=0,
+                                                   strict_low=True)),
+            min_following_error=self.number(doc, key, "min_following_error",
+                                            ferror / MIN_FERROR_DIVISOR, low=0,
+                                            high=ferror, strict_low=True),
             encoder=self.encoder_cal(doc, index, keys),
             down_scale=self.number(doc, key, "down_scale", 1.0, low=0, high=1, strict_low=True),
             gain_unit=self.number(doc, key, "gain_unit", 1.0, low=0, strict_low=True),

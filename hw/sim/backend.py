@@ -56,6 +56,8 @@ class SimBackend:
         self.plant.actuator_positions(self._a_now)
         self._duty = [0.0] * n
         self._estop = False
+        self._open = [1.0] * n  # how much of its duty each valve opens to (jam_valve)
+        self._lies: dict[int, tuple[int | None, int, int]] = {}  # joint: (frozen word, stuck)
         self._board: GrayEncoderBoard | None = None
         self._quadrature: tuple[QuadratureEncoder, ...] = ()
         if machine.encoder_kind == "gray":
@@ -91,6 +93,9 @@ class SimBackend:
             a = self._a_now
             for i, encoder in enumerate(self._quadrature):
                 raw[i] = encoder.count(a[i])
+        if self._lies:
+            for i, (frozen, stuck_mask, stuck_value) in self._lies.items():
+                raw[i] = frozen if frozen is not None else (raw[i] & ~stuck_mask) | stuck_value
 
     def write(self, duty_pct: Sequence[float]) -> None:
         """Command signed valve duty per joint, percent; clipped to ±100 and quantised.
@@ -104,7 +109,7 @@ class SimBackend:
             duty = quantise_duty(duty_pct[i], self._resolution)
             self._duty[i] = duty
             if not self._estop:
-                actuator.command(duty, delay_s)
+                actuator.command(self._open[i] * duty, delay_s)
 
     @property
     def estop(self) -> bool:
@@ -129,6 +134,31 @@ class SimBackend:
             delay_s = (next_period_ns(self._t_ns, self._period_ns) - self._t_ns) * 1e-9
             for actuator, duty in zip(self.plant.actuators, self._duty, strict=True):
                 actuator.command(duty, delay_s)
+
+    def jam_valve(self, joint: int, shut: float) -> None:
+        """Jam joint ``joint``'s valve: ``shut`` is the fraction of every duty it loses (1: it
+        stays shut whatever it is sent; 0: free again)."""
+        self._advance()
+        self._open[joint] = 1.0 - min(max(float(shut), 0.0), 1.0)
+        if not self._estop:
+            self.plant.actuators[joint].command(self._open[joint] * self._duty[joint], 0.0)
+
+    def freeze_encoder(self, joint: int, frozen: bool) -> None:
+        """Freeze (True) joint ``joint``'s encoder word at its present value, as a stalled
+        multiplexer or a cut cable reading a constant would; False frees it."""
+        if not frozen:
+            self._lies.pop(joint, None)
+            return
+        raw = [0] * self._n
+        self.read(raw)
+        self._lies[joint] = (raw[joint], 0, 0)
+
+    def stick_bit(self, joint: int, bit: int, value: int | None) -> None:
+        """Stick bit ``bit`` of joint ``joint``'s word at ``value`` (0 or 1); None frees it."""
+        if value is None:
+            self._lies.pop(joint, None)
+        else:
+            self._lies[joint] = (None, 1 << bit, (1 << bit) if value else 0)
 
     def joint_positions(self) -> list[float]:
         """True joint positions now, joint units (mm, degrees), couplings included."""

@@ -207,12 +207,12 @@ def test_bad_paths_are_refused_before_anything_starts(lockstep: ControlClient) -
 
 def test_following_error_aborts_into_hold_naming_the_joint(lockstep: ControlClient) -> None:
     start = np.array(lockstep.status().position)
-    path = np.tile(start, (3000, 1))
-    path[:, 0] = np.minimum(start[0] + 1.5 * np.arange(3000), 2041.0)  # 1500 mm/s: too fast
-    result = lockstep.wait(lockstep.move(path, kind="path"), timeout=60)
-    assert result.status.startswith("fault: following error: In/Out is ")
+    lockstep.inject("jam_valve", 1, 0.7)  # Rotate's valve opens to 30 % of its duty
+    path = moves.step(start, 1, start[1] + 30.0, duration=3.0, machine=UNIMATE)
+    result = lockstep.wait(lockstep.move(path, kind="step"), timeout=60)
+    assert result.status.startswith("fault: following error: Rotate is "), result.status
     fault = lockstep.wait_event("fault", 5.0, lambda e: e.payload["kind"] == "following_error")
-    assert fault.payload["joint"] == 0
+    assert fault.payload["joint"] == 1
     assert lockstep.status().mode == Mode.HOLD
 
 
@@ -226,7 +226,8 @@ def test_a_joint_driven_into_its_limit_stops_there(lockstep: ControlClient) -> N
 
 def test_killing_the_controller_is_reported(realtime: ControlClient) -> None:
     start = realtime.status().position
-    move = realtime.move(moves.step(start, 1, start[1] + 30, duration=5.0, machine=UNIMATE))
+    move = realtime.move(moves.step(start, 1, start[1] + 30, duration=5.0, machine=UNIMATE),
+                         kind="step")
     wait_until(lambda: realtime.status().move_done > 300, 3.0, "the move to run")
     os.kill(realtime.pid, signal.SIGKILL)
     died = realtime.wait_event("died", timeout=5.0)
@@ -282,7 +283,7 @@ def test_the_rig_refuses_moves_until_initialised_then_steps(tmp_path: Path) -> N
                        sim_options={"initial": [400.0]}) as client:
         assert not client.status().homed
         path = moves.step(client.status().position, 0, 100.0, duration=2.0, machine=rig)
-        assert client.wait(client.move(path), 10).status == "refused: not initialised"
+        assert client.wait(client.move(path), 10).status.startswith("refused: not initialised")
         client.initialise()
         done = client.wait_event("initialised", 60.0)
         assert done.payload["status"].startswith("complete: initialised")

@@ -1,8 +1,9 @@
 """The loop's safety logic, ticked in-process against a scripted backend.
 
-The backend here is a stand-in for iron whose readings the test dictates, so
-the glitch filter, fail-safe and following-error rules can be driven exactly;
-the real subprocess on the real simulator is exercised in test_client.py.
+The backend here is a stand-in for iron whose readings the test dictates (it
+never moves unless told), so the glitch filter, the supervisor, the row checks
+and the fail-safe can be driven exactly; the real subprocess on the real
+simulator is exercised in test_client.py and tests/faults.
 """
 
 from __future__ import annotations
@@ -17,9 +18,10 @@ from multiprocessing.connection import Connection
 import pytest
 
 from control import shm
-from control.commands import JogPosition, Manual
+from control.commands import JogPosition, Manual, Reset, StartMove
 from control.events import Notice
-from control.layout import ControlLayout, Mode
+from control.law import pi
+from control.layout import ESTOP_WORD, ControlLayout, Mode, MoveLayout
 from control.loop import Controller, LoopConfig
 from control.outbox import OUTBOX_LIMIT
 from hw.backend import LinkCounters, StepClock
@@ -105,6 +107,14 @@ def ticks(controller: Controller, backend: ScriptedBackend, n: int) -> None:
             controller.fail_safe(exc)
 
 
+def teleport(controller: Controller, backend: ScriptedBackend, j: int, q: float) -> None:
+    """Put joint ``j`` at ``q`` as a reset finds it (believed outright), holding there."""
+    backend.positions[j] = q
+    controller.encoders.resync(backend)
+    controller.modes.hold_here()
+    ticks(controller, backend, 2)
+
+
 def events(client: Connection) -> list[tuple[str, dict]]:
     out = []
     while client.poll(0.05):
@@ -125,15 +135,29 @@ def test_events_never_block_a_client_that_stopped_reading(rig) -> None:
     assert controller.tick_count >= 5
 
 
-def test_a_glitch_is_rejected_and_counted_then_a_real_jump_is_believed(rig) -> None:
-    controller, backend, _client = rig
+def test_a_glitch_is_rejected_and_counted_and_a_lying_encoder_latches(rig) -> None:
+    controller, backend, client = rig
     backend.positions[0] = HOME[0] + 500.0  # In/Out cannot move 500 mm in 1 ms
     ticks(controller, backend, 1)
     assert controller.encoders.position[0] == pytest.approx(HOME[0], abs=0.3)
-    assert controller.encoders.glitches[0] == 1
-    ticks(controller, backend, 5)  # still there after the resync count: it is real
+    assert controller.encoders.glitches[0] == 1 and not controller.guards.latched
+    ticks(controller, backend, 4)  # five impossible readings in a row: a stuck bit, not a glitch
+    assert controller.encoders.position[0] == pytest.approx(HOME[0], abs=0.3)  # never believed
+    assert controller.guards.latched and backend.written == [0.0] * 6
+    fault = next(p for name, p in events(client) if name == "fault")
+    assert fault["kind"] == "feedback" and fault["joint"] == 0
+    assert "In/Out's encoder read 5 jumps in a row" in fault["message"]
+
+
+def test_a_reset_believes_where_the_joint_now_is(rig) -> None:
+    controller, backend, _client = rig
+    backend.positions[0] = HOME[0] + 500.0
+    ticks(controller, backend, 5)
+    assert controller.guards.latched
+    controller.channel.deliver(Reset())
+    ticks(controller, backend, 2)
+    assert not controller.guards.latched, controller.guards.reason
     assert controller.encoders.position[0] == pytest.approx(HOME[0] + 500.0, abs=0.3)
-    assert controller.encoders.glitches[0] == 5
 
 
 def test_a_word_wider_than_the_encoder_is_decoded_and_judged_not_a_crash(rig) -> None:
@@ -167,7 +191,7 @@ def test_a_plausible_move_is_never_a_glitch(rig) -> None:
 
 def test_an_exception_in_a_tick_closes_the_valves_and_latches(rig) -> None:
     controller, backend, client = rig
-    controller.handle(Manual((40.0,) * 6))
+    controller.channel.deliver(Manual((40.0,) * 6))
     ticks(controller, backend, 2)
     assert all(backend.written)
     backend.fail_reads = 1
@@ -179,26 +203,159 @@ def test_an_exception_in_a_tick_closes_the_valves_and_latches(rig) -> None:
     assert any(name == "estop" for name, _ in events(client))
 
 
-def test_following_error_while_holding_closes_the_valves(rig) -> None:
+def test_a_joint_that_cannot_hold_trips_one_window_after_it_falls_behind(rig) -> None:
+    """Zero hold gains: no duty, so no valve opens and the joint stays 80° off its target;
+    following error, while holding, closes every valve."""
     controller, backend, client = rig
-    controller.modes.hold_target[3] = 80.0  # Bend told to hold 80° but it sits at 0° and won't move
-    ticks(controller, backend, 600)
+    zero = pi(UNIMATE, 0.0, 0.0)
+    controller.modes.set_coefficients("hold", zero)
+    controller.modes.hold_target[3] = 80.0  # Bend told to hold 80° but it sits at 0°
+    window_ms = UNIMATE.supervision.window_s * 1e3
+    for k in range(1, 400):  # noqa: B007  # k: the tick it tripped on
+        ticks(controller, backend, 1)
+        if controller.guards.latched:
+            break
     assert controller.guards.latched and backend.written == [0.0] * 6
+    assert k <= window_ms + 2 * UNIMATE.n_joints, f"tripped after {k} ms"
     faults = [p for name, p in events(client) if name == "fault"]
     assert faults[0]["kind"] == "following_error" and faults[0]["joint"] == 3
     assert "while holding; valves closed" in faults[0]["message"]
-    assert controller.modes.mode == Mode.HOLD
+
+
+def test_a_valve_held_open_with_no_motion_is_a_feedback_fault(rig) -> None:
+    """The scripted joint never moves: Rotate at 60 % for a window is a frozen encoder (or a
+    seized joint): feedback fault, E-stop latched, within the window and a sample."""
+    controller, backend, client = rig
+    controller.channel.deliver(Manual((0.0, 60.0, 0.0, 0.0, 0.0, 0.0)))
+    for k in range(1, 400):  # noqa: B007  # k: the tick it tripped on
+        ticks(controller, backend, 1)
+        if controller.guards.latched:
+            break
+    assert k <= UNIMATE.supervision.window_s * 1e3 + 2 * UNIMATE.n_joints, f"after {k} ms"
+    fault = next(p for name, p in events(client) if name == "fault")
+    assert fault["kind"] == "feedback" and fault["joint"] == 1
+    assert "has not moved" in fault["message"] and backend.written == [0.0] * 6
+
+
+def test_a_reading_moving_against_its_valve_is_a_feedback_fault(rig) -> None:
+    controller, backend, client = rig
+    controller.channel.deliver(Manual((0.0, 0.0, 0.0, 0.0, 0.0, 60.0)))
+    for _ in range(400):
+        backend.positions[5] -= 0.03  # Swivel opens upward and reads 30°/s downward
+        ticks(controller, backend, 1)
+        if controller.guards.latched:
+            break
+    fault = next(p for name, p in events(client) if name == "fault")
+    assert fault["kind"] == "feedback" and fault["joint"] == 5 and "the other way" in \
+        fault["message"]
+
+
+def test_a_plausible_motion_in_manual_is_not_a_fault(rig) -> None:
+    controller, backend, client = rig
+    controller.channel.deliver(Manual((0.0, 50.0, 0.0, 0.0, 0.0, 0.0)))
+    for _ in range(600):
+        backend.positions[1] += 0.02  # 20°/s for 50 % duty: about what the valve gives
+        ticks(controller, backend, 1)
+    assert not controller.guards.latched, controller.guards.reason
+    assert [p for name, p in events(client) if name == "fault"] == []
+
+
+def test_a_believed_position_outside_the_range_is_a_feedback_fault(rig) -> None:
+    controller, backend, client = rig
+    teleport(controller, backend, 2, 29.8)
+    for _ in range(40):  # Up/Down creeps past its 30° limit by way of plausible readings
+        backend.positions[2] += 0.02
+        ticks(controller, backend, 1)
+    assert controller.guards.latched
+    fault = next(p for name, p in events(client) if name == "fault" and p["kind"] == "feedback")
+    assert fault["joint"] == 2 and "outside its range" in fault["message"]
+
+
+def test_the_client_estop_word_latches_on_the_next_tick(rig) -> None:
+    controller, backend, _client = rig
+    controller.channel.deliver(Manual((30.0,) * 6))
+    ticks(controller, backend, 2)
+    controller.client.words[ESTOP_WORD] += 1
+    ticks(controller, backend, 1)
+    assert controller.guards.latched and backend.written == [0.0] * 6
+    assert controller.guards.reason == "operator E-stop"
 
 
 def test_stop_at_limits_in_manual(rig) -> None:
     controller, backend, client = rig
-    backend.positions[2] = 29.99  # Up/Down one count below its 30° limit
-    ticks(controller, backend, 6)
-    controller.handle(Manual((0.0, 0.0, 50.0, 0.0, 0.0, -50.0)))
+    teleport(controller, backend, 2, 29.99)  # Up/Down one count below its 30° limit
+    controller.channel.deliver(Manual((0.0, 0.0, 50.0, 0.0, 0.0, -50.0)))
     ticks(controller, backend, 2)
     assert controller.modes.duty[2] == 0.0 and controller.modes.duty[5] == -50.0
     (limit,) = [p for name, p in events(client) if name == "fault"]
     assert limit["kind"] == "limit" and limit["joint"] == 2
+
+
+def test_a_joint_past_its_limit_in_hold_gets_no_duty_toward_it(rig) -> None:
+    controller, backend, client = rig
+    controller.modes.set_coefficients("hold", pi(UNIMATE, -30.0, 0.0))  # pushes the wrong way
+    teleport(controller, backend, 2, 29.9)
+    backend.positions[2] = 30.1  # past the 30° limit, by a plausible step
+    ticks(controller, backend, 8)
+    assert controller.modes.duty[2] == 0.0
+    limit = next(p for name, p in events(client) if name == "fault" and p["kind"] == "limit")
+    assert limit["joint"] == 2 and "is past its limit" in limit["message"]
+
+
+def start_move(controller: Controller, path: list[list[float]], kind: str) -> Iterator[None]:
+    layout = MoveLayout(len(path), UNIMATE.n_joints)
+    segment = shm.create("loopmove", layout.size)
+    layout.write_header(segment.buf)
+    layout.desired(segment.buf)[:] = path
+    controller.channel.deliver(StartMove(1, segment.name, kind, False))
+    return segment
+
+
+@pytest.mark.parametrize(("kind", "row", "message"), [
+    ("path", [HOME[0], 5.0, *HOME[2:]], "jumps +5"),
+    ("step", [HOME[0], 200.0, *HOME[2:]], "outside -110…110"),
+    ("step", [HOME[0], float("nan"), *HOME[2:]], "nan"),
+])
+def test_a_row_that_cannot_be_trusted_aborts_the_move_and_holds(rig, kind: str, row: list,
+                                                                 message: str) -> None:
+    controller, backend, client = rig
+    segment = start_move(controller, [HOME, HOME, row, HOME], kind)
+    try:
+        ticks(controller, backend, 4)
+        assert controller.modes.move is None and controller.modes.mode == Mode.HOLD
+        done = next(p for name, p in events(client) if name == "move_done")
+        assert done["status"].startswith("fault: move 1 row 2: Rotate") and message in \
+            done["status"], done
+        assert controller.modes.hold_target[1] == pytest.approx(0.0, abs=0.1)
+    finally:
+        shm.release(segment, unlink=True)
+
+
+def test_a_step_kind_may_jump(rig) -> None:
+    controller, backend, client = rig
+    segment = start_move(controller, [HOME, [HOME[0], 5.0, *HOME[2:]], [HOME[0], 5.0,
+                                                                        *HOME[2:]]], "step")
+    try:
+        ticks(controller, backend, 3)
+        done = next(p for name, p in events(client) if name == "move_done")
+        assert done["status"] == "complete", done
+    finally:
+        shm.release(segment, unlink=True)
+
+
+def test_a_stall_in_a_move_is_listed_and_said(rig) -> None:
+    controller, backend, client = rig
+    segment = start_move(controller, [HOME] * 5, "path")
+    try:
+        ticks(controller, backend, 2)
+        backend.clock.sleep_until(backend.clock.now_ns() + 300_000_000)  # a 0.3 s stall
+        ticks(controller, backend, 3)
+        done = next(p for name, p in events(client) if name == "move_done")
+        assert done["status"] == "complete, with a 0.3 s controller stall", done
+        ((at, length),) = done["gaps"]
+        assert length == pytest.approx(0.301, abs=0.002) and at == pytest.approx(0.002)  # after its second row
+    finally:
+        shm.release(segment, unlink=True)
 
 
 def _bypassing_checks(cls: type, **fields: object) -> object:
@@ -222,7 +379,7 @@ def test_a_command_that_fails_its_checks_on_arrival_is_refused_and_moves_nothing
         rig, command: object) -> None:
     controller, backend, client = rig
     before = list(controller.modes.hold_target)
-    controller.handle(command)
+    controller.channel.deliver(command)
     ticks(controller, backend, 3)
     (refused,) = [p for name, p in events(client) if name == "refused"]
     assert refused["reason"], refused

@@ -1,5 +1,7 @@
-"""The UI side frozen (SIGSTOP) or killed (SIGKILL) mid-move: the controller holds, keeps
-ticking and publishing, saves the interrupted run itself, and exits cleanly.
+"""The UI side frozen (SIGSTOP) or killed (SIGKILL) mid-move: the controller holds on the
+next tick it notices, keeps ticking and publishing without a stall (it does no file I/O in
+the loop), and the interrupted run is saved: by the client when it comes back, by the
+controller itself after its loop has ended when the client is gone for good.
 
 The "UI" is a small client script in its own process (as the TUI would be),
 driven over its stdin. The test watches the controller from outside through
@@ -139,7 +141,7 @@ def adopting_orphans() -> Iterator[None]:
 
 
 def the_interrupted_run(runs: Path, rows_before: int, path: np.ndarray) -> Path:
-    """The run the controller saved itself: interrupted, every row up to the hold, readable."""
+    """The saved run: interrupted, every row up to the hold, readable."""
     (info,) = list_runs(runs)
     run = load_run(info.files.json)
     assert run.status == "interrupted: client silent"
@@ -148,22 +150,25 @@ def the_interrupted_run(runs: Path, rows_before: int, path: np.ndarray) -> Path:
     return info.files.json
 
 
-def ticks_keep_coming(watch: StatusWatch, seconds: float) -> tuple[int, int]:
-    """Ticks and latency-histogram counts published during ``seconds`` without a client."""
+def ticks_keep_coming(watch: StatusWatch, seconds: float) -> tuple[int, int, float]:
+    """Ticks and latency-histogram counts published during ``seconds`` without a client, and
+    the latest wake-up among those ticks (µs, to the 5 µs bin; the last bin holds ≥ 2 ms)."""
     s0, h0 = watch.status(), watch.histogram()
     time.sleep(seconds)
     s1, h1 = watch.status(), watch.histogram()
     assert s1.mode == Mode.HOLD and s1.flags & Flag.UI_LOST
-    return s1.tick - s0.tick, h1.ticks - h0.ticks
+    grew = np.flatnonzero(h1.counts - h0.counts)
+    latest = (grew[-1] + 1) * h1.bin_us if len(grew) else 0.0
+    return s1.tick - s0.tick, h1.ticks - h0.ticks, latest
 
 
 def test_a_frozen_client_makes_the_controller_hold_and_it_is_alive_on_resume(
         tmp_path: Path, until, leftovers, measured) -> None:
     """SIGSTOP of the client mid-move: the controller aborts into hold when the heartbeats
     stop (time from the freeze measured), keeps ticking and recording its latency (it never
-    blocks on the channel), saves the interrupted run itself; on SIGCONT the client finds
-    it alive, gets the saved run's path, and its close stops the controller with exit
-    code 0 and no segment left."""
+    blocks on the channel, and saves nothing in the loop); on SIGCONT the client finds it
+    alive, is told how the move ended and saves the interrupted run, and its close stops the
+    controller with exit code 0 and no segment left."""
     runs = tmp_path / "runs"
     script = ClientScript(runs, orphan_timeout_s=30.0)
     watch = StatusWatch(script.segment)
@@ -176,10 +181,11 @@ def test_a_frozen_client_makes_the_controller_hold_and_it_is_alive_on_resume(
         hold_s = until(watch.holding_without_client, 5.0, "the controller to hold")
         measured("hold_after_freeze_ms", hold_s * 1e3, "ms")
         assert hold_s < 2.0, "design: the controller holds 250 ms after the last heartbeat"
-        ticks, counted = ticks_keep_coming(watch, 1.0)
+        ticks, counted, latest_us = ticks_keep_coming(watch, 1.0)
         measured("ticks_per_s_while_frozen", ticks)
+        measured("latest_wakeup_while_frozen_us", latest_us, "µs")
         assert ticks > 500 and counted > 500, "the loop must not block on a frozen client"
-        saved = the_interrupted_run(runs, rows_before, script.path)
+        assert list_runs(runs) == [], "the loop saved a run: file I/O in the tick"
 
         os.kill(script.proc.pid, signal.SIGCONT)
         report = script.ask("report")
@@ -189,7 +195,7 @@ def test_a_frozen_client_makes_the_controller_hold_and_it_is_alive_on_resume(
         until(lambda: watch.status().tick > report["tick"] + 100, 2.0, "ticks after the resume")
         result = script.ask("wait")
         assert result["status"] == "interrupted: client silent"
-        assert result["files"] == str(saved)
+        assert result["files"] == str(the_interrupted_run(runs, rows_before, script.path))
         assert script.ask("close")["controller_exit"] == 0
         script.proc.wait(timeout=10)
     finally:
@@ -201,8 +207,9 @@ def test_a_frozen_client_makes_the_controller_hold_and_it_is_alive_on_resume(
 def test_a_killed_client_leaves_a_holding_controller_that_saves_and_exits(
         tmp_path: Path, until, leftovers, measured) -> None:
     """SIGKILL of the client mid-move: the controller holds at once (measured), keeps
-    ticking, saves the interrupted run itself with every row recorded, exits with code 0
-    after its orphan timeout (measured) and leaves no shared-memory segment."""
+    ticking with no stall (the latest wake-up measured), exits with code 0 after its orphan
+    timeout (measured), and only then, its loop ended, saves the interrupted run with every
+    row recorded; no shared-memory segment is left."""
     runs = tmp_path / "runs"
     orphan_s = 1.5
     with adopting_orphans():
@@ -217,13 +224,15 @@ def test_a_killed_client_leaves_a_holding_controller_that_saves_and_exits(
             hold_s = until(watch.holding_without_client, 5.0, "the controller to hold")
             measured("hold_after_kill_ms", hold_s * 1e3, "ms")
             assert hold_s < 2.0
-            ticks, counted = ticks_keep_coming(watch, 0.5)
+            ticks, counted, latest_us = ticks_keep_coming(watch, 0.5)
+            measured("latest_wakeup_after_kill_us", latest_us, "µs")
             assert ticks > 250 and counted > 250
-            the_interrupted_run(runs, rows_before, script.path)
+            assert list_runs(runs) == [], "the loop saved a run: file I/O in the tick"
         finally:
             watch.close()
         _, code = os.waitpid(script.controller, 0)
         exited_s = measured("exit_after_kill_s", time.monotonic() - killed, "s")
     assert os.waitstatus_to_exitcode(code) == 0
+    the_interrupted_run(runs, rows_before, script.path)
     assert orphan_s <= exited_s < orphan_s + 5.0
     assert leftovers(script.proc.pid) == []
