@@ -44,6 +44,13 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                    help="probability that a board-to-host frame is never sent")
     p.add_argument("--silent-after", type=_seconds, metavar="S",
                    help="stop answering S seconds after the first configuration (a hung board)")
+    p.add_argument("--frozen-after", type=_seconds, metavar="S",
+                   help="answer on time but with every encoder word frozen S seconds after the "
+                        "first configuration (a stalled multiplexer)")
+    p.add_argument("--stuck-bit", type=_stuck_bit, metavar="JOINT:BIT:VALUE",
+                   help="that bit of that joint's encoder word always reads VALUE (0 or 1)")
+    p.add_argument("--flood", type=_flood, default=0, metavar="N",
+                   help="follow every REPORT with N more, valid (a board flooding the link)")
     p.set_defaults(func=run)
 
 
@@ -58,7 +65,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"servodesk: {exc}", file=sys.stderr)
         return 2
     faults = Faults(corrupt_rate=args.corrupt_rate, corrupt_rx_rate=args.corrupt_rx_rate,
-                    drop_rate=args.drop_rate, silent_after_s=args.silent_after)
+                    drop_rate=args.drop_rate, silent_after_s=args.silent_after,
+                    frozen_after_s=args.frozen_after, stuck_bit=args.stuck_bit,
+                    flood=args.flood)
     try:
         emulator = Emulator(plant, tcp_port=args.tcp, faults=faults, seed=getattr(args, "seed", 0))
     except OSError as exc:
@@ -101,10 +110,7 @@ def _rate(text: str) -> float:
 
 
 def _port(text: str) -> int:
-    value = _number(text, 0, 65535, "a TCP port in 0…65535")
-    if value != int(value):
-        raise argparse.ArgumentTypeError(f"{text} is not a whole port number")
-    return int(value)
+    return _whole(text, 0, 65535, "a TCP port in 0…65535")
 
 
 def _scale(text: str) -> float:
@@ -113,3 +119,24 @@ def _scale(text: str) -> float:
 
 def _seconds(text: str) -> float:
     return _number(text, 0.0, 1e6, "a time in 0…1e6 s")
+
+
+def _whole(text: str, low: int, high: int, what: str) -> int:
+    value = _number(text, low, high, what)
+    if value != int(value):
+        raise argparse.ArgumentTypeError(f"{text} is not a whole number")
+    return int(value)
+
+
+def _flood(text: str) -> int:
+    return _whole(text, 0, 100, "a count of extra reports in 0…100")
+
+
+def _stuck_bit(text: str) -> tuple[int, int, int]:
+    parts = text.split(":")
+    if len(parts) != 3:
+        raise argparse.ArgumentTypeError(f"{text!r} is not JOINT:BIT:VALUE (e.g. 2:12:1)")
+    joint = _whole(parts[0], 0, 63, "a joint index")
+    bit = _whole(parts[1], 0, 31, "a bit in 0…31")
+    value = _whole(parts[2], 0, 1, "0 or 1")
+    return joint, bit, value

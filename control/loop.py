@@ -367,8 +367,9 @@ class Controller:
             self.running = False
         overloaded = self.latency.overloaded(now)
         if overloaded:
-            self.abort(Fault("overrun", -1, f"{overloaded:.0%} of the last second's ticks were "
-                                            "late (a flooded link or a starved CPU): holding"))
+            self.abort(Fault("overrun", -1, f"overrun: {overloaded:.0%} of the last second's "
+                                            "ticks were late (a flooded link or a starved "
+                                            "CPU); holding"))
 
     @property
     def orphaned(self) -> bool:

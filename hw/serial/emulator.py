@@ -60,12 +60,21 @@ class Faults:
     ``drop_rate``: board → host frames never sent.
     ``silent_after_s``: this long after the first CONFIG the board stops reading and
     writing (a hung board; its valve watchdog still closes the valves).
+
+    A hostile board answers on time with words that lie:
+    ``frozen_after_s``: this long after the first CONFIG every encoder word stays as it
+    was (a stalled multiplexer, a cut cable reading a constant).
+    ``stuck_bit``: (joint, bit, value): that bit of that joint's word always reads value.
+    ``flood``: each REPORT is followed by this many more, valid, of the same words.
     """
 
     corrupt_rate: float = 0.0
     corrupt_rx_rate: float = 0.0
     drop_rate: float = 0.0
     silent_after_s: float | None = None
+    frozen_after_s: float | None = None
+    stuck_bit: tuple[int, int, int] | None = None
+    flood: int = 0
 
 
 class EmulatedBoard:
@@ -104,6 +113,8 @@ class EmulatedBoard:
         self._last_tx_ns = 0
         self._last_host_seq = 0
         self._silent_at_ns: int | None = None
+        self._frozen_at_ns: int | None = None
+        self._frozen: tuple[int, ...] | None = None
         self._out = bytearray()
 
     # -- inputs -----------------------------------------------------------------
@@ -197,6 +208,8 @@ class EmulatedBoard:
         self._last_host_seq = seq
         if self._silent_at_ns is None and self.faults.silent_after_s is not None:
             self._silent_at_ns = now_ns + round(self.faults.silent_after_s * 1e9)
+        if self._frozen_at_ns is None and self.faults.frozen_after_s is not None:
+            self._frozen_at_ns = now_ns + round(self.faults.frozen_after_s * 1e9)
         self._emit(ConfigAck(seq, FIRMWARE, self.channels, config), now_ns)
 
     def _duty(self, seq: int, message: Duty, now_ns: int) -> None:
@@ -221,7 +234,9 @@ class EmulatedBoard:
                 self._duty_pct[j] = round(u / step) * step / DUTY_SCALE
             self.plant.write(self._duty_pct)
             self.applied += 1
-        self._emit(self._report(seq, now_ns), now_ns)
+        report = self._report(seq, now_ns)
+        for _ in range(1 + self.faults.flood):
+            self._emit(report, now_ns)
 
     def _nak(self, seq: int, msg_type: int, reason: int, now_ns: int) -> None:
         self.naks += 1
@@ -265,9 +280,22 @@ class EmulatedBoard:
         self.plant.read(self._raw)
         flags = self.flags | (Flag.UNSOLICITED if unsolicited else 0)
         mask = (1 << self.config.encoder_bits) - 1  # a quadrature count wraps, two's complement
-        words = tuple(w & mask for w in self._raw[: self.config.n_joints])
+        words = self._lie(tuple(w & mask for w in self._raw[: self.config.n_joints]), now_ns)
         latched = self.plant.sample_ns if self.plant_time else now_ns
         return Report(echo_seq, self._t_us(latched), flags, self.rx_errors, words)
+
+    def _lie(self, words: tuple[int, ...], now_ns: int) -> tuple[int, ...]:
+        """The words a hostile board sends (``Faults.frozen_after_s``, ``stuck_bit``)."""
+        if self._frozen_at_ns is not None and now_ns >= self._frozen_at_ns:
+            if self._frozen is None:
+                self._frozen = words
+            return self._frozen
+        if self.faults.stuck_bit is not None:
+            joint, bit, value = self.faults.stuck_bit
+            stuck = list(words)
+            stuck[joint] = stuck[joint] | (1 << bit) if value else stuck[joint] & ~(1 << bit)
+            return tuple(stuck)
+        return words
 
     def _t_us(self, now_ns: int) -> int:
         return ((now_ns - (self._t0_ns or now_ns)) // 1000) & 0xFFFFFFFF

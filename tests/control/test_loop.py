@@ -343,6 +343,22 @@ def test_a_step_kind_may_jump(rig) -> None:
         shm.release(segment, unlink=True)
 
 
+def test_a_second_with_over_a_fifth_of_its_ticks_overrun_aborts_the_move_and_holds(rig) -> None:
+    controller, backend, client = rig
+    controller.modes.set_coefficients("track", pi(UNIMATE, 1.0, 0.0))  # no integrator to wind
+    segment = start_move(controller, [HOME] * 3000, "path")  # up on a joint that never moves
+    try:
+        ticks(controller, backend, 1100)
+        controller.latency.overruns += 300  # a flooded link: 300 of the next 1000 ticks late
+        ticks(controller, backend, 1000)
+        fault = next(p for name, p in events(client) if name == "fault")
+        assert fault["kind"] == "overrun" and "% of the last second's ticks" in fault["message"]
+        assert controller.modes.move is None and controller.modes.mode == Mode.HOLD
+        assert not controller.guards.latched
+    finally:
+        shm.release(segment, unlink=True)
+
+
 def test_a_stall_in_a_move_is_listed_and_said(rig) -> None:
     controller, backend, client = rig
     segment = start_move(controller, [HOME] * 5, "path")

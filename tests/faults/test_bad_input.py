@@ -416,7 +416,8 @@ def test_fk_and_ik_numbers(measured, command: str, values: list[str]) -> None:
 
 @fuzz(200)
 @given(option=st.sampled_from(["--corrupt-rate", "--corrupt-rx-rate", "--drop-rate",
-                               "--glitch-scale", "--silent-after", "--seed", "--tcp"]),
+                               "--glitch-scale", "--silent-after", "--frozen-after", "--flood",
+                               "--seed", "--tcp"]),
        value=CLI_NUMBER)
 def test_emulator_options(measured, option: str, value: str) -> None:
     """``servodesk emulate`` options parsed from any text: a usable value (a probability in
@@ -434,16 +435,21 @@ def test_emulator_options(measured, option: str, value: str) -> None:
     parsed = getattr(args, option[2:].replace("-", "_"))
     if option.endswith("rate"):
         assert 0.0 <= parsed <= 1.0
-    elif option in ("--seed", "--tcp"):
+    elif option in ("--seed", "--tcp", "--flood"):
         assert isinstance(parsed, int)
 
 
 @pytest.mark.parametrize(("option", "value"), [("--tcp", "99999"), ("--tcp", "-1"),
                                                ("--glitch-scale", "nan"),
-                                               ("--silent-after", "nan")])
+                                               ("--silent-after", "nan"),
+                                               ("--frozen-after", "inf"), ("--flood", "2.5"),
+                                               ("--stuck-bit", "2:8"), ("--stuck-bit", "x:8:1"),
+                                               ("--stuck-bit", "2:8:2"),
+                                               ("--stuck-bit", "2:40:1")])
 def test_emulate_refuses_numbers_it_cannot_use(option: str, value: str) -> None:
-    """``servodesk emulate`` refuses a port outside 0…65535 and a non-finite scale or
-    delay when parsing, with argparse's message naming the option (as it does for rates)."""
+    """``servodesk emulate`` refuses a port outside 0…65535, a non-finite scale or delay, a
+    fractional flood and a stuck bit that is not JOINT:BIT:0|1 when parsing, with
+    argparse's message naming the option (as it does for rates)."""
     err = io.StringIO()
     with contextlib.redirect_stderr(err), pytest.raises(SystemExit) as info:
         cli.build_parser().parse_args(["emulate", option, value])

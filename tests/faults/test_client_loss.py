@@ -40,9 +40,10 @@ CLIENT_SCRIPT = textwrap.dedent("""
     from control.motion import moves
 
     data_dir, orphan_s, path_file = sys.argv[1], float(sys.argv[2]), sys.argv[3]
+    seconds = float(sys.argv[4])
     client = ControlClient("unimate2000b", data_dir=data_dir, orphan_timeout_s=orphan_s)
     start = client.status().position
-    path = moves.step(start, 1, start[1] + 40.0, duration=8.0, machine=client.machine)
+    path = moves.step(start, 1, start[1] + 40.0, duration=seconds, machine=client.machine)
     np.save(path_file, path)
     handle = client.move(path, kind="step")
     print(json.dumps({"controller": client.pid, "segment": client.segment_name}), flush=True)
@@ -69,13 +70,13 @@ CLIENT_SCRIPT = textwrap.dedent("""
 class ClientScript:
     """The client script as a child process, answering one JSON line per command."""
 
-    def __init__(self, data_dir: Path, orphan_timeout_s: float) -> None:
+    def __init__(self, data_dir: Path, orphan_timeout_s: float, seconds: float = 8.0) -> None:
         self.path_file = data_dir.parent / "path.npy"
         env = {**os.environ, "PYTHONPATH": str(ROOT)}
         self.proc = subprocess.Popen(
             [sys.executable, "-c", CLIENT_SCRIPT, str(data_dir), str(orphan_timeout_s),
-             str(self.path_file)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
-            env=env)
+             str(self.path_file), str(seconds)], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+            text=True, env=env)
         first = self.answer()
         self.controller = int(first["controller"])
         self.segment = str(first["segment"])
@@ -236,3 +237,36 @@ def test_a_killed_client_leaves_a_holding_controller_that_saves_and_exits(
     the_interrupted_run(runs, rows_before, script.path)
     assert orphan_s <= exited_s < orphan_s + 5.0
     assert leftovers(script.proc.pid) == []
+
+
+def test_a_client_killed_30_s_into_a_60_s_move_costs_the_loop_no_stall(
+        tmp_path: Path, until, leftovers, measured) -> None:
+    """The case that stalled the loop for a second when the controller saved the run inside
+    its tick: the client dies 30 s into a 60 s move. The loop holds and goes on ticking with
+    no gap (the latest wake-up around the kill measured, target under 2 ms), and after its
+    orphan timeout, its loop ended, the controller saves the 30 s run."""
+    runs = tmp_path / "runs"
+    with adopting_orphans():
+        script = ClientScript(runs, orphan_timeout_s=1.5, seconds=60.0)
+        watch = StatusWatch(script.segment)
+        try:
+            until(lambda: watch.status().move_done >= 30_000, 60.0, "30 s of the move")
+            rows_before = watch.status().move_done
+            h0 = watch.histogram()
+            script.proc.kill()
+            script.proc.wait(timeout=10)
+            until(watch.holding_without_client, 5.0, "the controller to hold")
+            time.sleep(0.5)
+            h1 = watch.histogram()
+            grew = np.flatnonzero(h1.counts - h0.counts)
+            latest_us = measured("latest_wakeup_around_the_kill_us", (grew[-1] + 1) * h1.bin_us,
+                                 "µs")
+            assert latest_us < 2_000, "the loop stalled when its client died"
+        finally:
+            watch.close()
+        _, code = os.waitpid(script.controller, 0)
+    assert os.waitstatus_to_exitcode(code) == 0
+    saved = the_interrupted_run(runs, rows_before, script.path)
+    measured("run_saved_rows", load_run(saved).samples)
+    assert leftovers(script.proc.pid) == []
+
