@@ -33,7 +33,6 @@ import numpy as np
 import control
 from control import process, shm
 from control.commands import (
-    MOVE_KINDS,
     Command,
     EmergencyStop,
     Heartbeat,
@@ -52,6 +51,7 @@ from control.commands import (
 )
 from control.events import ControllerEvent, Crash, Died, Fault, MoveDone, Ready
 from control.layout import ControlLayout, LatencyHistogram, MoveLayout, Status
+from control.motion.acceptance import accept
 from control.motion.moves import StepSummary
 from control.motion.plan import MovePlan, summaries
 from control.recorder import Run, RunFiles, coefficients_record, default_data_dir, save_run
@@ -418,55 +418,36 @@ class ControlClient:
         self._send(command)
 
     def move(self, desired: np.ndarray, kind: str = "path", meta: dict | None = None) -> MoveHandle:
-        """follow_track: track ``desired (N, J)`` (mm, deg) each tick, then hold at its end; a
-        path that starts away from the joints gets an approach ramp first (``run``)."""
-        path = np.asarray(desired, dtype=np.float64)
-        self._check_path(path)
-        return self.run(MovePlan.of_path(path, kind, meta))
+        """follow_track: track ``desired (N, J)`` (mm, deg) each tick, then hold at its end.
+
+        ``kind`` says what the path may do (``control.motion.acceptance``): a smooth kind
+        (the default ``path``, ramp, sine, …) keeps every joint's max_speed and max_accel; a
+        step kind (``step``, ``multi_step``) may jump. A path that starts away from the joints
+        gets an approach ramp first (``run``). Raises ValueError, nothing sent, if the rules
+        refuse it."""
+        return self.run(MovePlan.of_path(np.asarray(desired, dtype=np.float64), kind, meta))
 
     def run(self, plan: MovePlan) -> MoveHandle:
         """Run a planned move (``control.motion.plan``): its path, with an approach from where
-        the joints are now when it starts elsewhere, or its duty profile."""
-        if plan.path is None and plan.profile is None:
-            raise ValueError(f"plan {plan.title!r} has neither a path nor a duty profile")
-        if plan.path is not None:
-            self._check_path(np.asarray(plan.path, dtype=np.float64))
-            plan = plan.approached(np.array(self.status().position), self.machine, self.dt)
-        return self._start(plan)
+        the joints are now when it starts elsewhere, or its duty profile. The acceptance rules
+        (``control.motion.acceptance.accept``) decide; ValueError, nothing sent, if they
+        refuse."""
+        here = np.array(self.status().position) if plan.path is not None else None
+        return self._start(accept(plan, here, self.machine, self.dt))
 
     def actuate(self, profile: np.ndarray, kind: str = "tracking_actuate",
                 meta: dict | None = None) -> MoveHandle:
-        """tracking_actuate: play ``profile (N, J)`` duty in % open loop and record the response."""
-        duty = np.asarray(profile, dtype=np.float64)
-        if duty.ndim != 2 or duty.shape[1] != self.machine.n_joints or len(duty) == 0:
-            raise ValueError(f"a duty profile is (N, {self.machine.n_joints}), got {duty.shape}")
-        bad = np.argwhere(~np.isfinite(duty) | (np.abs(duty) > 100))
-        if len(bad):
-            k, j = bad[0]
-            raise ValueError(f"{self.machine.joints[j].name} duty {duty[k, j]} at sample {k} is "
-                             "not a number in -100…100 %")
-        moving = tuple(int(j) for j in np.flatnonzero(np.any(duty != 0, axis=0)))
-        return self._start(MovePlan(kind, kind, profile=duty, meta=dict(meta or {}),
-                                    moving=moving))
+        """tracking_actuate: play ``profile (N, J)`` duty in % open loop and record the response.
 
-    def _check_path(self, path: np.ndarray) -> None:
-        n = self.machine.n_joints
-        if path.ndim != 2 or path.shape[1] != n or len(path) == 0:
-            raise ValueError(f"a path is (N, {n}) joint positions, got shape {path.shape}")
-        lower, upper = np.array(self.machine.lower), np.array(self.machine.upper)
-        bad = np.argwhere(~np.isfinite(path) | (path < lower) | (path > upper))
-        if len(bad):
-            k, j = bad[0]
-            joint = self.machine.joints[j]
-            try:
-                joint.check_target(float(path[k, j]), self.machine.name)
-            except ValueError as exc:
-                raise ValueError(f"{exc} at sample {k} (t = {k * self.dt:.3f} s)") from None
+        Raises ValueError (nothing sent) unless every duty is finite and in -100…100 %."""
+        duty = np.asarray(profile, dtype=np.float64)
+        moving = (tuple(int(j) for j in np.flatnonzero(np.any(duty != 0, axis=0)))
+                  if duty.ndim == 2 else ())
+        return self.run(MovePlan(kind, kind, profile=duty, meta=dict(meta or {}), moving=moving))
 
     def _start(self, plan: MovePlan) -> MoveHandle:
+        """Send an accepted plan: its path or profile into a new move segment, then StartMove."""
         kind, path, profile = plan.kind, plan.path, plan.profile
-        if kind not in MOVE_KINDS:
-            raise ValueError(f"unknown move kind {kind!r} (kinds: {', '.join(sorted(MOVE_KINDS))})")
         samples = len(path if path is not None else profile)
         layout = MoveLayout(samples, self.machine.n_joints)
         move_id = next(self._ids)

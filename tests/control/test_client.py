@@ -22,6 +22,7 @@ import pytest
 from control import ControlClient, ControllerError, Flag, Mode, shm
 from control.layout import ControlLayout
 from control.motion import moves
+from control.motion.acceptance import check_path
 from control.recorder import load_run
 from control.seqlock import SeqlockReader
 from hw.machine import load_machine
@@ -113,6 +114,43 @@ def test_a_path_that_starts_away_gets_an_approach_and_the_tuis_summary(
     rows = result.summaries()
     assert [label for label, _ in rows] == ["Up/Down"]  # Rotate moved only in the approach
     assert rows[0][1].step == pytest.approx(5.0)
+
+
+def test_a_jump_is_refused_as_a_path_and_runs_as_a_step(lockstep: ControlClient) -> None:
+    """The acceptance rules by kind (control/motion/acceptance.py): Up/Down jumping 5° in one
+    sample is refused as a smooth path, nothing sent, and accepted as a step."""
+    start = np.array(lockstep.status().position)
+    path = np.tile(start, (1500, 1))
+    path[300:, 2] += 5.0
+    with pytest.raises(ValueError, match=r"^Up/Down moves \+5 deg in 0.001 s at sample 300 "
+                                         r"\(t = 0.300 s\): 5000 deg/s, 200 times its max_speed "
+                                         r"25 deg/s .*send it as a step move \(kind 'step'\)"):
+        lockstep.move(path)
+    assert our_segments(os.getpid()) == [lockstep.segment_name]
+    assert lockstep.status().move_id == 0 and lockstep.status().mode == Mode.HOLD
+    result = lockstep.wait(lockstep.move(path, kind="step"), timeout=60)
+    assert result.complete, result.status
+    assert result.run.samples == len(path) and result.plan.approach == 0
+    assert abs(result.run.actual[-1, 2] - path[-1, 2]) <= UNIMATE.joints[2].tolerance
+
+
+def test_a_smooth_move_that_starts_away_runs_behind_a_smooth_approach(
+        lockstep: ControlClient) -> None:
+    """A sine whose first row is 20° of Rotate away: the client puts the approach in front,
+    and what the controller was sent keeps every joint's max_speed and max_accel."""
+    here = np.array(lockstep.status().position)
+    start = here.copy()
+    start[1] += 20.0
+    end = start.copy()
+    end[2] += 5.0
+    path = moves.sine(start, end, period=2.0, duration=2.0, machine=UNIMATE)
+    result = lockstep.wait(lockstep.move(path, kind="sine"), timeout=60)
+    assert result.complete, result.status
+    sent = result.run.desired
+    assert result.plan.approach > 0 and len(sent) == result.plan.approach + len(path)
+    assert np.abs(sent[0] - here).max() < 1e-9
+    np.testing.assert_allclose(sent[result.plan.approach:], path, atol=1e-9)
+    check_path(sent, "sine", UNIMATE, lockstep.dt)
 
 
 def test_jog_duty_reaches_the_backend(realtime: ControlClient) -> None:
@@ -209,7 +247,8 @@ def test_following_error_aborts_into_hold_naming_the_joint(lockstep: ControlClie
     start = np.array(lockstep.status().position)
     path = np.tile(start, (3000, 1))
     path[:, 0] = np.minimum(start[0] + 1.5 * np.arange(3000), 2041.0)  # 1500 mm/s: too fast
-    result = lockstep.wait(lockstep.move(path, kind="path"), timeout=60)
+    # a smooth kind would be refused before it starts; a step may ask for anything in limits
+    result = lockstep.wait(lockstep.move(path, kind="step"), timeout=60)
     assert result.status.startswith("fault: following error: In/Out is ")
     fault = lockstep.wait_event("fault", 5.0, lambda e: e.payload["kind"] == "following_error")
     assert fault.payload["joint"] == 0
@@ -226,7 +265,8 @@ def test_a_joint_driven_into_its_limit_stops_there(lockstep: ControlClient) -> N
 
 def test_killing_the_controller_is_reported(realtime: ControlClient) -> None:
     start = realtime.status().position
-    move = realtime.move(moves.step(start, 1, start[1] + 30, duration=5.0, machine=UNIMATE))
+    move = realtime.move(moves.step(start, 1, start[1] + 30, duration=5.0, machine=UNIMATE),
+                         kind="step")
     wait_until(lambda: realtime.status().move_done > 300, 3.0, "the move to run")
     os.kill(realtime.pid, signal.SIGKILL)
     died = realtime.wait_event("died", timeout=5.0)
@@ -282,7 +322,8 @@ def test_the_rig_refuses_moves_until_initialised_then_steps(tmp_path: Path) -> N
                        sim_options={"initial": [400.0]}) as client:
         assert not client.status().homed
         path = moves.step(client.status().position, 0, 100.0, duration=2.0, machine=rig)
-        assert client.wait(client.move(path), 10).status == "refused: not initialised"
+        assert client.wait(client.move(path, kind="step"), 10).status == \
+            "refused: not initialised"
         client.initialise()
         done = client.wait_event("initialised", 60.0)
         assert done.payload["status"].startswith("complete: initialised")

@@ -60,14 +60,15 @@ def test_a_profile_into_a_limit_records_the_duty_actually_sent(controller) -> No
 
 
 def test_a_following_error_aborts_the_move_and_holds_where_the_joint_is(controller) -> None:
-    """A path asking In/Out for 1500 mm/s (it can do 400): the move is aborted with a fault
-    naming In/Out and its error, the run up to the abort is on disk, and the robot holds
-    where In/Out got to, not at the path's end."""
+    """A path asking In/Out for 1500 mm/s (it can do 400), sent as a step (a smooth kind is
+    refused before it starts): the move is aborted with a fault naming In/Out and its error,
+    the run up to the abort is on disk, and the robot holds where In/Out got to, not at the
+    path's end."""
     client = controller(lockstep=True)
     start = np.array(client.status().position)
     path = np.tile(start, (3000, 1))
     path[:, INOUT] = np.minimum(start[INOUT] + 1.5 * np.arange(3000), 2041.0)
-    result = client.wait(client.move(path, kind="path"), timeout=60)
+    result = client.wait(client.move(path, kind="step"), timeout=60)
     assert result.status.startswith("fault: following error: In/Out is ")
     assert result.status.endswith("(limit 150mm) and not closing; move aborted, holding")
     fault = client.wait_event("fault", 5.0, lambda e: e.payload["kind"] == "following_error")

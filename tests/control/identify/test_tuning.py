@@ -159,17 +159,17 @@ def proposal(models: list[DeadbandModel]) -> tuning.Proposal:
 
 
 def follow(robot: ControlClient, start: np.ndarray, track: Coefficients, path: np.ndarray,
-           settle: Coefficients) -> np.ndarray:
+           settle: Coefficients, kind: str) -> np.ndarray:
     """Return to ``start`` with ``settle`` as the track and hold set (so every run starts on
     target from the same stiff hold: the thesis's Bend gains need seconds), then follow
-    ``path`` with ``track``; the actual path."""
+    ``path``, a move of ``kind``, with ``track``; the actual path."""
     robot.set_coefficients("hold", settle)
     robot.set_coefficients("track", settle)
     back = trajectory.via_path([robot.status().position, start], UNIMATE, speed_fraction=0.5)
     rest = np.repeat(start[None], 500, axis=0)
     assert robot.wait(robot.move(np.vstack([back.q, rest])), timeout=120).complete
     robot.set_coefficients("track", track)
-    result = robot.wait(robot.move(path, kind="ramp"), timeout=120)
+    result = robot.wait(robot.move(path, kind=kind), timeout=120)
     robot.set_coefficients("hold", UNIMATE.hold)
     assert result.complete, result.status
     return result.run.actual
@@ -191,7 +191,7 @@ def test_the_proposed_gains_track_a_ramp_better_than_the_thesis_pi_gains(
     rms: dict[str, list[np.ndarray]] = {name: [] for name in sets}
     for _ in range(RUNS):
         for name, c in sets.items():
-            actual = follow(robot, start, c, path, settle=proposal.coefficients)
+            actual = follow(robot, start, c, path, settle=proposal.coefficients, kind="ramp")
             rms[name].append(np.sqrt(np.mean((path - actual) ** 2, axis=0)))
     mean = {name: np.mean(values, axis=0) for name, values in rms.items()}
     spread = {name: np.ptp(values, axis=0) for name, values in rms.items()}
@@ -213,7 +213,7 @@ def test_the_predicted_step_response_matches_the_simulator(
     path = moves.multi_step(start, start + size, 1.5, machine=UNIMATE)
     print("\nstep response, RMS of predicted − simulated, % of the step")
     for c in (THESIS, proposal.coefficients):
-        actual = follow(robot, start, c, path, settle=proposal.coefficients)
+        actual = follow(robot, start, c, path, settle=proposal.coefficients, kind="multi_step")
         predicted = tuning.simulate(models, UNIMATE, c, path, initial=actual[0]).position
         miss = np.sqrt(np.mean((predicted - actual) ** 2, axis=0)) / size
         print(f"{c.name:12s}" + "  ".join(f"{100 * m:5.2f}" for m in miss))
