@@ -27,6 +27,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -45,11 +46,10 @@ from control.commands import (
     SetCoefficients,
     Shutdown,
     StartMove,
-    check_coefficients,
     finite,
     joint_index,
 )
-from control.events import ControllerEvent, Crash, Died, Fault, MoveDone, Ready
+from control.events import ControllerEvent, Crash, Died, Fault, MoveDone, Notice, Ready
 from control.layout import ControlLayout, LatencyHistogram, MoveLayout, Status
 from control.motion.acceptance import accept
 from control.motion.moves import StepSummary
@@ -58,6 +58,10 @@ from control.recorder import Run, RunFiles, coefficients_record, default_data_di
 from control.runs import run_from_record, start_stamp
 from control.seqlock import SeqlockReader, SeqlockWriter
 from hw.machine import Coefficients, Machine, load_machine
+
+if TYPE_CHECKING:
+    from control.identify.gains import GainCheck
+    from control.identify.sysid import DeadbandModel
 
 HEARTBEAT_S = 0.05
 DEATH_S = 0.25
@@ -162,6 +166,11 @@ class ControlClient:
         self._stopping = False
         self._manual = [0.0] * self.machine.n_joints
         self.coefficients = {"hold": self.machine.hold, "track": self.machine.track}
+        # what the gain check said of each set in use, saved with every run (control.identify.gains)
+        self.coefficient_checks: dict[str, dict[str, object]] = {
+            which: {"passed": None, "summary": "the machine file's set, applied at start"}
+            for which in self.coefficients}
+        self._models: tuple[DeadbandModel | None, ...] = (None,) * self.machine.n_joints
         shm.cleanup_orphans()
         self.layout = ControlLayout(self.machine.n_joints)
         self._segment = shm.create(f"ctl{next(_SESSIONS)}", self.layout.size)
@@ -406,16 +415,54 @@ class ControlClient:
         """Closed-loop jog: move the hold target of one joint by ``delta`` (mm or deg)."""
         self._send(JogPosition.of(self.machine, joint, delta))
 
-    def set_coefficients(self, which: str, coefficients: Coefficients) -> None:
+    def set_coefficients(self, which: str, coefficients: Coefficients,
+                         models: Sequence[DeadbandModel | None] | None = None, *,
+                         override: str | None = None) -> GainCheck:
         """Replace the hold or track set; applied at once, even during a move (section 6.3).
 
-        Raises ValueError (nothing applied) for an unknown set or a number that is not finite."""
+        The set is checked first (``control.identify.gains``): every number finite, and every
+        joint's loop stable with margin on its model: ``models`` (one per joint, None for the
+        machine file's nominal model), and for a joint without one here the identified model
+        given earlier in this session (``models``), else the nominal one. Refused: ValueError
+        naming each joint and why, nothing applied. ``override="reason"`` applies a set the
+        stability check refuses (never one with a number that is not finite): the reason and
+        the refusal go into the metadata of every run made with the set
+        (``coefficients.<which>.check``) and out as a notice event. Returns the check."""
+        from control.identify import gains  # scipy: loaded on first use, never by the controller
+
         command = SetCoefficients(which)
-        check_coefficients(coefficients, self.machine.n_joints)
+        if override is not None and (not isinstance(override, str) or not override.strip()):
+            raise ValueError(f"override needs the reason as a non-empty string, got {override!r}")
+        known = self._known_models(models)
+        check = (gains.assess if override is not None else gains.check)(
+            coefficients, self.machine, known, self.dt)
         encoded = self.layout.coefficients.encode(coefficients)
         self._coefficient_writers[which].write(*encoded)
         self.coefficients[which] = coefficients
+        self.coefficient_checks[which] = check.record(override)
+        self._models = known
         self._send(command)
+        if not check.ok:
+            self._dispatch(Event(Notice(
+                f"gain check overridden for the {which} set {coefficients.name!r} ({override}): "
+                f"{check.summary()}; recorded with every run made with it")))
+        return check
+
+    @property
+    def models(self) -> tuple[DeadbandModel | None, ...]:
+        """The identified model of each joint given to ``set_coefficients`` in this session
+        (None: the machine file's nominal model), which later gain checks use."""
+        return self._models
+
+    def _known_models(self, models: Sequence[DeadbandModel | None] | None
+                      ) -> tuple[DeadbandModel | None, ...]:
+        if models is None:
+            return self._models
+        if len(models) != self.machine.n_joints:
+            raise ValueError(f"models: need one model (or None) per joint, "
+                             f"{self.machine.n_joints}, got {len(models)}")
+        return tuple(m if m is not None else known
+                     for m, known in zip(models, self._models, strict=True))
 
     def move(self, desired: np.ndarray, kind: str = "path", meta: dict | None = None) -> MoveHandle:
         """follow_track: track ``desired (N, J)`` (mm, deg) each tick, then hold at its end.
@@ -460,7 +507,8 @@ class ControlClient:
         full_meta = {
             "backend": self.backend,
             "start_time": start_stamp(),
-            "coefficients": {k: coefficients_record(c) for k, c in self.coefficients.items()},
+            "coefficients": {k: {**coefficients_record(c), "check": self.coefficient_checks[k]}
+                             for k, c in self.coefficients.items()},
             **plan.meta,
         }
         handle = MoveHandle(move_id, kind, samples, full_meta, plan, segment, layout)
