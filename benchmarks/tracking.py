@@ -70,6 +70,8 @@ def main() -> None:
         print_feed_forward(ffs)
         desired = np.vstack([path.q, np.repeat(path.q[-1:], round(SETTLE_S / machine.sample_time_s),
                                                axis=0)])
+        # the gain check judges every set below on these models, not the machine file's
+        robot.set_coefficients("hold", machine.hold, models)
         feed_forward = tuning.with_feed_forward(proposal.coefficients, ffs)
         columns = {
             "thesis P.I. (5.4.2)": follow(robot, machine, machine.coefficients["thesis_pi"],

@@ -27,13 +27,13 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 import control
 from control import process, shm
 from control.commands import (
-    MOVE_KINDS,
     Command,
     EmergencyStop,
     Hold,
@@ -45,11 +45,10 @@ from control.commands import (
     SetCoefficients,
     Shutdown,
     StartMove,
-    check_coefficients,
     finite,
     joint_index,
 )
-from control.events import ControllerEvent, Crash, Died, Fault, MoveDone, Ready
+from control.events import ControllerEvent, Crash, Died, Fault, MoveDone, Notice, Ready
 from control.layout import (
     ESTOP_WORD,
     HEARTBEAT_WORD,
@@ -58,12 +57,17 @@ from control.layout import (
     MoveLayout,
     Status,
 )
+from control.motion.acceptance import accept
 from control.motion.moves import StepSummary
 from control.motion.plan import MovePlan, summaries
 from control.recorder import Run, RunFiles, coefficients_record, default_data_dir, save_run
 from control.runs import run_from_record, start_stamp
 from control.seqlock import SeqlockReader, SeqlockWriter
 from hw.machine import Coefficients, Machine, load_machine
+
+if TYPE_CHECKING:
+    from control.identify.gains import GainCheck
+    from control.identify.sysid import DeadbandModel
 
 HEARTBEAT_S = 0.05
 OUTGOING = 64  # commands waiting for the channel; more means the controller is not reading
@@ -170,6 +174,11 @@ class ControlClient:
         self._stopping = False
         self._manual = [0.0] * self.machine.n_joints
         self.coefficients = {"hold": self.machine.hold, "track": self.machine.track}
+        # what the gain check said of each set in use, saved with every run (control.identify.gains)
+        self.coefficient_checks: dict[str, dict[str, object]] = {
+            which: {"passed": None, "summary": "the machine file's set, applied at start"}
+            for which in self.coefficients}
+        self._models: tuple[DeadbandModel | None, ...] = (None,) * self.machine.n_joints
         shm.cleanup_orphans()
         self.layout = ControlLayout(self.machine.n_joints)
         self._segment = shm.create(f"ctl{next(_SESSIONS)}", self.layout.size)
@@ -441,67 +450,86 @@ class ControlClient:
         """Closed-loop jog: move the hold target of one joint by ``delta`` (mm or deg)."""
         self._send(JogPosition.of(self.machine, joint, delta))
 
-    def set_coefficients(self, which: str, coefficients: Coefficients) -> None:
+    def set_coefficients(self, which: str, coefficients: Coefficients,
+                         models: Sequence[DeadbandModel | None] | None = None, *,
+                         override: str | None = None) -> GainCheck:
         """Replace the hold or track set; applied at once, even during a move (section 6.3).
 
-        Raises ValueError (nothing applied) for an unknown set or a number that is not finite."""
+        The set is checked first (``control.identify.gains``): every number finite, and every
+        joint's loop stable with margin on its model: ``models`` (one per joint, None for the
+        machine file's nominal model), and for a joint without one here the identified model
+        given earlier in this session (``models``), else the nominal one. Refused: ValueError
+        naming each joint and why, nothing applied. ``override="reason"`` applies a set the
+        stability check refuses (never one with a number that is not finite): the reason and
+        the refusal go into the metadata of every run made with the set
+        (``coefficients.<which>.check``) and out as a notice event. Returns the check."""
+        from control.identify import gains  # scipy: loaded on first use, never by the controller
+
         command = SetCoefficients(which)
-        check_coefficients(coefficients, self.machine.n_joints)
+        if override is not None and (not isinstance(override, str) or not override.strip()):
+            raise ValueError(f"override needs the reason as a non-empty string, got {override!r}")
+        known = self._known_models(models)
+        check = (gains.assess if override is not None else gains.check)(
+            coefficients, self.machine, known, self.dt)
         encoded = self.layout.coefficients.encode(coefficients)
         self._coefficient_writers[which].write(*encoded)
         self.coefficients[which] = coefficients
+        self.coefficient_checks[which] = check.record(override)
+        self._models = known
         self._send(command)
+        if not check.ok:
+            self._dispatch(Event(Notice(
+                f"gain check overridden for the {which} set {coefficients.name!r} ({override}): "
+                f"{check.summary()}; recorded with every run made with it")))
+        return check
+
+    @property
+    def models(self) -> tuple[DeadbandModel | None, ...]:
+        """The identified model of each joint given to ``set_coefficients`` in this session
+        (None: the machine file's nominal model), which later gain checks use."""
+        return self._models
+
+    def _known_models(self, models: Sequence[DeadbandModel | None] | None
+                      ) -> tuple[DeadbandModel | None, ...]:
+        if models is None:
+            return self._models
+        if len(models) != self.machine.n_joints:
+            raise ValueError(f"models: need one model (or None) per joint, "
+                             f"{self.machine.n_joints}, got {len(models)}")
+        return tuple(m if m is not None else known
+                     for m, known in zip(models, self._models, strict=True))
 
     def move(self, desired: np.ndarray, kind: str = "path", meta: dict | None = None) -> MoveHandle:
-        """follow_track: track ``desired (N, J)`` (mm, deg) each tick, then hold at its end; a
-        path that starts away from the joints gets an approach ramp first (``run``)."""
-        path = np.asarray(desired, dtype=np.float64)
-        self._check_path(path)
-        return self.run(MovePlan.of_path(path, kind, meta))
+        """follow_track: track ``desired (N, J)`` (mm, deg) each tick, then hold at its end.
+
+        ``kind`` says what the path may do (``control.motion.acceptance``): a smooth kind
+        (the default ``path``, ramp, sine, …) keeps every joint's max_speed and max_accel; a
+        step kind (``step``, ``multi_step``) may jump. A path that starts away from the joints
+        gets an approach ramp first (``run``). Raises ValueError, nothing sent, if the rules
+        refuse it."""
+        return self.run(MovePlan.of_path(np.asarray(desired, dtype=np.float64), kind, meta))
 
     def run(self, plan: MovePlan) -> MoveHandle:
         """Run a planned move (``control.motion.plan``): its path, with an approach from where
-        the joints are now when it starts elsewhere, or its duty profile."""
-        if plan.path is None and plan.profile is None:
-            raise ValueError(f"plan {plan.title!r} has neither a path nor a duty profile")
-        if plan.path is not None:
-            self._check_path(np.asarray(plan.path, dtype=np.float64))
-            plan = plan.approached(np.array(self.status().position), self.machine, self.dt)
-        return self._start(plan)
+        the joints are now when it starts elsewhere, or its duty profile. The acceptance rules
+        (``control.motion.acceptance.accept``) decide; ValueError, nothing sent, if they
+        refuse."""
+        here = np.array(self.status().position) if plan.path is not None else None
+        return self._start(accept(plan, here, self.machine, self.dt))
 
     def actuate(self, profile: np.ndarray, kind: str = "tracking_actuate",
                 meta: dict | None = None) -> MoveHandle:
-        """tracking_actuate: play ``profile (N, J)`` duty in % open loop and record the response."""
-        duty = np.asarray(profile, dtype=np.float64)
-        if duty.ndim != 2 or duty.shape[1] != self.machine.n_joints or len(duty) == 0:
-            raise ValueError(f"a duty profile is (N, {self.machine.n_joints}), got {duty.shape}")
-        bad = np.argwhere(~np.isfinite(duty) | (np.abs(duty) > 100))
-        if len(bad):
-            k, j = bad[0]
-            raise ValueError(f"{self.machine.joints[j].name} duty {duty[k, j]} at sample {k} is "
-                             "not a number in -100…100 %")
-        moving = tuple(int(j) for j in np.flatnonzero(np.any(duty != 0, axis=0)))
-        return self._start(MovePlan(kind, kind, profile=duty, meta=dict(meta or {}),
-                                    moving=moving))
+        """tracking_actuate: play ``profile (N, J)`` duty in % open loop and record the response.
 
-    def _check_path(self, path: np.ndarray) -> None:
-        n = self.machine.n_joints
-        if path.ndim != 2 or path.shape[1] != n or len(path) == 0:
-            raise ValueError(f"a path is (N, {n}) joint positions, got shape {path.shape}")
-        lower, upper = np.array(self.machine.lower), np.array(self.machine.upper)
-        bad = np.argwhere(~np.isfinite(path) | (path < lower) | (path > upper))
-        if len(bad):
-            k, j = bad[0]
-            joint = self.machine.joints[j]
-            try:
-                joint.check_target(float(path[k, j]), self.machine.name)
-            except ValueError as exc:
-                raise ValueError(f"{exc} at sample {k} (t = {k * self.dt:.3f} s)") from None
+        Raises ValueError (nothing sent) unless every duty is finite and in -100…100 %."""
+        duty = np.asarray(profile, dtype=np.float64)
+        moving = (tuple(int(j) for j in np.flatnonzero(np.any(duty != 0, axis=0)))
+                  if duty.ndim == 2 else ())
+        return self.run(MovePlan(kind, kind, profile=duty, meta=dict(meta or {}), moving=moving))
 
     def _start(self, plan: MovePlan) -> MoveHandle:
+        """Send an accepted plan: its path or profile into a new move segment, then StartMove."""
         kind, path, profile = plan.kind, plan.path, plan.profile
-        if kind not in MOVE_KINDS:
-            raise ValueError(f"unknown move kind {kind!r} (kinds: {', '.join(sorted(MOVE_KINDS))})")
         samples = len(path if path is not None else profile)
         layout = MoveLayout(samples, self.machine.n_joints)
         move_id = next(self._ids)
@@ -514,7 +542,8 @@ class ControlClient:
         full_meta = {
             "backend": self.backend,
             "start_time": start_stamp(),
-            "coefficients": {k: coefficients_record(c) for k, c in self.coefficients.items()},
+            "coefficients": {k: {**coefficients_record(c), "check": self.coefficient_checks[k]}
+                             for k, c in self.coefficients.items()},
             **plan.meta,
         }
         handle = MoveHandle(move_id, kind, samples, full_meta, plan, segment, layout)

@@ -19,11 +19,15 @@ from typing import ClassVar
 from hw.machine import Coefficients, Machine
 
 COEFFICIENT_SETS = ("hold", "track")
-MOVE_KINDS = frozenset({
-    "step", "multi_step", "ramp", "sine", "path", "end_point", "cartesian", "via_points",
-    "go_to", "set_pulse", "tracking_actuate",
-})
-STEP_KINDS = frozenset({"step", "multi_step"})  # may jump from row to row, as the thesis's did
+# What a move of each kind may ask of the joints (control/motion/acceptance.py applies it,
+# docs/motion.md): a smooth kind keeps every joint's max_speed and max_accel; a step kind may
+# jump, as the thesis's step inputs did (function.c SingleStep, MultiStep), but every row is
+# finite and inside the limits; a duty kind plays open-loop duty, finite and in -100…100 %.
+SMOOTH_KINDS = frozenset({"path", "ramp", "sine", "cartesian", "via_points", "end_point",
+                          "go_to"})
+STEP_KINDS = frozenset({"step", "multi_step"})
+DUTY_KINDS = frozenset({"tracking_actuate", "set_pulse"})
+MOVE_KINDS = SMOOTH_KINDS | STEP_KINDS | DUTY_KINDS
 INJECTABLE = ("press_estop", "jam_valve", "freeze_encoder", "stick_bit")  # simulator faults
 
 
@@ -185,6 +189,9 @@ class StartMove(Command):
         if self.kind not in MOVE_KINDS:
             raise CommandError(f"unknown move kind {self.kind!r} (kinds: "
                                f"{', '.join(sorted(MOVE_KINDS))})")
+        if self.tracking != (self.kind in DUTY_KINDS):
+            what = "a duty profile" if self.kind in DUTY_KINDS else "a desired path"
+            raise CommandError(f"move {self.move_id}: a {self.kind} move plays {what}")
         if not isinstance(self.segment, str) or not self.segment:
             raise CommandError(f"move {self.move_id}: no segment name")
         if not isinstance(self.meta, dict):

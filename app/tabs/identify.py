@@ -380,7 +380,8 @@ class IdentifyTab(TabPage):
         proposed = outcome.track if which == "track" else outcome.hold
         if self.query_one("#identify-ff", Switch).value:
             proposed = with_kv(proposed, client.coefficients[which], outcome.feed_forward)
-        if self.command(f"apply to {which}", "set_coefficients", which, proposed):
+        if self.command(f"apply to {which}", "set_coefficients", which, proposed,
+                        outcome.models):  # the gain check judges them on the identified models
             self.notify(f"proposed gains applied to the {which} set")
             self._state(Text(f"applied to the {which} set: {proposed.note}", "green"))
 

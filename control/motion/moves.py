@@ -5,7 +5,16 @@ Every path is ``(N, J)`` joint positions (mm, deg) at the sample time ``dt``
 inclusive. Row 0 is ``start``, the pose the move begins from (the thesis first
 drives there with move(), errata #19), so a summary knows the step it was asked
 for. With ``machine`` given, every target is checked against the joint limits
-(the error names the joint), and ramps and sines against ``max_speed``.
+(the error names the joint), and ramps and sines against ``max_speed`` and
+``max_accel``: they are smooth kinds, and the paths they make pass the rules of
+``control.motion.acceptance`` (steps may jump).
+
+Where they depart from the thesis's function.c, to be smooth: a **ramp**'s
+change of speed at each end is a parabola at the joint's ``max_accel`` (a
+linear segment with parabolic blends), still leaving ``start`` at t = 0 and
+reaching ``end`` at ``ramp_time``; a **sine** stops at the last half period
+that fits in ``duration`` (at rest, on ``start`` or ``end``) and holds there
+for the rest, where the thesis's stopped wherever its array ended.
 
 Settle tail: a step's ``duration`` is the whole run, including the time to
 settle. Left out, it is the slowest joint's travel time at ``max_speed`` plus
@@ -105,8 +114,16 @@ def rig_sequence(start: Sequence[float] | float,
 
 def ramp(start: Sequence[float], end: Sequence[float], ramp_time: float,
          total_duration: float | None = None, *, dt: float | None = None,
-         machine: Machine | None = None) -> np.ndarray:
-    """Linear from ``start`` to ``end`` in ``ramp_time`` s, then hold (function.c RampInput)."""
+         machine: Machine | None = None, fraction: float = 1.0) -> np.ndarray:
+    """From ``start`` to ``end`` in ``ramp_time`` s at constant speed, then hold (function.c
+    RampInput).
+
+    With ``machine``, each joint's change of speed at either end is a parabola at
+    ``fraction`` (default all) of its ``max_accel`` (a linear segment with parabolic
+    blends), so the ramp is a smooth move; a ramp that needs more than that share of
+    ``max_speed`` or ``max_accel`` is refused with the ``ramp_time`` it needs. Without a
+    machine no limit is known and the corners are the thesis's.
+    """
     q0 = _start(start, machine)
     q1 = _targets(_vector(end, "end", machine, len(q0)), machine, "end")
     _positive(ramp_time, "ramp_time")
@@ -114,24 +131,69 @@ def ramp(start: Sequence[float], end: Sequence[float], ramp_time: float,
     _positive(total, "total_duration")
     if total < ramp_time:
         raise ValueError(f"total_duration {total:g} s is shorter than ramp_time {ramp_time:g} s")
-    _check_speed(np.abs(q1 - q0) / ramp_time, machine, "ramp_time", ramp_time)
     step_dt = _dt(dt, machine)
     t = times(_samples(total, step_dt, "total_duration"), step_dt)
-    fraction = np.minimum(t / ramp_time, 1.0)[:, None]
-    return q0 + (q1 - q0) * fraction
+    if machine is None:
+        fraction = np.minimum(t / ramp_time, 1.0)[:, None]
+        return q0 + (q1 - q0) * fraction
+    if not 0.0 < fraction <= 1.0:
+        raise ValueError(f"fraction must be in (0, 1], got {fraction}")
+    _check_ramp(q1 - q0, ramp_time, machine, fraction)
+    path = np.repeat(q0[None, :], len(t), axis=0)
+    for j, joint in enumerate(machine.joints):
+        path[:, j] += blended_ramp(t, float(q1[j] - q0[j]), ramp_time,
+                                   fraction * joint.max_accel)
+    return path
+
+
+def blended_ramp(t: np.ndarray, change: float, ramp_time: float, accel: float) -> np.ndarray:
+    """Travel ``(N,)`` at times ``t`` of a linear segment with parabolic blends: ``change``
+    in ``ramp_time`` s, accelerating and braking at ``accel`` (needs ``accel·T² ≥ 4|change|``).
+    """
+    distance = abs(change)
+    if distance == 0.0:
+        return np.zeros_like(t)
+    # the root of accel·b² − accel·T·b + distance = 0, in the form that keeps its digits
+    root = math.sqrt(max(0.0, (accel * ramp_time) ** 2 - 4 * accel * distance))
+    blend = 2 * distance / (accel * ramp_time + root)
+    cruise = accel * blend
+    s = np.clip(t, 0.0, ramp_time)
+    travel = np.where(
+        s < blend, 0.5 * accel * s**2,
+        np.where(s <= ramp_time - blend, 0.5 * accel * blend**2 + cruise * (s - blend),
+                 distance - 0.5 * accel * (ramp_time - s) ** 2))
+    return math.copysign(1.0, change) * travel
+
+
+def min_ramp_time(start: Sequence[float], end: Sequence[float], machine: Machine,
+                  fraction: float = 1.0) -> float:
+    """The shortest ``ramp_time`` (s) from ``start`` to ``end`` within ``fraction`` of every
+    joint's ``max_speed`` and ``max_accel`` (trapezoidal speed, or triangular if short)."""
+    change = np.abs(np.asarray(end, dtype=float) - np.asarray(start, dtype=float))
+    return max((_ramp_time_needed(float(d), fraction * j.max_speed, fraction * j.max_accel)
+                for d, j in zip(change, machine.joints, strict=True)), default=0.0)
 
 
 def sine(start: Sequence[float], end: Sequence[float], period: float, duration: float, *,
          dt: float | None = None, machine: Machine | None = None) -> np.ndarray:
     """``start + (end − start)/2·(1 − cos 2πt/T)``: at ``end`` at T/2, back at T (function.c
-    Sinewave)."""
+    Sinewave), for the whole half periods that fit in ``duration``; then it holds where that
+    leaves it (at rest on ``start`` or ``end``) until ``duration``."""
     q0 = _start(start, machine)
     q1 = _targets(_vector(end, "end", machine, len(q0)), machine, "end")
     _positive(period, "period")
-    _check_speed(np.pi * np.abs(q1 - q0) / period, machine, "period", period)  # peak speed
+    swing = np.abs(q1 - q0)
+    _check_speed(np.pi * swing / period, machine, "period", period)  # peak speed
+    _check_accel(2 * np.pi**2 * swing / period**2, machine, "period", period)  # peak accel
     step_dt = _dt(dt, machine)
     t = times(_samples(duration, step_dt), step_dt)
-    return q0 + (q1 - q0) / 2.0 * (1.0 - np.cos(2.0 * np.pi * t / period))[:, None]
+    halves = math.floor(duration / (period / 2) + 1e-9)
+    if halves == 0:
+        raise ValueError(f"duration {duration:g} s is shorter than half the period "
+                         f"({period / 2:g} s): the sine would stop mid-swing; make duration at "
+                         f"least {period / 2:g} s")
+    phase = np.minimum(t, halves * period / 2)
+    return q0 + (q1 - q0) / 2.0 * (1.0 - np.cos(2.0 * np.pi * phase / period))[:, None]
 
 
 def hold_path(q: Sequence[float], duration: float, *, dt: float | None = None,
@@ -338,3 +400,40 @@ def _check_speed(speed: np.ndarray, machine: Machine | None, knob: str, value: f
                 f"{joint.name} would move at {v:g} {joint.unit}/s, above its max_speed "
                 f"{joint.max_speed:g} {joint.unit}/s (machine {machine.name}): make {knob} at "
                 f"least {need:.3g} s")
+
+
+def _check_accel(accel: np.ndarray, machine: Machine | None, knob: str, value: float) -> None:
+    """Refuse a sine whose peak acceleration (∝ 1/T²) is above a joint's max_accel."""
+    if machine is None:
+        return
+    for joint, a in zip(machine.joints, accel, strict=True):
+        if a > joint.max_accel:
+            need = value * math.sqrt(a / joint.max_accel)
+            raise ValueError(
+                f"{joint.name} would accelerate at {a:.4g} {joint.unit}/s², above its "
+                f"max_accel {joint.max_accel:g} {joint.unit}/s² (machine {machine.name}): make "
+                f"{knob} at least {need:.3g} s")
+
+
+def _check_ramp(change: np.ndarray, ramp_time: float, machine: Machine,
+                fraction: float) -> None:
+    """Refuse a blended ramp beyond ``fraction`` of a joint's max_speed or max_accel, with
+    the time it needs."""
+    share = "" if fraction == 1.0 else f"{fraction:.0%} of "
+    for joint, d in zip(machine.joints, np.abs(change), strict=True):
+        speed, accel = fraction * joint.max_speed, fraction * joint.max_accel
+        need = _ramp_time_needed(float(d), speed, accel)
+        if ramp_time < need * (1 - 1e-9):
+            u = joint.unit
+            raise ValueError(
+                f"{joint.name} cannot ramp {d:g} {u} in {ramp_time:g} s (that is {d / ramp_time:g} "
+                f"{u}/s on average) within {share}its max_speed and max_accel ({speed:g} {u}/s, "
+                f"{accel:g} {u}/s², machine {machine.name}): make ramp_time at least "
+                f"{need:.3g} s")
+
+
+def _ramp_time_needed(distance: float, speed: float, accel: float) -> float:
+    """Shortest time for ``distance`` from rest to rest within ``speed`` and ``accel``."""
+    if distance * accel <= speed**2:
+        return 2.0 * math.sqrt(distance / accel)  # triangular: never reaches ``speed``
+    return distance / speed + speed / accel

@@ -10,18 +10,33 @@
   columns are used and its actual and duty columns ignored.
 
 Times are seconds, positions mm or degrees. Every malformed line is reported
-with its line number, and the points are checked against the joint limits and
-speeds of the machine. ``resample`` turns the points into a path at the sample
-time, as ``ControlClient.move`` expects.
+with its line number. A file is a ``path`` move, a smooth kind, so the points
+are held to the rules of ``control.motion.acceptance`` (``docs/motion.md``):
+every point inside the joint limits, no joint faster than its ``max_speed``
+from one point to the next.
+
+``resample`` turns the points into a path at the sample time, as
+``ControlClient.move`` expects: the points joined by straight lines, and each
+change of speed at a point (leaving rest at the first, coming to rest at the
+last) blended over a parabola at the joint's ``max_accel``, so the path keeps
+``max_accel`` too. A blend takes ``|Δv|/max_accel`` seconds centred on its
+point and passes within ``Δv²/(8·max_accel)`` of it (0.35 mm for the rig's
+Ram turning from 100 to −50 mm/s); the path starts ``lead_s(dt)`` before the
+file's time 0 (half the first blend, on whole samples) and ends at rest half
+the last blend after its last point. Points closer together than their two
+blends need are refused naming both lines. The thesis's files had one point per
+sample (function.c FollowPath), where the blends are shorter than a sample.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from control.motion.acceptance import MoveRefused, check_rows, check_smooth, check_speeds
 from control.motion.file_fields import csv_lines, field_number, read_text_file
 from hw.machine import Machine
 
@@ -36,16 +51,30 @@ class PathFileError(ValueError):
 
 @dataclass(frozen=True)
 class PathPoints:
-    """Points of a path file: ``t (M,)`` s from 0, ``q (M, J)`` mm/deg, ``lines (M,)``."""
+    """Points of a path file: ``t (M,)`` s from 0, ``q (M, J)`` mm/deg, ``lines (M,)``, and
+    ``max_accel (J,)`` the changes of speed are blended at (none: straight corners)."""
 
     source: str
     t: np.ndarray
     q: np.ndarray
     lines: tuple[int, ...]
+    max_accel: tuple[float, ...] = ()
 
     @property
     def duration(self) -> float:
         return float(self.t[-1]) if len(self.t) else 0.0
+
+    def blends(self) -> np.ndarray:
+        """``(M, J)`` s: how long each point's change of speed takes at ``max_accel``, from
+        rest at the first point and to rest at the last (0 without ``max_accel``)."""
+        if not self.max_accel or len(self.t) < 2:
+            return np.zeros_like(self.q)
+        return np.abs(speed_changes(self.t, self.q)) / np.array(self.max_accel)
+
+    def lead_s(self, dt: float) -> float:
+        """How long before the file's time 0 the resampled path starts: half the first
+        blend, on whole samples of ``dt``."""
+        return _whole(float(self.blends()[0].max(initial=0.0)) / 2, dt)
 
 
 def read_path(path: str | Path, machine: Machine, hold: tuple[float, ...]) -> PathPoints:
@@ -104,11 +133,49 @@ def parse_csv(text: str, machine: Machine, hold: tuple[float, ...],
 
 
 def resample(points: PathPoints, dt: float) -> np.ndarray:
-    """The path at sample time ``dt`` from t = 0 to the last point, ``(N, J)``."""
-    n_samples = max(1, round(points.duration / dt) + 1)
-    t = np.arange(n_samples) * dt
-    return np.stack([np.interp(t, points.t, points.q[:, j]) for j in range(points.q.shape[1])],
-                    axis=1)
+    """The path at sample time ``dt``, ``(N, J)``: straight lines between the points, each
+    change of speed blended at ``max_accel`` (module docstring), from rest ``lead_s`` before
+    the file's time 0 until rest after its last point."""
+    blends = points.blends()
+    lead = points.lead_s(dt)
+    tail = _whole(float(blends[-1].max(initial=0.0)) / 2, dt)
+    n_samples = max(1, math.ceil((points.duration + lead + tail) / dt - 1e-9) + 1)
+    t = np.arange(n_samples) * dt - lead  # the file's time of each sample
+    q = np.stack([np.interp(t, points.t, points.q[:, j]) for j in range(points.q.shape[1])],
+                 axis=1)
+    if len(points.t) < 2:
+        return q
+    change = speed_changes(points.t, points.q)
+    last = len(points.t) - 1
+    left = np.clip(np.searchsorted(points.t, t, side="right") - 1, 0, last)
+    right = left + 1
+    for k, here in ((left, True), (np.minimum(right, last), right <= last)):
+        # a sample is in at most one blend: of the point before it or of the one after
+        s = np.where(here, t - points.t[k], -np.inf)[:, None] + blends[k] / 2
+        q += _blend(s, change[k], blends[k])
+    return q
+
+
+def speed_changes(t: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """``(M, J)`` units/s: the change of speed at each point of straight lines through the
+    points, from rest before the first and to rest after the last."""
+    speed = np.diff(q, axis=0) / np.diff(t)[:, None]
+    rest = np.zeros((1, q.shape[1]))
+    return np.diff(np.concatenate([rest, speed, rest]), axis=0)
+
+
+def _blend(s: np.ndarray, change: np.ndarray, blend: np.ndarray) -> np.ndarray:
+    """What a parabolic blend adds to the straight lines at ``s`` s into the blend (0 outside):
+    ``Δv·s²/(2·tb) − Δv·max(0, s − tb/2)``, for changes ``Δv`` taking ``tb`` s."""
+    active = (s >= 0.0) & (s <= blend) & (blend > 0.0)
+    tb = np.where(active, blend, 1.0)
+    s = np.where(active, s, 0.0)
+    add = change * s**2 / (2 * tb) - change * np.maximum(0.0, s - tb / 2)
+    return np.where(active, add, 0.0)
+
+
+def _whole(seconds: float, dt: float) -> float:
+    return math.ceil(seconds / dt - 1e-9) * dt
 
 
 def _columns(header: list[str], machine: Machine, source: str, line: int
@@ -169,19 +236,61 @@ def _points(source: str, times: list[float], rows: list[list[float]], lines: lis
     if t[-1] > MAX_MOVE_S:
         raise PathFileError(f"{source}: line {lines[-1]}: the path lasts {t[-1]:g} s; a move "
                             f"lasts at most {MAX_MOVE_S:g} s: split the file into shorter ones")
-    for k, row in enumerate(q):
-        try:
-            machine.check_targets(tuple(row))
-        except ValueError as exc:
-            raise PathFileError(f"{source}: line {lines[k]}: {exc}") from None
-    if len(t) > 1:
-        speed = np.abs(np.diff(q, axis=0)) / np.diff(t)[:, None]
-        for j, joint in enumerate(machine.joints):
-            fast = np.flatnonzero(speed[:, j] > joint.max_speed)
-            if len(fast):
-                k = int(fast[0]) + 1
-                raise PathFileError(
-                    f"{source}: line {lines[k]}: {joint.name} would move at "
-                    f"{speed[k - 1, j]:.4g} {joint.unit}/s, above its max_speed "
-                    f"{joint.max_speed:g} {joint.unit}/s: space the points further apart")
-    return PathPoints(source, t, q, tuple(lines))
+    def at(k: int) -> str:
+        return f"t = {t[k]:g} s"
+
+    try:
+        check_rows(q, machine, at)
+        check_speeds(t, q, machine, at, "space the points further apart")
+    except MoveRefused as exc:
+        raise PathFileError(f"{source}: line {lines[exc.index or 0]}: {exc}") from None
+    points = PathPoints(source, t, q, tuple(lines),
+                        tuple(j.max_accel for j in machine.joints))
+    _check_blends(points, machine)
+    _check_resampled(points, machine)
+    return points
+
+
+def _check_blends(points: PathPoints, machine: Machine) -> None:
+    """Refuse two points closer together than their changes of speed take at max_accel."""
+    blends = points.blends()
+    if len(points.t) < 2:
+        return
+    room = np.diff(points.t)[:, None]
+    need = (blends[:-1] + blends[1:]) / 2
+    over = np.argwhere(need > room * (1 + 1e-9))
+    if not len(over):
+        return
+    k, j = (int(i) for i in over[0])
+    joint = machine.joints[j]
+    change = speed_changes(points.t, points.q)[:, j]
+    u = joint.unit
+    raise PathFileError(
+        f"{points.source}: lines {points.lines[k]} and {points.lines[k + 1]}: {joint.name} "
+        f"changes speed by {change[k]:+.4g} {u}/s at the first (t = {points.t[k]:g} s) and by "
+        f"{change[k + 1]:+.4g} {u}/s at the second (t = {points.t[k + 1]:g} s), "
+        f"{room[k, 0]:.4g} s apart; at its max_accel {joint.max_accel:g} {u}/s² those changes "
+        f"need {need[k, j]:.3g} s (machine {machine.name}): space the points further apart or "
+        "change speed in smaller steps (the path leaves rest at the first point and comes to "
+        "rest at the last)")
+
+
+def _check_resampled(points: PathPoints, machine: Machine) -> None:
+    """The path ``resample`` makes at the machine's sample time, under the smooth rules, its
+    samples named by the file's lines (it keeps them by construction: this is the guard)."""
+    dt = machine.sample_time_s
+    path = resample(points, dt)
+    lead = points.lead_s(dt)
+
+    def line(k: int) -> str:
+        when = k * dt - lead
+        i = int(np.clip(np.searchsorted(points.t, when, side="right") - 1, 0,
+                        len(points.t) - 1))
+        near = (f"line {points.lines[i]}" if i == len(points.t) - 1 or when <= points.t[0]
+                else f"lines {points.lines[i]}–{points.lines[i + 1]}")
+        return f"{near} (t = {when:.3f} s in the file)"
+
+    try:
+        check_smooth(path, machine, dt, line)
+    except MoveRefused as exc:
+        raise PathFileError(f"{points.source}: {exc}") from None

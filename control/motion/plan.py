@@ -2,10 +2,13 @@
 it, and how its result is summarised afterwards.
 
 The thesis's ``move()`` first drove the robot to a move's start position; here a
-path that begins away from where the joints are gets an approach ramp in front
-(``approached``), at half of each joint's ``max_speed``, which the result's
-summary leaves out. ``ControlClient.run`` applies it to every plan, so a script
-and the TUI run, and summarise, the same move.
+path that begins away from where the joints are (beyond a joint's tolerance:
+``acceptance.starts_here``) gets an approach ramp in front (``approached``),
+at half of each joint's ``max_speed`` and ``max_accel``, which the result's
+summary leaves out. The acceptance rules (``control.motion.acceptance.accept``,
+which ``ControlClient.run`` applies to every plan) decide when one is needed
+and hold it to the smooth rules, so a script and the TUI run, and summarise,
+the same move.
 """
 
 from __future__ import annotations
@@ -16,10 +19,11 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from control.motion import moves
+from control.motion.acceptance import starts_here
 from control.recorder import Run
 from hw.machine import Machine
 
-APPROACH_SPEED = 0.5  # approach ramps run at this fraction of each joint's max_speed
+APPROACH_SPEED = 0.5  # approach ramps keep this fraction of each joint's max_speed, max_accel
 APPROACH_MIN_S = 0.2
 APPROACH_SETTLE_S = 0.5
 
@@ -63,20 +67,24 @@ class MovePlan:
 
 def approach_ramp(current: np.ndarray, start: np.ndarray, machine: Machine,
                   dt: float) -> np.ndarray:
-    """``(M, J)`` from ``current`` to ``start`` at ``APPROACH_SPEED`` and a short settle, or
-    ``(0, J)`` when every joint is already within its tolerance of the start."""
-    gap = np.abs(start - current)
-    if all(g <= j.tolerance for g, j in zip(gap, machine.joints, strict=True)):
+    """``(M, J)`` from ``current`` to ``start`` within ``APPROACH_SPEED`` of every joint's
+    max_speed and max_accel and a short settle, or ``(0, J)`` when every joint is already
+    within its tolerance of the start. A joint resting just past a limit starts on it."""
+    if starts_here(current, start, machine):
         return np.zeros((0, machine.n_joints))
-    speeds = np.array([APPROACH_SPEED * j.max_speed for j in machine.joints])
-    ramp_time = max(APPROACH_MIN_S, float(np.max(gap / speeds)))
-    ramp = moves.ramp(current, start, ramp_time, ramp_time + APPROACH_SETTLE_S, dt=dt)
-    return np.clip(ramp, machine.lower, machine.upper)
+    here = np.clip(current, machine.lower, machine.upper)
+    ramp_time = max(APPROACH_MIN_S, moves.min_ramp_time(here, start, machine, APPROACH_SPEED))
+    return moves.ramp(here, start, ramp_time, ramp_time + APPROACH_SETTLE_S, dt=dt,
+                      machine=machine, fraction=APPROACH_SPEED)
 
 
 def moving_joints(path: np.ndarray) -> tuple[int, ...]:
-    """The joints whose desired position changes along ``path``."""
-    return tuple(int(j) for j in np.flatnonzero(np.ptp(path, axis=0) > 0))
+    """The joints whose desired position changes along ``path`` (none for an array that is
+    not a path: the acceptance rules refuse it with the reason)."""
+    if path.ndim != 2 or len(path) == 0:
+        return ()
+    with np.errstate(invalid="ignore"):  # inf − inf: a path the rules refuse
+        return tuple(int(j) for j in np.flatnonzero(np.ptp(path, axis=0) > 0))
 
 
 def summaries(plan: MovePlan, run: Run, machine: Machine

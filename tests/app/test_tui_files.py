@@ -78,12 +78,22 @@ def test_too_many_taps_for_the_controller_are_refused() -> None:
 
 # -- path files ----------------------------------------------------------------------------
 
-def test_the_thesis_tsv_is_resampled_at_the_sample_time() -> None:
+def test_the_thesis_tsv_is_resampled_with_its_changes_of_speed_blended() -> None:
+    """Straight lines at the sample time; each change of speed a parabola at the Ram's
+    max_accel, 8000 mm/s²: 12.5 ms from rest to 100 mm/s at t = 0 (the path starts 7 ms
+    early), 18.75 ms from 100 to −50 mm/s at t = 1 s (passing 150²/(8·8000) mm inside the
+    point), 6.25 ms to rest at t = 2 s (4 ms after it)."""
     points = parse_tsv("# time\tposition\n0\t100\n1.0\t200\n\n2.0\t150\n", RIG, (0.0,))
     assert points.lines == (2, 3, 5)
-    path = resample(points, RIG.sample_time_s)
-    assert path.shape == (2001, 1)
-    assert path[500, 0] == pytest.approx(150.0) and path[-1, 0] == 150.0
+    dt = RIG.sample_time_s
+    assert points.lead_s(dt) == pytest.approx(0.007)
+    path = resample(points, dt)
+    assert path.shape == (7 + 2000 + 4 + 1, 1)
+    assert path[0, 0] == 100.0 and path[7 + 500, 0] == pytest.approx(150.0)
+    assert path[7 + 1000, 0] == pytest.approx(200.0 - 150.0**2 / (8 * 8000.0))
+    assert path[-1, 0] == 150.0
+    assert np.abs(np.diff(path[:, 0])).max() / dt == pytest.approx(100.0)
+    assert np.abs(np.diff(path[:, 0], 2)).max() / dt**2 <= 8000.0 * (1 + 1e-9)
 
 
 def test_a_csv_names_its_joints_and_the_others_stay() -> None:
@@ -102,7 +112,12 @@ def test_a_saved_run_plays_back_its_desired_columns() -> None:
 @pytest.mark.parametrize(("text", "message"), [
     ("0\t100\n1\tabc\n", "line 2: field 2 'abc' is not a number"),
     ("0\t100\n0\t200\n", "line 2: time 0 s does not increase"),
-    ("0\t100\n0.01\t900\n", "line 2: Ram would move at 8e\\+04 mm/s, above its max_speed"),
+    ("0\t100\n0.01\t900\n", "line 2: Ram moves \\+800 mm in 0.01 s at t = 0.01 s: 8e\\+04 mm/s, "
+     "100 times its max_speed 800 mm/s \\(machine rig\\); that change needs at least 1 s: "
+     "space the points further apart"),
+    ("0\t100\n0.01\t101\n0.02\t100\n", "lines 1 and 2: Ram changes speed by \\+100 mm/s at the "
+     "first \\(t = 0 s\\) and by -200 mm/s at the second \\(t = 0.01 s\\), 0.01 s apart; at its "
+     "max_accel 8000 mm/s² those changes need 0.0188 s \\(machine rig\\): space the points"),
     ("0\t1300\n", "line 1: Ram target 1300mm is outside 0…1200mm"),
     ("0\t100\t5\n", "line 1: 3 field\\(s\\), expected 2"),
     ("0\tnan\n", "line 1: field 2 is nan"),

@@ -111,6 +111,68 @@ def test_tuning_edits_apply_live_and_files_round_trip(tui, tmp_path: Path) -> No
     asyncio.run(scenario())
 
 
+def notifications(app) -> list[str]:
+    """Every message the app is asked to show from now on."""
+    seen: list[str] = []
+    show = app.notify
+
+    def notify(message: str, *args: object, **kwargs: object) -> None:
+        seen.append(str(message))
+        show(message, *args, **kwargs)
+
+    app.notify = notify
+    return seen
+
+
+def test_a_set_the_gain_check_refuses_is_shown_and_applies_nothing(tui) -> None:
+    """In/Out's kp edited to −20 in the track set: the client refuses it (issue 11's gain
+    check) and the tab shows why; the set in use and the table are unchanged."""
+    async def scenario() -> None:
+        app = tui.app()
+        async with app.run_test(size=SIZE) as pilot:
+            await tui.ready(app, pilot)
+            seen = notifications(app)
+            await pilot.press("f5")
+            table = app.query_one("#tuning-joints", DataTable)
+            await tui.until(lambda: app.focused is table, what="the table focused")
+            before = app.client.coefficients["track"]
+            table.move_cursor(row=0, column=1)  # In/Out kp of the track set
+            await pilot.press("enter")
+            app.screen.query_one(Input).value = "-20"
+            await pilot.press("enter")
+            await tui.until(lambda: any("refused" in m for m in seen), what=lambda: str(seen))
+            (shown,) = [m for m in seen if "refused" in m]
+            assert "In/Out: unstable on the nominal model: negative gain" in shown, shown
+            assert app.client.coefficients["track"] == before
+            assert table.get_row_at(0)[1] == "20"
+
+    asyncio.run(scenario())
+
+
+def test_the_rigs_observer_preset_is_refused_with_the_reason(tui) -> None:
+    """Section 3.6.2's observer as printed cannot be stable (errata #12): the preset is
+    offered and refused with the client's message; the thesis's PID preset applies."""
+    async def scenario() -> None:
+        app = tui.app("rig")
+        async with app.run_test(size=SIZE) as pilot:
+            await tui.ready(app, pilot)
+            seen = notifications(app)
+            await pilot.press("f5")
+            await pilot.pause()
+            app.query_one("#tuning-preset").value = "observer"
+            await pilot.click("#tuning-apply-preset")
+            await tui.until(lambda: any("refused" in m for m in seen), what=lambda: str(seen))
+            assert any("Ram: unstable on the nominal model: a closed-loop pole at |z| = 94.98"
+                       in m for m in seen), seen
+            assert app.client.coefficients["track"] == app.machine.track
+            app.query_one("#tuning-preset").value = "hold"
+            await pilot.click("#tuning-apply-preset")
+            await tui.until(lambda: app.client.coefficients["track"] == app.machine.hold,
+                            what="the preset applied")
+
+    asyncio.run(scenario())
+
+
 def test_latency_tab_shows_table_2_1_and_runs_a_fresh_test(tui, monkeypatch) -> None:
     monkeypatch.setattr("app.tabs.latency.TEST_S", 0.5)
 

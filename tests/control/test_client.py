@@ -7,6 +7,7 @@ operator gets it. Every test ends with no servodesk segment left in /dev/shm.
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -14,14 +15,17 @@ import sys
 import textwrap
 import time
 from collections.abc import Iterator
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from control import ControlClient, ControllerError, Flag, Mode, shm
+from control.identify.sysid import DeadbandModel
 from control.layout import ControlLayout
 from control.motion import moves
+from control.motion.acceptance import check_path
 from control.recorder import load_run
 from control.seqlock import SeqlockReader
 from hw.machine import load_machine
@@ -115,6 +119,43 @@ def test_a_path_that_starts_away_gets_an_approach_and_the_tuis_summary(
     assert rows[0][1].step == pytest.approx(5.0)
 
 
+def test_a_jump_is_refused_as_a_path_and_runs_as_a_step(lockstep: ControlClient) -> None:
+    """The acceptance rules by kind (control/motion/acceptance.py): Up/Down jumping 5° in one
+    sample is refused as a smooth path, nothing sent, and accepted as a step."""
+    start = np.array(lockstep.status().position)
+    path = np.tile(start, (1500, 1))
+    path[300:, 2] += 5.0
+    with pytest.raises(ValueError, match=r"^Up/Down moves \+5 deg in 0.001 s at sample 300 "
+                                         r"\(t = 0.300 s\): 5000 deg/s, 200 times its max_speed "
+                                         r"25 deg/s .*send it as a step move \(kind 'step'\)"):
+        lockstep.move(path)
+    assert our_segments(os.getpid()) == [lockstep.segment_name]
+    assert lockstep.status().move_id == 0 and lockstep.status().mode == Mode.HOLD
+    result = lockstep.wait(lockstep.move(path, kind="step"), timeout=60)
+    assert result.complete, result.status
+    assert result.run.samples == len(path) and result.plan.approach == 0
+    assert abs(result.run.actual[-1, 2] - path[-1, 2]) <= UNIMATE.joints[2].tolerance
+
+
+def test_a_smooth_move_that_starts_away_runs_behind_a_smooth_approach(
+        lockstep: ControlClient) -> None:
+    """A sine whose first row is 20° of Rotate away: the client puts the approach in front,
+    and what the controller was sent keeps every joint's max_speed and max_accel."""
+    here = np.array(lockstep.status().position)
+    start = here.copy()
+    start[1] += 20.0
+    end = start.copy()
+    end[2] += 5.0
+    path = moves.sine(start, end, period=2.0, duration=2.0, machine=UNIMATE)
+    result = lockstep.wait(lockstep.move(path, kind="sine"), timeout=60)
+    assert result.complete, result.status
+    sent = result.run.desired
+    assert result.plan.approach > 0 and len(sent) == result.plan.approach + len(path)
+    assert np.abs(sent[0] - here).max() < 1e-9
+    np.testing.assert_allclose(sent[result.plan.approach:], path, atol=1e-9)
+    check_path(sent, "sine", UNIMATE, lockstep.dt)
+
+
 def test_jog_duty_reaches_the_backend(realtime: ControlClient) -> None:
     realtime.jog_joint(2, 40.0)
     polarity = UNIMATE.joints[2].polarity
@@ -178,6 +219,87 @@ def test_coefficients_change_during_a_move(lockstep: ControlClient) -> None:
     assert lockstep.status().moving
     lockstep.hold()
     assert lockstep.wait(move, timeout=10).status == "aborted by operator"
+
+
+def applied(client: ControlClient, which: str) -> object:
+    """The set the controller reads from shared memory."""
+    segment = shm.attach(client.segment_name)
+    reader = SeqlockReader(segment.buf, client.layout.coefficient_offset(which),
+                           client.layout.coefficients.struct)
+    try:
+        return client.layout.coefficients.decode(reader.read(), which)
+    finally:
+        reader.release()
+        shm.release(segment, unlink=False)
+
+
+def small_ramp(client: ControlClient) -> np.ndarray:
+    start = np.array(client.status().position)
+    return moves.ramp(start, start + np.array([0.0, 5.0, 0.0, 0.0, 0.0, 0.0]), 1.0, 1.5,
+                      machine=UNIMATE)
+
+
+@pytest.mark.parametrize("kp", [-20.0, 1e9])
+def test_gains_that_cannot_be_stable_are_refused_and_nothing_is_applied(
+        lockstep: ControlClient, kp: float) -> None:
+    track = UNIMATE.track
+    wild = replace(track, name="wild", kp=((kp,),) * 6)
+    before = applied(lockstep, "track")
+    with pytest.raises(ValueError, match=r"^coefficient set 'wild' refused, nothing applied: "
+                                         r"In/Out: unstable on the nominal model: .*Swivel: "
+                                         r"unstable"):
+        lockstep.set_coefficients("track", wild)
+    assert lockstep.coefficients["track"] == track and applied(lockstep, "track") == before
+    result = lockstep.wait(lockstep.move(small_ramp(lockstep), kind="ramp"), timeout=60)
+    assert result.complete, result.status
+    saved = load_run(result.files.json).coefficients["track"]
+    assert saved["kp"] == [list(k) for k in track.kp] and saved["check"]["passed"] is None
+    assert [e for e in lockstep.poll_events() if e.kind in ("refused", "notice", "fault")] == []
+
+
+def test_an_override_applies_a_refused_set_and_every_run_says_so(lockstep: ControlClient,
+                                                                 tmp_path: Path) -> None:
+    """Bend at kp 105: Ms 10.4 on the nominal model (refused), 2.5 on the Bend identified on
+    the simulator; an expert overrides with that reason, and the run made with the set
+    carries the reason and the refusal in its saved JSON."""
+    bend = replace(UNIMATE.track, name="stiff bend",
+                   kp=tuple((105.0,) if j == 3 else k for j, k in enumerate(UNIMATE.track.kp)))
+    with pytest.raises(ValueError, match="Bend: too little margin on the nominal model"):
+        lockstep.set_coefficients("track", bend)
+    with pytest.raises(ValueError, match="override needs the reason"):
+        lockstep.set_coefficients("track", bend, override=" ")
+    reason = "Bend identified at 35 Hz: Ms 2.5 on that model"
+    check = lockstep.set_coefficients("track", bend, override=reason)
+    assert not check.ok and lockstep.coefficients["track"] is bend
+    assert applied(lockstep, "track").kp[3] == (105.0,)
+    notice = lockstep.wait_event("notice", 2.0)
+    assert reason in notice.message and "Bend: too little margin" in notice.message
+    result = lockstep.wait(lockstep.move(small_ramp(lockstep), kind="ramp"), timeout=60)
+    assert result.complete, result.status
+    saved = json.loads(result.files.json.read_text())["coefficients"]["track"]
+    assert saved["kp"][3] == [105.0] and saved["name"] == "stiff bend"
+    assert saved["check"]["passed"] is False and saved["check"]["overridden"] is True
+    assert saved["check"]["override_reason"] == reason
+    assert saved["check"]["summary"].startswith("Bend: too little margin on the nominal model")
+    lockstep.set_coefficients("track", UNIMATE.track)  # checked again: passes
+    result = lockstep.wait(lockstep.move(small_ramp(lockstep), kind="ramp"), timeout=60)
+    assert load_run(result.files.json).coefficients["track"]["check"]["passed"] is True
+
+
+def test_a_set_is_judged_on_the_identified_models_the_client_was_given(
+        lockstep: ControlClient) -> None:
+    """The same stiff Bend passes on an identified Bend model (Ms 2.5 ≤ 6), and later sets
+    (a Tuning tab edit) are judged on that model too."""
+    identified = DeadbandModel("Bend", "deg", k_pos=1.211, d_pos=27.5, k_neg=1.19, d_neg=24.3,
+                               wn=2 * np.pi * 35.2, zeta=0.49)
+    bend = replace(UNIMATE.track, name="stiff bend",
+                   kp=tuple((105.0,) if j == 3 else k for j, k in enumerate(UNIMATE.track.kp)))
+    check = lockstep.set_coefficients("track", bend, [None, None, None, identified, None, None])
+    assert check.ok and check.joints[3].model == "identified"
+    assert lockstep.models[3] == identified and lockstep.models[0] is None
+    edited = replace(bend, duty_limit=80.0)
+    assert lockstep.set_coefficients("track", edited).joints[3].model == "identified"
+    assert applied(lockstep, "track").duty_limit == 80.0
 
 
 def test_two_clients_in_one_process_have_their_own_segments(tmp_path: Path) -> None:

@@ -369,7 +369,8 @@ def test_a_stall_in_a_move_is_listed_and_said(rig) -> None:
         done = next(p for name, p in events(client) if name == "move_done")
         assert done["status"] == "complete, with a 0.3 s controller stall", done
         ((at, length),) = done["gaps"]
-        assert length == pytest.approx(0.301, abs=0.002) and at == pytest.approx(0.002)  # after its second row
+        assert length == pytest.approx(0.301, abs=0.002)
+        assert at == pytest.approx(0.002)  # after its second row
     finally:
         shm.release(segment, unlink=True)
 

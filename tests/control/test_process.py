@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import re
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from control import ControlClient
+from control.motion import moves
 
 FORBIDDEN = ("control.client", "control.motion", "control.identify", "app", "scipy", "textual")
 
@@ -25,8 +28,8 @@ def test_the_control_process_imports_no_client_planning_or_identification(
     with ControlClient("unimate2000b", lockstep=True, data_dir=tmp_path,
                        heartbeat_timeout_s=3.0) as client:
         start = np.array(client.status().position)
-        path = np.repeat(start[None, :], 200, axis=0)
-        path[:, 2] += np.linspace(0.0, 1.0, 200)
+        path = moves.ramp(start, start + np.array([0.0, 0.0, 1.0, 0.0, 0.0, 0.0]), 0.2, 0.2,
+                          machine=client.machine)
         assert client.wait(client.move(path, kind="ramp"), 60).complete
         client.jog_position(1, 0.5)
         client.jog([0.0] * 6)
@@ -36,3 +39,13 @@ def test_the_control_process_imports_no_client_planning_or_identification(
     assert "control.loop" in modules and "hw.sim.plant" in modules, sorted(modules)[:20]
     leaked = sorted(m for m in modules if any(m == f or m.startswith(f"{f}.") for f in FORBIDDEN))
     assert leaked == [], f"the control process imported {leaked}"
+
+
+def test_the_move_kinds_are_read_without_numpy() -> None:
+    """The controller will check rows against their kind (issue 11): the classification is in
+    control.commands, which imports neither numpy nor scipy."""
+    loaded = subprocess.run(
+        [sys.executable, "-c", "import sys; from control.commands import DUTY_KINDS, "
+         "SMOOTH_KINDS, STEP_KINDS; print(sorted(m for m in ('numpy', 'scipy') "
+         "if m in sys.modules))"], capture_output=True, text=True, check=True)
+    assert loaded.stdout.strip() == "[]"

@@ -35,6 +35,7 @@ from app.coefficient_files import CoefficientFileError, dump_coefficients, parse
 from app.widgets.fields import FieldError, NumberCheck, position_check
 from control import ControlClient
 from control.layout import MAX_TAPS
+from control.motion.acceptance import SAMPLING_TOLERANCE, check_path
 from control.motion.cartesian import PoseFileError, parse_poses
 from control.motion.path_files import (
     PathFileError,
@@ -53,6 +54,7 @@ from kinematics import Unreachable, unimate, xyz_fixed
 UNIMATE = load_machine("unimate2000b")
 MACHINE_TEXT = Path(UNIMATE.path).read_text()
 HOLD = (1500.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+DT = UNIMATE.sample_time_s
 LOWER, UPPER = np.array(UNIMATE.lower), np.array(UNIMATE.upper)
 MAX_SPEED = np.array([j.max_speed for j in UNIMATE.joints])
 
@@ -126,13 +128,15 @@ HEADER_NAMES = st.sampled_from(["t", "time", "t [s]", "In/Out", "inout", "Rotate
 
 
 def check_points(points: PathPoints) -> None:
-    """What a parsed path file promises: times from 0, increasing; finite; in limits; speeds."""
+    """What a parsed path file promises: times from 0, increasing; finite; in limits; speeds
+    (the acceptance rules' tolerance); and a resampled path the smooth rules accept."""
     t, q = points.t, points.q
     assert len(t) >= 1 and t[0] == 0.0 and np.all(np.diff(t) > 0)
     assert np.isfinite(q).all() and np.all(q >= LOWER) and np.all(q <= UPPER)
     if len(t) > 1:
         speed = np.abs(np.diff(q, axis=0)) / np.diff(t)[:, None]
-        assert np.all(speed <= MAX_SPEED * (1 + 1e-9))
+        assert np.all(speed <= MAX_SPEED * (1 + SAMPLING_TOLERANCE))
+    check_path(resample(points, DT), "path", UNIMATE, DT)
 
 
 @fuzz(400)

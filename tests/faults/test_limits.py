@@ -92,16 +92,17 @@ def test_a_following_error_aborts_the_move_and_holds_where_the_joint_is(controll
 
 
 def test_a_joint_that_cannot_hold_gets_its_valves_closed(controller, until) -> None:
-    """Bend stops responding while holding (its hold gains zeroed) and its target is moved
-    40° away: after the following-error window the controller closes every valve and
-    latches, with a fault naming Bend."""
+    """Bend stops responding while holding (its hold gains zeroed: the gain check refuses
+    such a set, so the test overrides it) and its target is moved 40° away: after the
+    following-error window the controller closes every valve and latches, with a fault
+    naming Bend."""
     client = controller(lockstep=True)
     hold = UNIMATE.hold
     dead_bend = dataclasses.replace(
         hold, name="dead_bend",
         kp=tuple((0.0,) if j == BEND else k for j, k in enumerate(hold.kp)),
         ki=tuple(0.0 if j == BEND else k for j, k in enumerate(hold.ki)))
-    client.set_coefficients("hold", dead_bend)
+    client.set_coefficients("hold", dead_bend, override="test: Bend made unable to hold")
     client.jog_position(BEND, 40.0)
     fault = client.wait_event("fault", 30.0, lambda e: e.payload["kind"] == "following_error")
     assert fault.payload["joint"] == BEND

@@ -55,17 +55,40 @@ def test_rig_sequence_dwells_at_each_position() -> None:
     assert np.all(q[1501:] == 200.0)
 
 
-def test_ramp_is_linear_then_holds() -> None:
+def test_ramp_is_linear_between_blends_at_max_accel_then_holds() -> None:
     start, end = np.array([200.0]), np.array([600.0])
     path = moves.ramp(start, end, ramp_time=2.0, total_duration=3.0, machine=RIG)
     q = path[:, 0]
     assert path.shape == (3001, 1)
-    slope = np.diff(q[:2001]) / DT  # (end − start)/ramp_time = 200 mm/s
-    assert slope == pytest.approx(np.full(2000, 200.0))
-    assert q[1000] == pytest.approx(400.0)  # halfway at half the ramp time
+    accel = RIG.joints[0].max_accel  # 8000 mm/s²: blends of 25 ms
+    blend = 2.0 / 2 - np.sqrt(2.0**2 / 4 - 400.0 / accel)
+    speed = np.diff(q) / DT
+    cruise = speed[100:1900]
+    assert cruise == pytest.approx(np.full(1800, 400.0 / (2.0 - blend)))  # 202.6 mm/s
+    assert np.abs(np.diff(q, 2)).max() / DT**2 <= accel * (1 + 1e-9)
+    assert q[0] == 200.0 and q[1000] == pytest.approx(400.0)  # halfway at half the ramp time
     assert q[2000] == pytest.approx(600.0)
     assert np.all(q[2000:] == 600.0)
     assert len(moves.ramp(start, end, 2.0, machine=RIG)) == round((2.0 + SETTLE_TAIL_S) / DT) + 1
+
+
+def test_a_ramp_without_a_machine_keeps_the_thesis_corners() -> None:
+    path = moves.ramp([200.0], [600.0], ramp_time=2.0, total_duration=3.0, dt=DT)
+    assert np.diff(path[:2001, 0]) / DT == pytest.approx(np.full(2000, 200.0))
+
+
+def test_the_shortest_ramp_time_keeps_speed_and_acceleration() -> None:
+    # In/Out, 400 mm/s and 2000 mm/s²: 600 mm take 600/400 + 400/2000 s; 40 mm never reach
+    # full speed (triangular): 2·√(40/2000) s
+    here = np.array([1200.0, 0, 0, 0, 0, 0])
+    assert moves.min_ramp_time(here, here + np.array([600.0, 0, 0, 0, 0, 0]), UNIMATE) == \
+        pytest.approx(1.7)
+    assert moves.min_ramp_time(here, here + np.array([40.0, 0, 0, 0, 0, 0]), UNIMATE) == \
+        pytest.approx(2 * np.sqrt(0.02))
+    assert moves.min_ramp_time(here, here + np.array([600.0, 0, 0, 0, 0, 0]), UNIMATE, 0.5) == \
+        pytest.approx(600 / 200 + 200 / 1000)
+    path = moves.ramp(here, here + np.array([600.0, 0, 0, 0, 0, 0]), 1.7, machine=UNIMATE)
+    assert np.abs(np.diff(path[:, 0])).max() / DT <= 400.0 * (1 + 1e-9)
 
 
 def test_sine_reaches_end_at_half_the_period() -> None:
@@ -77,6 +100,13 @@ def test_sine_reaches_end_at_half_the_period() -> None:
     assert q[500] == pytest.approx(400.0)  # T/4: halfway
     assert q[2000] == pytest.approx(200.0) and q[3000] == pytest.approx(600.0)
     assert q.min() >= 200.0 - 1e-9 and q.max() <= 600.0 + 1e-9
+
+
+def test_a_sine_stops_at_rest_on_its_last_whole_half_period() -> None:
+    path = moves.sine([200.0], [600.0], period=2.0, duration=3.5, machine=RIG)
+    q = path[:, 0]
+    assert path.shape == (3501, 1)
+    assert q[3000] == pytest.approx(600.0) and np.all(q[3000:] == q[3000])  # 3 half periods
 
 
 def test_hold_path_is_constant() -> None:
@@ -118,7 +148,15 @@ def test_times_match_the_samples() -> None:
     (lambda: moves.ramp([200.0], [600.0], 2.0, 1.0, machine=RIG),
      "total_duration 1 s is shorter than ramp_time 2 s"),
     (lambda: moves.ramp([200.0], [1000.0], 0.5, machine=RIG),
-     "Ram would move at 1600 mm/s, above its max_speed 800 mm/s .*make ramp_time at least 1 s"),
+     "Ram cannot ramp 800 mm in 0.5 s .* within its max_speed and max_accel "
+     r"\(800 mm/s, 8000 mm/s², machine rig\): make ramp_time at least 1.1 s"),
+    (lambda: moves.ramp([200.0], [210.0], 0.05, machine=RIG),
+     "Ram cannot ramp 10 mm in 0.05 s .*make ramp_time at least 0.0707 s"),
+    (lambda: moves.sine([200.0], [600.0], 2.0, 0.5, machine=RIG),
+     "duration 0.5 s is shorter than half the period .*make duration at least 1 s"),
+    (lambda: moves.sine([200.0], [210.0], 0.1, 1.0, machine=RIG),
+     "Ram would accelerate at 1.974e\\+04 mm/s², above its max_accel 8000 mm/s² .*make period "
+     "at least 0.157 s"),
     (lambda: moves.sine([200.0], [600.0], -2.0, 4.0, machine=RIG),
      "period must be a positive number of seconds, got -2"),
     (lambda: moves.sine([200.0], [600.0], 1.0, 4.0, machine=RIG),

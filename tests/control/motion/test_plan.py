@@ -32,13 +32,15 @@ def test_a_path_that_starts_here_gets_no_approach() -> None:
 
 def test_a_path_that_starts_elsewhere_gets_a_ramp_to_its_start_at_half_speed() -> None:
     start = HOME.copy()
-    start[1] = 20.0  # Rotate 20° away: 20 / (0.5 · 60°/s) = 0.67 s, then 0.5 s settling
+    start[1] = 20.0  # Rotate 20° away at half of 60°/s and 300°/s²: 20/30 + 30/150 s, then 0.5
     path = moves.step(start, 2, 10.0, 2.0, dt=DT, machine=UNIMATE)
     plan = MovePlan.of_path(path, "step").approached(HOME, UNIMATE, DT)
     assert plan.approach == len(approach_ramp(HOME, start, UNIMATE, DT))
-    assert plan.approach * DT == pytest.approx(20.0 / 30.0 + 0.5, abs=2 * DT)
+    assert plan.approach * DT == pytest.approx(20.0 / 30.0 + 30.0 / 150.0 + 0.5, abs=2 * DT)
     assert plan.path[0] == pytest.approx(HOME) and plan.path[plan.approach] == pytest.approx(start)
-    assert np.abs(np.diff(plan.path[:plan.approach + 1, 1])).max() <= 30.0 * DT * 1.6
+    rotate = plan.path[:plan.approach + 1, 1]
+    assert np.abs(np.diff(rotate)).max() <= 30.0 * DT * (1 + 1e-9)  # half of max_speed
+    assert np.abs(np.diff(rotate, 2)).max() <= 150.0 * DT**2 * (1 + 1e-9)  # half of max_accel
     assert plan.approached(HOME, UNIMATE, DT).approach == plan.approach  # not twice
 
 
