@@ -405,7 +405,8 @@ def test_the_rig_refuses_moves_until_initialised_then_steps(tmp_path: Path) -> N
                        sim_options={"initial": [400.0]}) as client:
         assert not client.status().homed
         path = moves.step(client.status().position, 0, 100.0, duration=2.0, machine=rig)
-        assert client.wait(client.move(path), 10).status.startswith("refused: not initialised")
+        assert client.wait(client.move(path, kind="step"), 10).status.startswith(
+            "refused: not initialised")
         client.initialise()
         done = client.wait_event("initialised", 60.0)
         assert done.payload["status"].startswith("complete: initialised")

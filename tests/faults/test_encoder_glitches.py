@@ -18,6 +18,7 @@ from control import ControlClient
 from control.motion import moves
 from control.recorder import Run, load_run
 from hw.machine import load_machine
+from hw.transmission import Transmission
 
 UNIMATE = load_machine("unimate2000b")
 GLITCH_SCALE = 30.0
@@ -39,14 +40,15 @@ def run_sine(controller: Callable[..., ControlClient], glitch_scale: float
 
 
 def implausible_steps(actual: np.ndarray, dt: float) -> int:
-    """Recorded steps larger than the joint can move since the reading last changed.
+    """Recorded steps larger than an actuator can move since its reading last changed.
 
-    A rejected reading leaves the recorded position unchanged, so after ``k``
-    unchanged samples the next step may cover ``k + 1`` samples of motion.
+    A rejected reading leaves the actuator's position unchanged, so after ``k``
+    unchanged samples the next step may cover ``k + 1`` samples of motion. Judged
+    per actuator, as the filter judges (the Yaw reading includes Bend's).
     """
     speed = np.array([1.5 * j.max_speed * dt for j in UNIMATE.joints])
     floor = np.array([3 * abs(j.encoder.gradient) for j in UNIMATE.joints])
-    steps = np.abs(np.diff(actual, axis=0))
+    steps = np.abs(np.diff(Transmission(UNIMATE).actuators_of(actual), axis=0))
     unchanged = np.zeros(actual.shape[1])
     bad = 0
     for step in steps:
