@@ -23,6 +23,7 @@ from textual.css.query import NoMatches
 from textual.screen import ModalScreen
 from textual.widgets import Footer, TabbedContent, TabPane
 
+from app.history import History, Sampler
 from app.tabs.identify import IdentifyTab
 from app.tabs.jog import JogTab
 from app.tabs.latency import LatencyTab
@@ -34,7 +35,6 @@ from app.tabs.tab import TabPage
 from app.tabs.tuning import TuningTab
 from app.widgets.dialogs import ConfirmScreen
 from app.widgets.header import FaultBanner, StatusHeader
-from app.widgets.history import History, Sampler
 from app.widgets.messages import (
     ClientFailed,
     ClientReady,

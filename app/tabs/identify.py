@@ -28,11 +28,11 @@ from textual.containers import Horizontal, Vertical
 from textual.widgets import Button, DataTable, Label, Select, Static, Switch
 from textual_plotext import PlotextPlot
 
+from app.plotting.run_plot import ACTUAL_COLOR, DESIRED_COLOR, DUTY_COLOR, decimate
 from app.tabs.tab import TabPage
 from app.widgets.fields import FieldError, JointField, NumberCheck, NumberField, seconds_check
 from app.widgets.live_text import LiveText
 from app.widgets.messages import RunsChanged
-from app.widgets.run_plot import ACTUAL_COLOR, DESIRED_COLOR, DUTY_COLOR, decimate
 from control.client import ControlClient, MoveHandle
 from control.recorder import Run
 from hw.machine import Coefficients, Machine

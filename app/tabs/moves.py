@@ -42,6 +42,7 @@ from textual.widgets import (
 from textual.widgets.option_list import Option
 from textual_plotext import PlotextPlot
 
+from app.plotting.run_plot import draw_path
 from app.tabs.tab import TabPage
 from app.widgets.fields import (
     FieldError,
@@ -54,7 +55,6 @@ from app.widgets.fields import (
 )
 from app.widgets.live_text import LiveText
 from app.widgets.messages import RunsChanged
-from app.widgets.run_plot import draw_path
 from control.client import MoveHandle, MoveResult
 from control.motion import moves
 from control.motion.path_files import PathFileError, PathPoints, read_path, resample

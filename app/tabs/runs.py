@@ -21,8 +21,8 @@ from textual.containers import Horizontal, Vertical
 from textual.widgets import Button, DataTable, Input, Static
 from textual_plotext import PlotextPlot
 
+from app.plotting.run_plot import draw_joint, draw_overview, export, steady_velocity
 from app.tabs.tab import TabPage
-from app.widgets.run_plot import draw_joint, draw_overview, export, steady_velocity
 from control.recorder import RecorderError, Run, RunInfo, list_runs, load_run, save_run
 
 

@@ -20,9 +20,9 @@ from textual.binding import Binding
 from textual.containers import Grid, Vertical
 from textual.reactive import reactive
 
+from app.history import Window
+from app.plotting.braille import Trace
 from app.tabs.tab import TabPage
-from app.widgets.braille import Trace
-from app.widgets.history import Window
 from app.widgets.live_text import LiveText
 from app.widgets.scope import ScopePlot
 from hw.machine import Joint
