@@ -190,7 +190,7 @@ class IdentifyTab(TabPage):
             return
         client, status = self.client, self.status()
         if client is None or status is None:
-            self.command("identify", "check")
+            self.command("identify", ControlClient.check)
             return
         j = self.joint()
         kind = str(self.query_one("#identify-profile", Select).value)
@@ -375,12 +375,13 @@ class IdentifyTab(TabPage):
             self.notify("run an identification first", severity="warning")
             return
         if client is None:
-            self.command(f"apply to {which}", "check")
+            self.command(f"apply to {which}", ControlClient.check)
             return
         proposed = outcome.track if which == "track" else outcome.hold
         if self.query_one("#identify-ff", Switch).value:
             proposed = with_kv(proposed, client.coefficients[which], outcome.feed_forward)
-        if self.command(f"apply to {which}", "set_coefficients", which, proposed):
+        if self.command(f"apply to {which}",
+                        lambda client: client.set_coefficients(which, proposed)):
             self.notify(f"proposed gains applied to the {which} set")
             self._state(Text(f"applied to the {which} set: {proposed.note}", "green"))
 

@@ -31,6 +31,7 @@ from textual.widgets import Static
 from app.tabs.tab import TabPage
 from app.widgets.limit_bar import LimitBar
 from app.widgets.live_text import LiveText
+from control.client import ControlClient
 from control.layout import Mode, Status
 
 JOG_KEYS = (("a", "z"), ("s", "x"), ("d", "c"), ("f", "v"), ("g", "b"), ("h", "n"))
@@ -176,7 +177,7 @@ class JogPad(Widget, can_focus=True):
             self.hold_key(joint, sign * HOLD_DUTY_PER_STEP * self.increment)
         else:
             step = sign * POSITION_STEPS[self.increment - 1]
-            self.tab.command("position jog", "jog_position", joint, step)
+            self.tab.command("position jog", lambda client: client.jog_position(joint, step))
         self.tab.refresh_live()
 
     def action_arrow(self, sign: int) -> None:
@@ -214,7 +215,7 @@ class JogPad(Widget, can_focus=True):
             self.tab.watch_release(False)
 
     def send(self) -> None:
-        self.tab.command("jog", "jog", list(self.duty))
+        self.tab.command("jog", lambda client: client.jog(list(self.duty)))
 
     def stop(self, hold: bool) -> None:
         """Zero every duty and leave manual actuation for closed-loop hold (the thesis's
@@ -224,7 +225,7 @@ class JogPad(Widget, can_focus=True):
         self.duty = [0.0] * self.n
         status = self.tab.status()
         if hold or (status is not None and status.mode == Mode.MANUAL_ACTUATE):
-            self.tab.command("hold", "hold")
+            self.tab.command("hold", ControlClient.hold)
 
     def forget_duties(self) -> None:
         """The controller left manual mode (E-stop, a move, hold): start again from zero."""

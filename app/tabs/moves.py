@@ -55,7 +55,7 @@ from app.widgets.fields import (
 )
 from app.widgets.live_text import LiveText
 from app.widgets.messages import RunsChanged
-from control.client import MoveHandle, MoveResult
+from control.client import ControlClient, MoveHandle, MoveResult
 from control.motion import moves
 from control.motion.path_files import PathFileError, PathPoints, read_path, resample
 from control.motion.plan import APPROACH_SPEED, MovePlan, moving_joints
@@ -743,10 +743,10 @@ class MovesTab(TabPage):
         error.update("")
         client = self.client
         if client is None:
-            self.command("run", "check")
+            self.command("run", ControlClient.check)
             return
         if plan.kind == "initialise":
-            if self.command("initialise", "initialise"):
+            if self.command("initialise", ControlClient.initialise):
                 self.initialising = True
                 self._state(Text("initialising: driving down to the bottom stop…", "cyan"))
             return

@@ -3,6 +3,7 @@ runs only while the tab is visible (hidden tabs cost nothing, and Pilot sees the
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import TYPE_CHECKING, ClassVar
 
 from textual.containers import Container
@@ -56,9 +57,9 @@ class TabPage(Container):
         except (ValueError, TimeoutError):  # closed while we asked
             return None
 
-    def command(self, what: str, method: str, *args: object) -> bool:
-        """Call ``client.<method>(*args)``; if the controller cannot take it, say why and what
-        to do instead of raising."""
+    def command(self, what: str, call: Callable[[ControlClient], object]) -> bool:
+        """``call(client)`` (``ControlClient.hold``, ``lambda client: client.jog(duty)``); if
+        the controller cannot take it, say why and what to do instead of raising."""
         client = self.client
         if client is None:
             self.notify(f"{what}: the controller is not running — "
@@ -66,7 +67,7 @@ class TabPage(Container):
                         severity="error")
             return False
         try:
-            getattr(client, method)(*args)
+            call(client)
         except (ControllerError, ValueError, OSError) as exc:
             self.notify(f"{what}: {exc}", severity="error")
             return False

@@ -172,7 +172,8 @@ class TuningTab(TabPage):
             self.save(self.query_one("#tuning-path", Input).value)
 
     def apply(self, coefficients: Coefficients, what: str) -> None:
-        if self.command(f"apply {what}", "set_coefficients", self.which, coefficients):
+        if self.command(f"apply {what}",
+                        lambda client: client.set_coefficients(self.which, coefficients)):
             self.notify(f"{what} applied to the {self.which} set")
         self._fill()
 
