@@ -17,6 +17,7 @@ the result summary. The wait for the end runs in a worker; the summary
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from pathlib import Path
 from typing import ClassVar
 
@@ -25,6 +26,7 @@ from rich.text import Text
 from textual import on, work
 from textual.app import ComposeResult
 from textual.containers import Horizontal, Vertical, VerticalScroll
+from textual.message import Message
 from textual.timer import Timer
 from textual.widgets import (
     Button,
@@ -42,6 +44,8 @@ from textual.widgets import (
 from textual.widgets.option_list import Option
 from textual_plotext import PlotextPlot
 
+from app.desk import Desk
+from app.messages import RunsChanged
 from app.plotting.run_plot import draw_path
 from app.tabs.tab import TabPage
 from app.widgets.fields import (
@@ -54,12 +58,12 @@ from app.widgets.fields import (
     set_position_limits,
 )
 from app.widgets.live_text import LiveText
-from app.widgets.messages import RunsChanged
 from control.client import ControlClient, MoveHandle, MoveResult
 from control.motion import moves
 from control.motion.path_files import PathFileError, PathPoints, read_path, resample
 from control.motion.plan import APPROACH_SPEED, MovePlan, moving_joints
 from control.motion.robot_model import has_unimate_model
+from control.recorder import Run
 from hw.machine import Machine
 from kinematics import Unreachable
 
@@ -398,6 +402,19 @@ class PathFileForm(MoveForm):
         return ("A CSV with a header of joint names (t,In/Out,Rotate,…; a joint left out "
                 "stays where it is) or a TSV of time then six positions. Seconds, mm, deg.")
 
+    @dataclass
+    class Loaded(Message, bubble=False):
+        """The file ``source`` was read (from the loading worker)."""
+
+        points: PathPoints
+        source: str
+
+    @dataclass
+    class Refused(Message, bubble=False):
+        """The file could not be used; ``problem`` names the line (from the loading worker)."""
+
+        problem: str
+
     def __init__(self, machine: Machine) -> None:
         super().__init__(machine)
         self.points: PathPoints | None = None
@@ -419,21 +436,21 @@ class PathFileForm(MoveForm):
         try:
             points = read_path(text, self.machine, tuple(current))
         except PathFileError as exc:
-            self.tab.servodesk.later(self._loaded, None, str(exc))
+            self.post_message(self.Refused(str(exc)))
             return
-        self.tab.servodesk.later(self._loaded, points, text)
+        self.post_message(self.Loaded(points, text))
 
-    def _loaded(self, points: PathPoints | None, text: str) -> None:
-        state = self.query_one("#path-state", Static)
-        self.points = points
-        if points is None:
-            self.loaded_from = ""
-            state.update(Text(f"{text}. Fix the file and press Enter in the field again.",
-                              "bold red"))
-            return
-        self.loaded_from = text
-        state.update(Text(f"{len(points.t)} points over {points.duration:g} s from {text}",
-                          "green"))
+    def on_path_file_form_refused(self, message: Refused) -> None:
+        self.points = None
+        self.loaded_from = ""
+        self.query_one("#path-state", Static).update(Text(
+            f"{message.problem}. Fix the file and press Enter in the field again.", "bold red"))
+
+    def on_path_file_form_loaded(self, message: Loaded) -> None:
+        points = self.points = message.points
+        self.loaded_from = message.source
+        self.query_one("#path-state", Static).update(Text(
+            f"{len(points.t)} points over {points.duration:g} s from {message.source}", "green"))
         self.tab.schedule_preview()
 
     def plan(self, current: np.ndarray, dt: float) -> MovePlan:
@@ -578,8 +595,25 @@ class MovesTab(TabPage):
     REFRESH_HZ = 10.0
     TITLE = "Moves"
 
-    def __init__(self, *, id: str | None = None) -> None:
-        super().__init__(id=id)
+    class HoldRequested(Message):
+        """Abort was pressed: abort the move and hold every joint where it is."""
+
+    @dataclass
+    class RunUnsaved(Message):
+        """A move's run could not be saved: keep it, so it can be saved elsewhere."""
+
+        run: Run
+
+    @dataclass
+    class MoveFinished(Message, bubble=False):
+        """The move ended (from the waiting worker): its result and summary rows."""
+
+        result: MoveResult
+        plan: MovePlan
+        summaries: list[tuple[str, moves.StepSummary]]
+
+    def __init__(self, desk: Desk, *, id: str | None = None) -> None:
+        super().__init__(desk, id=id)
         self.handle: MoveHandle | None = None
         self.plan_running: MovePlan | None = None
         self.initialising = False
@@ -633,7 +667,8 @@ class MovesTab(TabPage):
         self._fill_forms()
         self.schedule_preview()
 
-    def client_ready(self) -> None:
+    def client_ready(self, client: ControlClient) -> None:
+        super().client_ready(client)
         if self.visible_now:
             self._fill_forms()
 
@@ -724,7 +759,7 @@ class MovesTab(TabPage):
             self.action_run()
         elif event.button.id == "move-abort":
             event.stop()
-            self.servodesk.action_hold()
+            self.post_message(self.HoldRequested())
 
     def action_run(self) -> None:
         error = self.query_one("#move-error", Static)
@@ -762,12 +797,12 @@ class MovesTab(TabPage):
         self._wait(client, handle, plan)
 
     @work(thread=True, group="move-wait")
-    def _wait(self, client: object, handle: MoveHandle, plan: MovePlan) -> None:
-        result = client.wait(handle)  # type: ignore[attr-defined]
-        self.servodesk.later(self.finished, result, plan, result.summaries())
+    def _wait(self, client: ControlClient, handle: MoveHandle, plan: MovePlan) -> None:
+        result = client.wait(handle)
+        self.post_message(self.MoveFinished(result, plan, result.summaries()))
 
-    def finished(self, result: MoveResult, plan: MovePlan,
-                 summaries: list[tuple[str, moves.StepSummary]]) -> None:
+    def on_moves_tab_move_finished(self, message: MoveFinished) -> None:
+        result, plan = message.result, message.plan
         self.handle = None
         self.plan_running = None
         self.last_result = result
@@ -778,12 +813,12 @@ class MovesTab(TabPage):
         bar = self.query_one("#move-progress", ProgressBar)
         if result.complete:
             bar.update(progress=bar.total)
-        self._result_table(summaries)
+        self._result_table(message.summaries)
         if result.files is None and result.run.samples:
-            self.servodesk.keep_unsaved(result.run)
+            self.post_message(self.RunUnsaved(result.run))
         self.form.fill(self.current())  # "here" has moved
         self.schedule_preview()
-        self.app.post_message(RunsChanged())
+        self.post_message(RunsChanged())
         severity = "information" if result.complete else "warning"
         self.notify(f"{plan.title}: {result.status}", severity=severity)
 
