@@ -358,7 +358,7 @@ class ServodeskApp(App[None]):
         self._link(estop_sent=True)
         jog = self.tab("jog")
         if isinstance(jog, JogTab):
-            jog.pad.forget_duties()
+            jog.forget_duties()
         while isinstance(self.screen, ModalScreen):
             self.pop_screen()
 
