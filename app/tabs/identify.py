@@ -80,8 +80,9 @@ def build(machine: Machine, kind: str, joint: int, start: np.ndarray,
         options = {} if duration is None else {"hold_s": duration / (2 * STEP_LEVELS)}
         return excitation.steps(machine, joint, start, amplitude=amplitude,
                                 levels=STEP_LEVELS, **options)
+    profile = {"prbs": excitation.prbs, "chirp": excitation.chirp}[kind]
     options = {} if duration is None else {"duration": duration}
-    return getattr(excitation, kind)(machine, joint, start, amplitude=amplitude, **options)
+    return profile(machine, joint, start, amplitude=amplitude, **options)
 
 
 def step_desired(machine: Machine, joint: int, start: np.ndarray) -> np.ndarray:
