@@ -241,11 +241,15 @@ class JogPad(Widget, can_focus=True):
         self.post_message(self.DutyChanged(tuple(self.duty)))
 
     def stop(self, hold: bool) -> None:
-        """Zero every duty and ask for closed-loop hold (see ``Stopped``)."""
+        """Let go and ask for closed-loop hold (see ``Stopped``)."""
+        self.let_go()
+        self.post_message(self.Stopped(hold))
+
+    def let_go(self) -> None:
+        """Forget every held key and zero every duty; the tab decides about the hold."""
         self.repeat.forget()
         self._release_timer.pause()
         self.duty = [0.0] * self.n
-        self.post_message(self.Stopped(hold))
 
     def forget_duties(self) -> None:
         """The controller left manual mode (E-stop, a move, hold): start again from zero."""
@@ -283,24 +287,35 @@ class JogTab(TabPage):
     def hidden(self) -> None:
         super().hidden()
         self.pad.armed = False
-        self.pad.stop(hold=False)  # leaving the tab must not leave a joint moving
+        self.pad.let_go()  # leaving the tab must not leave a joint moving: decided now
+        self._leave_manual(hold=False)
 
     def forget_duties(self) -> None:
         """The E-stop closed every valve: the pad starts again from zero."""
         self.pad.forget_duties()
 
     def on_jog_pad_duty_changed(self, message: JogPad.DutyChanged) -> None:
+        # A duty the pad has moved on from (a later key, or let go since: the tab was left,
+        # the E-stop) is not sent: a later message carries the pad's duties, or none should.
+        if not self.visible_now or message.duty != tuple(self.pad.duty):
+            return
         self.command("jog", lambda client: client.jog(list(message.duty)))
         self.refresh_live()
 
     def on_jog_pad_target_stepped(self, message: JogPad.TargetStepped) -> None:
+        if not self.visible_now:  # pressed just before the tab was left
+            return
         self.command("position jog",
                      lambda client: client.jog_position(message.joint, message.step))
         self.refresh_live()
 
     def on_jog_pad_stopped(self, message: JogPad.Stopped) -> None:
+        self._leave_manual(message.hold)
+
+    def _leave_manual(self, hold: bool) -> None:
+        """Hold, the thesis's default mode, if asked to or if the controller is in manual."""
         status = self.status()
-        if message.hold or (status is not None and status.mode == Mode.MANUAL_ACTUATE):
+        if hold or (status is not None and status.mode == Mode.MANUAL_ACTUATE):
             self.command("hold", ControlClient.hold)
 
     def refresh_live(self) -> None:
