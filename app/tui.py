@@ -342,9 +342,14 @@ class ServodeskApp(App[None]):
 
     def _focus_active(self) -> None:
         """Focus where the visible tab's keys work, once its pane is displayed (a hidden
-        widget cannot take the focus, and a late call must not focus a tab left since)."""
+        widget cannot take the focus, and a late call must not focus a tab left since).
+
+        The app chooses the tab; the focus must not choose it again: TabbedContent shows
+        the pane its TabPane.Focused names, and that message can arrive after the operator
+        has chosen another tab (F2 just after start), switching back to this one."""
         if self._active is not None and not isinstance(self.screen, ModalScreen):
-            self._active.focus_main()
+            with self.prevent(TabPane.Focused):
+                self._active.focus_main()
 
     def action_show_tab(self, name: str) -> None:
         self.query_one("#tabs", TabbedContent).active = f"pane-{name}"
