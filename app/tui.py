@@ -74,7 +74,9 @@ def estop_advice(reason: str, port: str | None) -> str:
 class ServodeskApp(App[None]):
     """The operator's workstation for one machine and backend."""
 
-    CSS_PATH = "servodesk.tcss"
+    # the whole screen's rules, the form fields' (tabs use their classes too), each tab's
+    CSS_PATH: ClassVar = ["servodesk.tcss", "widgets/fields.tcss",
+                          *[f"tabs/{name}.tcss" for name, _ in TABS]]
     TITLE = "servodesk"
     BINDINGS: ClassVar = [
         Binding("escape,ctrl+e", "estop", "E-STOP", priority=True, key_display="Esc/^E"),
