@@ -12,17 +12,18 @@ from __future__ import annotations
 import contextlib
 import gc
 import threading
-from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 from typing import ClassVar
 
 from textual.app import App, ComposeResult
 from textual.binding import Binding
-from textual.css.query import NoMatches
 from textual.screen import ModalScreen
 from textual.widgets import Footer, TabbedContent, TabPane
 
+from app.desk import Desk
+from app.history import History, Sampler
+from app.messages import ClientFailed, ClientReady, ControllerEvent, RunsChanged
 from app.tabs.identify import IdentifyTab
 from app.tabs.jog import JogTab
 from app.tabs.latency import LatencyTab
@@ -34,18 +35,10 @@ from app.tabs.tab import TabPage
 from app.tabs.tuning import TuningTab
 from app.widgets.dialogs import ConfirmScreen
 from app.widgets.header import FaultBanner, StatusHeader
-from app.widgets.history import History, Sampler
-from app.widgets.messages import (
-    ClientFailed,
-    ClientReady,
-    ControllerEvent,
-    Deferred,
-    RunsChanged,
-)
 from control.client import ControlClient, ControllerError, Event
 from control.events import Died, EStop, Fault, Initialised, Notice, Refused
 from control.motion.robot_model import model_of
-from control.recorder import Run, default_data_dir
+from control.recorder import default_data_dir
 from hw.machine import Machine, load_machine
 
 HEADER_HZ = 10.0
@@ -81,7 +74,9 @@ def estop_advice(reason: str, port: str | None) -> str:
 class ServodeskApp(App[None]):
     """The operator's workstation for one machine and backend."""
 
-    CSS_PATH = "servodesk.tcss"
+    # the whole screen's rules, the form fields' (tabs use their classes too), each tab's
+    CSS_PATH: ClassVar = ["servodesk.tcss", "widgets/fields.tcss",
+                          *[f"tabs/{name}.tcss" for name, _ in TABS]]
     TITLE = "servodesk"
     BINDINGS: ClassVar = [
         Binding("escape,ctrl+e", "estop", "E-STOP", priority=True, key_display="Esc/^E"),
@@ -110,6 +105,7 @@ class ServodeskApp(App[None]):
         self.sim_options = sim_options
         self.client_options = client_options or {}
         self.history = History(self.machine.n_joints)
+        self.desk = Desk(self.machine, self.model, backend, self.data_dir, self.history)
         self.client: ControlClient | None = None
         self.client_problem = ""
         self.sampler: Sampler | None = None
@@ -132,7 +128,7 @@ class ServodeskApp(App[None]):
         with TabbedContent(id="tabs"):
             for i, (name, cls) in enumerate(TABS):
                 with TabPane(f"F{i + 1} {cls.TITLE}", id=f"pane-{name}"):
-                    yield cls(id=f"tab-{name}")
+                    yield cls(self.desk, id=f"tab-{name}")
         yield Footer()
 
     def on_mount(self) -> None:
@@ -207,17 +203,6 @@ class ServodeskApp(App[None]):
         with contextlib.suppress(RuntimeError):
             self.post_message(message)  # type: ignore[arg-type]
 
-    def later(self, callback: Callable[..., object], *args: object, **kwargs: object) -> None:
-        """Run ``callback(*args, **kwargs)`` on the UI thread, from any thread; dropped once
-        the app has closed."""
-        self._post(Deferred(callback, *args, **kwargs))
-
-    def on_deferred(self, message: Deferred) -> None:
-        if not self.is_running:
-            return
-        with contextlib.suppress(NoMatches):  # the widget went away with the screen
-            message.callback(*message.args, **message.kwargs)
-
     def on_client_ready(self, message: ClientReady) -> None:
         if self._held_back(message):
             return
@@ -229,15 +214,15 @@ class ServodeskApp(App[None]):
             self._send_estop()
         if client.notice:
             self.notify(client.notice, title="controller", timeout=6)
-        for name, _ in TABS:
-            self.tab(name).client_ready()
+        for tab in self.tabs.values():
+            tab.client_ready(client)
         if self._active is not None:
             self._active.refresh_live()
 
     def on_client_failed(self, message: ClientFailed) -> None:
         if self._held_back(message):
             return
-        self.client_problem = message.reason
+        self._client_down(message.reason)
         self._link(state="failed", reason="controller did not start")
         self._fault("start", f"The controller did not start: {message.reason}")
 
@@ -293,10 +278,13 @@ class ServodeskApp(App[None]):
         assert isinstance(runs, RunsTab)
         runs.mark_stale()
 
-    def keep_unsaved(self, run: Run) -> None:
+    def on_moves_tab_run_unsaved(self, message: MovesTab.RunUnsaved) -> None:
         runs = self.tab("runs")
         assert isinstance(runs, RunsTab)
-        runs.keep_unsaved(run)
+        runs.keep_unsaved(message.run)
+
+    def on_moves_tab_hold_requested(self, message: MovesTab.HoldRequested) -> None:
+        self.action_hold()
 
     def _freeze_long_lived(self) -> None:
         """Exempt the widgets and caches built so far from full garbage collections.
@@ -313,8 +301,13 @@ class ServodeskApp(App[None]):
     # -- header --------------------------------------------------------------------------------
 
     def _died(self) -> None:
-        self.client_problem = "it died: quit (^Q) and start servodesk again"
+        self._client_down("it died: quit (^Q) and start servodesk again")
         self._link(state="dead", reason="controller died")
+
+    def _client_down(self, problem: str) -> None:
+        self.client_problem = problem
+        for tab in self.tabs.values():
+            tab.client_down(problem)
 
     def _link(self, **changes: object) -> None:
         self.header.link = replace(self.header.link, **changes)  # type: ignore[arg-type]
@@ -351,9 +344,14 @@ class ServodeskApp(App[None]):
 
     def _focus_active(self) -> None:
         """Focus where the visible tab's keys work, once its pane is displayed (a hidden
-        widget cannot take the focus, and a late call must not focus a tab left since)."""
+        widget cannot take the focus, and a late call must not focus a tab left since).
+
+        The app chooses the tab; the focus must not choose it again: TabbedContent shows
+        the pane its TabPane.Focused names, and that message can arrive after the operator
+        has chosen another tab (F2 just after start), switching back to this one."""
         if self._active is not None and not isinstance(self.screen, ModalScreen):
-            self._active.focus_main()
+            with self.prevent(TabPane.Focused):
+                self._active.focus_main()
 
     def action_show_tab(self, name: str) -> None:
         self.query_one("#tabs", TabbedContent).active = f"pane-{name}"
@@ -367,7 +365,7 @@ class ServodeskApp(App[None]):
         self._link(estop_sent=True)
         jog = self.tab("jog")
         if isinstance(jog, JogTab):
-            jog.pad.forget_duties()
+            jog.forget_duties()
         while isinstance(self.screen, ModalScreen):
             self.pop_screen()
 

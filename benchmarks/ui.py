@@ -42,11 +42,11 @@ from textual.screen import Screen
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # ahead of benchmarks/hw.py
 
+from app.plotting.braille import Trace, render
+from app.plotting.run_plot import decimate
 from app.tabs.latency import Lateness
 from app.tabs.scope import ScopeTab
 from app.tui import ServodeskApp
-from app.widgets.braille import Trace, render
-from app.widgets.run_plot import decimate
 from control import shm
 from control.layout import ControlLayout
 from control.seqlock import SeqlockReader

@@ -25,14 +25,16 @@ from rich.text import Text
 from textual import work
 from textual.app import ComposeResult
 from textual.containers import Horizontal, Vertical
+from textual.message import Message
 from textual.widgets import Button, DataTable, Label, Select, Static, Switch
 from textual_plotext import PlotextPlot
 
+from app.desk import Desk
+from app.messages import RunsChanged
+from app.plotting.run_plot import ACTUAL_COLOR, DESIRED_COLOR, DUTY_COLOR, decimate
 from app.tabs.tab import TabPage
 from app.widgets.fields import FieldError, JointField, NumberCheck, NumberField, seconds_check
 from app.widgets.live_text import LiveText
-from app.widgets.messages import RunsChanged
-from app.widgets.run_plot import ACTUAL_COLOR, DESIRED_COLOR, DUTY_COLOR, decimate
 from control.client import ControlClient, MoveHandle
 from control.recorder import Run
 from hw.machine import Coefficients, Machine
@@ -78,8 +80,9 @@ def build(machine: Machine, kind: str, joint: int, start: np.ndarray,
         options = {} if duration is None else {"hold_s": duration / (2 * STEP_LEVELS)}
         return excitation.steps(machine, joint, start, amplitude=amplitude,
                                 levels=STEP_LEVELS, **options)
+    profile = {"prbs": excitation.prbs, "chirp": excitation.chirp}[kind]
     options = {} if duration is None else {"duration": duration}
-    return getattr(excitation, kind)(machine, joint, start, amplitude=amplitude, **options)
+    return profile(machine, joint, start, amplitude=amplitude, **options)
 
 
 def step_desired(machine: Machine, joint: int, start: np.ndarray) -> np.ndarray:
@@ -110,8 +113,36 @@ class IdentifyTab(TabPage):
 
     TITLE = "Identify"
 
-    def __init__(self, *, id: str | None = None) -> None:
-        super().__init__(id=id)
+    class Fitting(Message, bubble=False):
+        """The excitation ran to its end; the fit has started (from the worker)."""
+
+    @dataclass
+    class Identified(Message, bubble=False):
+        """The fit, the proposals and the predicted steps (from the worker)."""
+
+        outcome: Outcome
+
+    @dataclass
+    class Failed(Message, bubble=False):
+        """The run or the fit failed; ``reason`` says why (from the worker)."""
+
+        reason: str
+
+    @dataclass
+    class Checked(Message, bubble=False):
+        """Both models' fit on the fresh held-out PRBS (from the worker)."""
+
+        joint: int
+        fits: tuple[Fit, Fit]
+
+    @dataclass
+    class Unchecked(Message, bubble=False):
+        """The held-out run did not complete; ``reason`` says why (from the worker)."""
+
+        reason: str
+
+    def __init__(self, desk: Desk, *, id: str | None = None) -> None:
+        super().__init__(desk, id=id)
         self.models: list[DeadbandModel | None] = []
         self.handle: MoveHandle | None = None
         self.outcome: Outcome | None = None
@@ -190,7 +221,7 @@ class IdentifyTab(TabPage):
             return
         client, status = self.client, self.status()
         if client is None or status is None:
-            self.command("identify", "check")
+            self.command("identify", ControlClient.check)
             return
         j = self.joint()
         kind = str(self.query_one("#identify-profile", Select).value)
@@ -220,13 +251,15 @@ class IdentifyTab(TabPage):
             result = client.wait(handle)
             if not result.complete:
                 raise ValueError(f"the run ended {result.status}: nothing to fit; run it again")
-            self.servodesk.later(self._state, Text("fitting the model and designing gains…",
-                                                   "cyan"))
+            self.post_message(self.Fitting())
             outcome = self._fit(client, result.run, j)
         except Exception as exc:  # a refusal of sysid/tuning or a closed controller
-            self.servodesk.later(self._failed, f"{exc}")
+            self.post_message(self.Failed(f"{exc}"))
             return
-        self.servodesk.later(self._identified, outcome)
+        self.post_message(self.Identified(outcome))
+
+    def on_identify_tab_fitting(self, message: Fitting) -> None:
+        self._state(Text("fitting the model and designing gains…", "cyan"))
 
     def _fit(self, client: ControlClient, run: Run, j: int) -> Outcome:
         """Identify, propose and predict (worker thread)."""
@@ -250,13 +283,14 @@ class IdentifyTab(TabPage):
                        hold_proposal.coefficients, proposal.designs, ffs, t, desired[:, j],
                        *predicted)
 
-    def _failed(self, message: str) -> None:
+    def on_identify_tab_failed(self, message: Failed) -> None:
         self.handle = None
-        self.query_one("#identify-error", Static).update(Text(message, "bold red"))
+        self.query_one("#identify-error", Static).update(Text(message.reason, "bold red"))
         self._state(Text("identification failed", "bold yellow"))
-        self.notify(f"identify: {message}", severity="error")
+        self.notify(f"identify: {message.reason}", severity="error")
 
-    def _identified(self, outcome: Outcome) -> None:
+    def on_identify_tab_identified(self, message: Identified) -> None:
+        outcome = message.outcome
         self.handle = None
         self.outcome = outcome
         self.models = list(outcome.models)
@@ -265,7 +299,7 @@ class IdentifyTab(TabPage):
         self._plot(outcome)
         for which in ("track", "hold"):
             self.query_one(f"#identify-apply-{which}", Button).disabled = False
-        self.app.post_message(RunsChanged())
+        self.post_message(RunsChanged())
         self._hold_out(outcome)
 
     # -- the held-out check -----------------------------------------------------------------
@@ -304,16 +338,17 @@ class IdentifyTab(TabPage):
             data = sysid.joint_series(result.run, self.machine, ident.joint)
             fits = (sysid.validate(ident.deadband, data), sysid.validate(ident.arx, data))
         except Exception as exc:  # a stopped run or a closed controller
-            self.servodesk.later(self._unchecked, f"{exc}: the fit shown is on the model's own "
-                                 "run; run the identification again to check it")
+            self.post_message(self.Unchecked(f"{exc}: the fit shown is on the model's own run; "
+                                             "run the identification again to check it"))
             return
-        self.servodesk.later(self._checked, ident.joint, fits)
+        self.post_message(self.Checked(ident.joint, fits))
 
-    def _unchecked(self, message: str) -> None:
+    def on_identify_tab_unchecked(self, message: Unchecked) -> None:
         self.handle = None
-        self._state(Text(message, "yellow"))
+        self._state(Text(message.reason, "yellow"))
 
-    def _checked(self, joint: int, fits: tuple[Fit, Fit]) -> None:
+    def on_identify_tab_checked(self, message: Checked) -> None:
+        joint, fits = message.joint, message.fits
         self.handle = None
         self.held_out[joint] = fits
         line, arx = fits
@@ -323,7 +358,7 @@ class IdentifyTab(TabPage):
             f" in velocity, {line.position_pct:.1f} % in position, ARX "
             f"{arx.velocity_pct:.1f} % (a fresh {HELD_OUT_S:g} s PRBS the fit never saw)"))
         self._table()
-        self.app.post_message(RunsChanged())
+        self.post_message(RunsChanged())
 
     def _table(self) -> None:
         """One row per joint identified so far, the proposal's design beside its model."""
@@ -375,13 +410,13 @@ class IdentifyTab(TabPage):
             self.notify("run an identification first", severity="warning")
             return
         if client is None:
-            self.command(f"apply to {which}", "check")
+            self.command(f"apply to {which}", ControlClient.check)
             return
         proposed = outcome.track if which == "track" else outcome.hold
         if self.query_one("#identify-ff", Switch).value:
             proposed = with_kv(proposed, client.coefficients[which], outcome.feed_forward)
-        if self.command(f"apply to {which}", "set_coefficients", which, proposed,
-                        outcome.models):  # the gain check judges them on the identified models
+        if self.command(f"apply to {which}",  # the gain check judges them on the models fitted
+                        lambda client: client.set_coefficients(which, proposed, outcome.models)):
             self.notify(f"proposed gains applied to the {which} set")
             self._state(Text(f"applied to the {which} set: {proposed.note}", "green"))
 

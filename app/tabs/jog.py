@@ -12,6 +12,9 @@ Three modes, cycled with ``m``:
   keyboard teleop tools do it.
 - **position** — closed loop: each press moves the joint's hold target by the
   step chosen with 1–9 (0.1 … 50 mm or degrees).
+
+The keys belong to ``JogPad``, which posts what they ask for (``DutyChanged``,
+``TargetStepped``, ``Stopped``); ``JogTab`` sends it to the controller.
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ from rich.table import Table
 from rich.text import Text
 from textual.app import ComposeResult
 from textual.binding import Binding
+from textual.message import Message
 from textual.reactive import reactive
 from textual.widget import Widget
 from textual.widgets import Static
@@ -31,6 +35,7 @@ from textual.widgets import Static
 from app.tabs.tab import TabPage
 from app.widgets.limit_bar import LimitBar
 from app.widgets.live_text import LiveText
+from control.client import ControlClient
 from control.layout import Mode, Status
 
 JOG_KEYS = (("a", "z"), ("s", "x"), ("d", "c"), ("f", "v"), ("g", "b"), ("h", "n"))
@@ -118,7 +123,10 @@ def _jog_bindings() -> list[Binding]:
 
 
 class JogPad(Widget, can_focus=True):
-    """The focusable part of the Jog tab: its keys drive the joints."""
+    """The focusable part of the Jog tab: its keys set the duties and steps it posts up.
+
+    ``armed`` is set by the tab: True only while the tab is the visible one.
+    """
 
     BINDINGS: ClassVar = [
         *_jog_bindings(),
@@ -132,11 +140,36 @@ class JogPad(Widget, can_focus=True):
     mode: reactive[str] = reactive("duty")
     increment: reactive[int] = reactive(5)
 
+    @dataclass
+    class DutyChanged(Message):
+        """Send these manual duties (%, one per joint) to the controller."""
+
+        duty: tuple[float, ...]
+
+    @dataclass
+    class TargetStepped(Message):
+        """Move ``joint``'s hold target by ``step`` (mm or °): the closed-loop position jog."""
+
+        joint: int
+        step: float
+
+    @dataclass
+    class Stopped(Message):
+        """Every duty is zero: leave manual actuation for closed-loop hold (the thesis's
+        default mode); ``hold`` asks for the hold even when not in manual."""
+
+        hold: bool
+
     def __init__(self, n_joints: int, *, id: str | None = None) -> None:
         super().__init__(id=id)
         self.n = n_joints
         self.duty = [0.0] * n_joints
         self.repeat = KeyRepeat()
+        self.armed = False
+
+    def on_mount(self) -> None:
+        self._release_timer = self.set_interval(RELEASE_CHECK_S, self._check_release,
+                                                pause=True)
 
     def render(self) -> Text:
         step = POSITION_STEPS[self.increment - 1]
@@ -147,17 +180,13 @@ class JogPad(Widget, can_focus=True):
                              (amount, "bold"), ("  ·  ", "dim"), MODE_HELP[self.mode])
 
     def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
-        if not self.tab.visible_now:
+        if not self.armed:
             return False  # a key must never move a joint the operator cannot see
         if action == "jog":
             return int(parameters[0]) < self.n  # type: ignore[arg-type]
         if action == "arrow":
             return self.n == 1
         return True
-
-    @property
-    def tab(self) -> JogTab:
-        return self.query_ancestor(JogTab)
 
     def action_increment(self, k: int) -> None:
         self.increment = k
@@ -175,15 +204,12 @@ class JogPad(Widget, can_focus=True):
         elif self.mode == "hold-to-move":
             self.hold_key(joint, sign * HOLD_DUTY_PER_STEP * self.increment)
         else:
-            step = sign * POSITION_STEPS[self.increment - 1]
-            self.tab.command("position jog", "jog_position", joint, step)
-        self.tab.refresh_live()
+            self.post_message(self.TargetStepped(joint, sign * POSITION_STEPS[self.increment - 1]))
 
     def action_arrow(self, sign: int) -> None:
         if self.mode == "duty":
             self.duty[0] = max(-100.0, min(100.0, self.duty[0] + sign * RIG_ARROW_STEP))
             self.send()
-            self.tab.refresh_live()
         else:
             self.action_jog(0, sign)
 
@@ -191,7 +217,6 @@ class JogPad(Widget, can_focus=True):
         self.repeat.forget()
         self.duty = [0.0] * self.n
         self.send()
-        self.tab.refresh_live()
 
     def action_hold_here(self) -> None:
         self.stop(hold=True)
@@ -200,31 +225,31 @@ class JogPad(Widget, can_focus=True):
         if self.repeat.press(joint, time.monotonic()) or self.duty[joint] != duty:
             self.duty[joint] = duty
             self.send()
-        self.tab.watch_release(True)
+        self._release_timer.resume()
 
-    def released(self) -> None:
-        """Called every RELEASE_CHECK_S while a key is held: stop the joints let go."""
+    def _check_release(self) -> None:
+        """Every RELEASE_CHECK_S while a key is held: stop the joints let go."""
         gone = self.repeat.released(time.monotonic())
         if gone:
             for j in gone:
                 self.duty[j] = 0.0
             self.send()
-            self.tab.refresh_live()
         if not self.repeat.held:
-            self.tab.watch_release(False)
+            self._release_timer.pause()
 
     def send(self) -> None:
-        self.tab.command("jog", "jog", list(self.duty))
+        self.post_message(self.DutyChanged(tuple(self.duty)))
 
     def stop(self, hold: bool) -> None:
-        """Zero every duty and leave manual actuation for closed-loop hold (the thesis's
-        default mode); ``hold`` sends the hold even when not in manual."""
+        """Let go and ask for closed-loop hold (see ``Stopped``)."""
+        self.let_go()
+        self.post_message(self.Stopped(hold))
+
+    def let_go(self) -> None:
+        """Forget every held key and zero every duty; the tab decides about the hold."""
         self.repeat.forget()
-        self.tab.watch_release(False)
+        self._release_timer.pause()
         self.duty = [0.0] * self.n
-        status = self.tab.status()
-        if hold or (status is not None and status.mode == Mode.MANUAL_ACTUATE):
-            self.tab.command("hold", "hold")
 
     def forget_duties(self) -> None:
         """The controller left manual mode (E-stop, a move, hold): start again from zero."""
@@ -247,7 +272,6 @@ class JogTab(TabPage):
 
     def on_mount(self) -> None:
         self.query_one("#jog-table").styles.height = self.machine.n_joints + 1
-        self._release_timer = self.set_interval(RELEASE_CHECK_S, self._check_release, pause=True)
 
     @property
     def pad(self) -> JogPad:
@@ -256,18 +280,43 @@ class JogTab(TabPage):
     def focus_main(self) -> None:
         self.pad.focus()
 
-    def watch_release(self, on: bool) -> None:
-        if on:
-            self._release_timer.resume()
-        else:
-            self._release_timer.pause()
-
-    def _check_release(self) -> None:
-        self.pad.released()
+    def shown(self) -> None:
+        self.pad.armed = True
+        super().shown()
 
     def hidden(self) -> None:
         super().hidden()
-        self.pad.stop(hold=False)  # leaving the tab must not leave a joint moving
+        self.pad.armed = False
+        self.pad.let_go()  # leaving the tab must not leave a joint moving: decided now
+        self._leave_manual(hold=False)
+
+    def forget_duties(self) -> None:
+        """The E-stop closed every valve: the pad starts again from zero."""
+        self.pad.forget_duties()
+
+    def on_jog_pad_duty_changed(self, message: JogPad.DutyChanged) -> None:
+        # A duty the pad has moved on from (a later key, or let go since: the tab was left,
+        # the E-stop) is not sent: a later message carries the pad's duties, or none should.
+        if not self.visible_now or message.duty != tuple(self.pad.duty):
+            return
+        self.command("jog", lambda client: client.jog(list(message.duty)))
+        self.refresh_live()
+
+    def on_jog_pad_target_stepped(self, message: JogPad.TargetStepped) -> None:
+        if not self.visible_now:  # pressed just before the tab was left
+            return
+        self.command("position jog",
+                     lambda client: client.jog_position(message.joint, message.step))
+        self.refresh_live()
+
+    def on_jog_pad_stopped(self, message: JogPad.Stopped) -> None:
+        self._leave_manual(message.hold)
+
+    def _leave_manual(self, hold: bool) -> None:
+        """Hold, the thesis's default mode, if asked to or if the controller is in manual."""
+        status = self.status()
+        if hold or (status is not None and status.mode == Mode.MANUAL_ACTUATE):
+            self.command("hold", ControlClient.hold)
 
     def refresh_live(self) -> None:
         status = self.status()

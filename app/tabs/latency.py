@@ -21,6 +21,7 @@ from textual.binding import Binding
 from textual.containers import Horizontal
 from textual.widgets import Button, Static
 
+from app.desk import Desk
 from app.tabs.tab import TabPage
 from control.layout import HIST_BIN_NS, LatencyHistogram
 
@@ -95,8 +96,8 @@ class LatencyTab(TabPage):
     TITLE = "Latency"
     BINDINGS: ClassVar = [Binding("t", "fresh_test", f"fresh {TEST_S:g} s test")]
 
-    def __init__(self, *, id: str | None = None) -> None:
-        super().__init__(id=id)
+    def __init__(self, desk: Desk, *, id: str | None = None) -> None:
+        super().__init__(desk, id=id)
         self.test_start: Lateness | None = None
         self.test_started_at = 0.0
         self.fresh: Lateness | None = None

@@ -9,6 +9,7 @@ listed first, so they can be saved elsewhere.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
 from typing import ClassVar
@@ -18,11 +19,13 @@ from textual import work
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
+from textual.message import Message
 from textual.widgets import Button, DataTable, Input, Static
 from textual_plotext import PlotextPlot
 
+from app.desk import Desk
+from app.plotting.run_plot import draw_joint, draw_overview, export, steady_velocity
 from app.tabs.tab import TabPage
-from app.widgets.run_plot import draw_joint, draw_overview, export, steady_velocity
 from control.recorder import RecorderError, Run, RunInfo, list_runs, load_run, save_run
 
 
@@ -44,8 +47,28 @@ class RunsTab(TabPage):
         Binding("s", "save_unsaved", "save unsaved run", show=False),
     ]
 
-    def __init__(self, *, id: str | None = None) -> None:
-        super().__init__(id=id)
+    @dataclass
+    class Listed(Message, bubble=False):
+        """The runs in the data directory, newest first (from the listing worker)."""
+
+        infos: list[RunInfo]
+
+    @dataclass
+    class Opened(Message, bubble=False):
+        """A run was read from its files (from the loading worker)."""
+
+        run: Run
+        name: str
+
+    @dataclass
+    class Saved(Message, bubble=False):
+        """An unsaved run was saved to ``where`` (from the saving worker)."""
+
+        run: Run
+        where: Path
+
+    def __init__(self, desk: Desk, *, id: str | None = None) -> None:
+        super().__init__(desk, id=id)
         self.infos: list[RunInfo] = []
         self.unsaved: list[Run] = []
         self.run: Run | None = None
@@ -97,11 +120,10 @@ class RunsTab(TabPage):
 
     @work(thread=True, exclusive=True, group="runs-list")
     def _list(self) -> None:
-        infos = list_runs(self.servodesk.data_dir)
-        self.servodesk.later(self._show_list, infos)
+        self.post_message(self.Listed(list_runs(self.desk.data_dir)))
 
-    def _show_list(self, infos: list[RunInfo]) -> None:
-        self.infos = infos
+    def on_runs_tab_listed(self, message: Listed) -> None:
+        infos = self.infos = message.infos
         table = self.query_one("#runs-table", DataTable)
         table.clear()
         for i, run in enumerate(self.unsaved):
@@ -115,8 +137,8 @@ class RunsTab(TabPage):
             table.add_row(local_time(info.start_time), info.kind, Text(info.status[:28], style),
                           str(info.samples), key=info.files.stem)
         self.query_one("#runs-meta", Static).update(Text(
-            f"{len(infos)} run(s) in {self.servodesk.data_dir}" if infos or self.unsaved else
-            f"no runs yet in {self.servodesk.data_dir}: run a move from the Moves tab", "dim"))
+            f"{len(infos)} run(s) in {self.desk.data_dir}" if infos or self.unsaved else
+            f"no runs yet in {self.desk.data_dir}: run a move from the Moves tab", "dim"))
 
     def on_data_table_row_selected(self, event: DataTable.RowSelected) -> None:
         event.stop()
@@ -138,10 +160,9 @@ class RunsTab(TabPage):
         try:
             run = load_run(info.files.json)
         except RecorderError as exc:
-            self.servodesk.later(self.notify, f"cannot open the run: {exc}",
-                                      severity="error")
+            self.notify(f"cannot open the run: {exc}", severity="error")
             return
-        self.servodesk.later(self._opened, run, info.files.stem)
+        self.post_message(self.Opened(run, info.files.stem))
 
     def open_latest(self) -> None:
         """Open the newest run (after the list was loaded)."""
@@ -158,6 +179,9 @@ class RunsTab(TabPage):
         n = len(self.run.joint_names)
         groups = [f"plotsix {a + 1}–{min(n, a + 3)}" for a in range(0, n, 3)] if n > 1 else []
         return groups + [f"plotdata {name}" for name in self.run.joint_names]
+
+    def on_runs_tab_opened(self, message: Opened) -> None:
+        self._opened(message.run, message.name)
 
     def _opened(self, run: Run, name: str) -> None:
         self.run = run
@@ -215,17 +239,17 @@ class RunsTab(TabPage):
             return
         view = self.views()[self.view].replace(" ", "-").replace("–", "-").replace("/", "")
         stem = self.run_name.replace(" ", "-")
-        self._export(self.servodesk.data_dir / "plots" / f"{stem}-{view}")
+        self._export(self.desk.data_dir / "plots" / f"{stem}-{view}")
 
     @work(thread=True, group="runs-export")
     def _export(self, path: Path) -> None:
         try:
             written = export(path, lambda plt, width: self._draw_on(plt, width))
         except OSError as exc:
-            self.servodesk.later(self.notify, f"cannot export to {path}: {exc}; check the "
-                                      "data directory is writable", severity="error")
+            self.notify(f"cannot export to {path}: {exc}; check the data directory is writable",
+                        severity="error")
             return
-        self.servodesk.later(self.notify, "exported " + ", ".join(str(p) for p in written))
+        self.notify("exported " + ", ".join(str(p) for p in written))
 
     def on_button_pressed(self, event: Button.Pressed) -> None:
         if event.button.id == "runs-save-button":
@@ -243,12 +267,11 @@ class RunsTab(TabPage):
         try:
             files = save_run(run, directory)
         except RecorderError as exc:
-            self.servodesk.later(self.notify, f"{exc}; choose another directory",
-                                      severity="error")
+            self.notify(f"{exc}; choose another directory", severity="error")
             return
-        self.servodesk.later(self._saved, run, files.json)
+        self.post_message(self.Saved(run, files.json))
 
-    def _saved(self, run: Run, where: Path) -> None:
-        self.unsaved = [r for r in self.unsaved if r is not run]
-        self.notify(f"saved to {where}")
+    def on_runs_tab_saved(self, message: Saved) -> None:
+        self.unsaved = [r for r in self.unsaved if r is not message.run]
+        self.notify(f"saved to {message.where}")
         self.action_reload()

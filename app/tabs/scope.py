@@ -20,9 +20,10 @@ from textual.binding import Binding
 from textual.containers import Grid, Vertical
 from textual.reactive import reactive
 
+from app.desk import Desk
+from app.history import Window
+from app.plotting.braille import Trace
 from app.tabs.tab import TabPage
-from app.widgets.braille import Trace
-from app.widgets.history import Window
 from app.widgets.live_text import LiveText
 from app.widgets.scope import ScopePlot
 from hw.machine import Joint
@@ -99,8 +100,8 @@ class ScopeTab(TabPage, can_focus=True):
     show_duty: reactive[bool] = reactive(True)
     fixed_y: reactive[bool] = reactive(False)
 
-    def __init__(self, *, id: str | None = None) -> None:
-        super().__init__(id=id)
+    def __init__(self, desk: Desk, *, id: str | None = None) -> None:
+        super().__init__(desk, id=id)
         self.selected = [True] * 6
         self.paused_at = 0.0
         self.pan_s = 0.0
@@ -144,7 +145,7 @@ class ScopeTab(TabPage, can_focus=True):
     def action_pause(self) -> None:
         self.paused = not self.paused
         self.pan_s = 0.0
-        self.paused_at = self.servodesk.history.latest_time
+        self.paused_at = self.desk.history.latest_time
         self.refresh_bindings()
         self.refresh_live(force=True)
 
@@ -187,7 +188,7 @@ class ScopeTab(TabPage, can_focus=True):
         if self.paused and not force:
             return
         started = time.perf_counter()
-        history = self.servodesk.history
+        history = self.desk.history
         end = self.paused_at - self.pan_s if self.paused else None
         window = history.window(self.window_s, end)
         t_end = (end if end is not None else

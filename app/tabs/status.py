@@ -111,7 +111,7 @@ class StatusTab(TabPage):
         for name, value in status.link.items():
             bad = value and name not in ("frames_tx", "frames_rx")
             table.add_row(name.replace("_", " "), Text(str(value), "bold yellow" if bad else ""))
-        return Group(Text(f"link ({self.servodesk.backend})", "bold"), table)
+        return Group(Text(f"link ({self.desk.backend})", "bold"), table)
 
 
 def _share(busy_s: float, elapsed_s: float) -> str:

@@ -1,20 +1,20 @@
-"""What every tab shares: access to the app's client and machine, and a refresh timer that
-runs only while the tab is visible (hidden tabs cost nothing, and Pilot sees the app idle)."""
+"""What every tab shares: the desk the app hands down (machine, kinematics, data directory,
+history) and the client once the controller is up, and a refresh timer that runs only while
+the tab is visible (hidden tabs cost nothing, and Pilot sees the app idle)."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, ClassVar
+from collections.abc import Callable
+from typing import ClassVar
 
 from textual.containers import Container
 from textual.timer import Timer
 
+from app.desk import Desk
 from control.client import ControlClient, ControllerError
 from control.layout import Status
 from hw.machine import Machine
 from kinematics.unimate import Unimate2000B
-
-if TYPE_CHECKING:
-    from app.tui import ServodeskApp
 
 
 class TabPage(Container):
@@ -23,27 +23,27 @@ class TabPage(Container):
     REFRESH_HZ: ClassVar[float] = 0.0
     TITLE: ClassVar[str] = ""
 
-    def __init__(self, *, id: str | None = None) -> None:
+    def __init__(self, desk: Desk, *, id: str | None = None) -> None:
         super().__init__(id=id)
+        self.desk = desk
+        self.connection: ControlClient | None = None  # kept after a death: its sets still save
+        self.client_problem = ""
         self._timer: Timer | None = None
         self.visible_now = False
 
     @property
-    def servodesk(self) -> ServodeskApp:
-        return self.app  # type: ignore[return-value]
-
-    @property
     def machine(self) -> Machine:
-        return self.servodesk.machine
+        return self.desk.machine
 
     @property
     def model(self) -> Unimate2000B | None:
         """The machine's closed-form kinematics, None for a machine without (the rig)."""
-        return self.servodesk.model
+        return self.desk.model
 
     @property
     def client(self) -> ControlClient | None:
-        client = self.servodesk.client
+        """The client while the controller is alive, else None."""
+        client = self.connection
         return client if client is not None and not client.dead else None
 
     def status(self) -> Status | None:
@@ -56,17 +56,16 @@ class TabPage(Container):
         except (ValueError, TimeoutError):  # closed while we asked
             return None
 
-    def command(self, what: str, method: str, *args: object) -> bool:
-        """Call ``client.<method>(*args)``; if the controller cannot take it, say why and what
-        to do instead of raising."""
+    def command(self, what: str, call: Callable[[ControlClient], object]) -> bool:
+        """``call(client)`` (``ControlClient.hold``, ``lambda client: client.jog(duty)``); if
+        the controller cannot take it, say why and what to do instead of raising."""
         client = self.client
         if client is None:
             self.notify(f"{what}: the controller is not running — "
-                        + (self.servodesk.client_problem or "wait for it to start"),
-                        severity="error")
+                        + (self.client_problem or "wait for it to start"), severity="error")
             return False
         try:
-            getattr(client, method)(*args)
+            call(client)
         except (ControllerError, ValueError, OSError) as exc:
             self.notify(f"{what}: {exc}", severity="error")
             return False
@@ -92,8 +91,13 @@ class TabPage(Container):
         if focused is not None and self in focused.ancestors_with_self:
             self.app.set_focus(None)
 
-    def client_ready(self) -> None:
-        """The controller is up (called once)."""
+    def client_ready(self, client: ControlClient) -> None:
+        """The controller is up (called once, by the app)."""
+        self.connection = client
+
+    def client_down(self, problem: str) -> None:
+        """The controller did not start, or died: ``problem`` says what to do."""
+        self.client_problem = problem
 
     def refresh_live(self) -> None:
         """Redraw from the controller's status (only while visible)."""

@@ -9,16 +9,18 @@ the rig's observer controller of section 3.6.2) and any loaded from a file.
 from __future__ import annotations
 
 import math
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from rich.text import Text
 from textual import work
 from textual.app import ComposeResult
 from textual.containers import Horizontal
+from textual.message import Message
 from textual.widgets import Button, DataTable, Input, Label, RadioButton, RadioSet, Select, Static
 
 from app.coefficient_files import CoefficientFileError, load_coefficients, save_coefficients
+from app.desk import Desk
 from app.tabs.tab import TabPage
 from app.widgets.dialogs import EditValueScreen
 from control.layout import MAX_TAPS, Mode
@@ -75,8 +77,15 @@ class TuningTab(TabPage):
     TITLE = "Tuning"
     REFRESH_HZ = 2.0
 
-    def __init__(self, *, id: str | None = None) -> None:
-        super().__init__(id=id)
+    @dataclass
+    class Loaded(Message, bubble=False):
+        """Coefficient sets read from ``path`` (from the file worker)."""
+
+        path: Path
+        sets: dict[str, Coefficients]
+
+    def __init__(self, desk: Desk, *, id: str | None = None) -> None:
+        super().__init__(desk, id=id)
         self.which = "track"
         self.presets: dict[str, Coefficients] = {}
 
@@ -105,7 +114,7 @@ class TuningTab(TabPage):
         common = self.query_one("#tuning-common", DataTable)
         common.add_columns(*COMMON_COLUMNS)
         self.query_one("#tuning-path", Input).value = str(
-            self.servodesk.data_dir.parent / f"{self.machine.name}-coefficients.toml")
+            self.desk.data_dir.parent / f"{self.machine.name}-coefficients.toml")
         self._fill()
 
     def focus_main(self) -> None:
@@ -117,7 +126,7 @@ class TuningTab(TabPage):
 
     @property
     def current(self) -> Coefficients:
-        client = self.servodesk.client
+        client = self.connection
         if client is not None:
             return client.coefficients[self.which]
         return self.machine.coefficients[self.which]
@@ -172,7 +181,8 @@ class TuningTab(TabPage):
             self.save(self.query_one("#tuning-path", Input).value)
 
     def apply(self, coefficients: Coefficients, what: str) -> None:
-        if self.command(f"apply {what}", "set_coefficients", self.which, coefficients):
+        if self.command(f"apply {what}",
+                        lambda client: client.set_coefficients(self.which, coefficients)):
             self.notify(f"{what} applied to the {self.which} set")
         self._fill()
 
@@ -235,12 +245,12 @@ class TuningTab(TabPage):
         try:
             sets = load_coefficients(path, self.machine)
         except CoefficientFileError as exc:
-            self.servodesk.later(self.notify, f"{exc}. Fix the file or choose another.",
-                                      severity="error", timeout=10)
+            self.notify(f"{exc}. Fix the file or choose another.", severity="error", timeout=10)
             return
-        self.servodesk.later(self._loaded, Path(path), sets)
+        self.post_message(self.Loaded(Path(path), sets))
 
-    def _loaded(self, path: Path, sets: dict[str, Coefficients]) -> None:
+    def on_tuning_tab_loaded(self, message: Loaded) -> None:
+        path, sets = message.path, message.sets
         for name, c in sets.items():
             self.presets[f"{path.stem}:{name}"] = c
         select = self.query_one("#tuning-preset", Select)
@@ -251,13 +261,12 @@ class TuningTab(TabPage):
 
     @work(thread=True, group="tuning-file")
     def save(self, path: str) -> None:
-        client = self.servodesk.client
+        client = self.connection
         sets = dict(client.coefficients) if client is not None else {
             "hold": self.machine.hold, "track": self.machine.track}
         try:
             written = save_coefficients(path, sets, self.machine)
         except CoefficientFileError as exc:
-            self.servodesk.later(self.notify, f"{exc}. Choose another path.",
-                                      severity="error", timeout=10)
+            self.notify(f"{exc}. Choose another path.", severity="error", timeout=10)
             return
-        self.servodesk.later(self.notify, f"saved the hold and track sets to {written}")
+        self.notify(f"saved the hold and track sets to {written}")

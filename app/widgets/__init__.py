@@ -1,2 +1,2 @@
-"""Widgets and drawing shared by the tabs: header and E-stop lamp, scope plot and its braille
-raster, limit bar, validated fields, dialogs, run plots."""
+"""Widgets shared by the tabs: header and E-stop lamp, scope plot, limit bar, live text,
+validated fields, dialogs."""

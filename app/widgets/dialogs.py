@@ -7,7 +7,7 @@ its Cancel button; the E-stop also closes any dialog that is open.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import ClassVar
+from typing import ClassVar, TypeVar
 
 from textual.app import ComposeResult
 from textual.binding import Binding
@@ -16,8 +16,45 @@ from textual.screen import ModalScreen
 from textual.validation import ValidationResult, Validator
 from textual.widgets import Button, Input, Label, Static
 
+Answer = TypeVar("Answer")
 
-class ConfirmScreen(ModalScreen[bool]):
+
+class Dialog(ModalScreen[Answer]):
+    """A box in the middle of the screen: a title, a detail line, buttons."""
+
+    DEFAULT_CSS = """
+    Dialog {
+        align: center middle;
+    }
+    .dialog {
+        width: 72;
+        height: auto;
+        border: thick $error;
+        background: $surface;
+        padding: 1 2;
+    }
+    .dialog-title {
+        text-style: bold;
+        margin-bottom: 1;
+    }
+    .dialog-detail {
+        margin-bottom: 1;
+    }
+    .dialog-error {
+        height: auto;
+        color: $error;
+    }
+    .dialog-buttons {
+        height: auto;
+        margin-top: 1;
+    }
+    .dialog-buttons Button {
+        margin-right: 2;
+    }
+    """
+
+
+class ConfirmScreen(Dialog[bool]):
     """Ask once more before something that matters; ``y`` or Enter confirms, ``n`` cancels."""
 
     BINDINGS: ClassVar = [
@@ -26,7 +63,7 @@ class ConfirmScreen(ModalScreen[bool]):
     ]
 
     def __init__(self, question: str, detail: str, confirm: str = "Confirm") -> None:
-        super().__init__(classes="dialog-screen")
+        super().__init__()
         self.question = question
         self.detail = detail
         self.confirm = confirm
@@ -63,12 +100,12 @@ class _Check(Validator):
         return self.success()
 
 
-class EditValueScreen(ModalScreen[str | None]):
+class EditValueScreen(Dialog[str | None]):
     """Edit one value; ``parse`` raises ValueError with the fix. Returns the text, or None."""
 
     def __init__(self, title: str, value: str, parse: Callable[[str], object],
                  hint: str = "") -> None:
-        super().__init__(classes="dialog-screen")
+        super().__init__()
         self.title_text = title
         self.value = value
         self.parse = parse

@@ -1,5 +1,9 @@
 """Form fields validated as they are typed: a number with its unit, limits and an error
-line that says how to fix it; a joint chooser. Used by the Moves and Tuning tabs."""
+line that says how to fix it; a joint chooser. Used by the Moves and Identify tabs.
+
+Their rules are in ``fields.tcss`` beside this module, loaded by the app rather than kept
+in the classes: tabs lay out rows of their own with the same classes (``.field``,
+``.field-label``, ``.field-select``) and adjust them in their own stylesheets."""
 
 from __future__ import annotations
 

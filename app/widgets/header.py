@@ -38,6 +38,32 @@ class Link:
 class EStopLamp(LiveText):
     """A large lamp: green RUN, red E-STOP LATCHED, yellow STARTING, red CONTROLLER DOWN."""
 
+    DEFAULT_CSS = """
+    EStopLamp {
+        width: 30;
+        height: 3;
+        content-align: center middle;
+        text-align: center;
+        text-style: bold;
+    }
+    EStopLamp.lamp-run {
+        background: $success-darken-2;
+        color: $text;
+    }
+    EStopLamp.lamp-estop {
+        background: red;
+        color: white;
+    }
+    EStopLamp.lamp-starting {
+        background: $warning-darken-2;
+        color: $text;
+    }
+    EStopLamp.lamp-down {
+        background: darkred;
+        color: white;
+    }
+    """
+
     def light(self, title: str, hint: str, lamp: str) -> None:
         if not self.has_class(lamp):
             self.set_classes(lamp)
@@ -46,6 +72,20 @@ class EStopLamp(LiveText):
 
 class StatusHeader(Horizontal):
     """Machine, backend, link health, control mode, loop lateness and the E-stop lamp."""
+
+    DEFAULT_CSS = """
+    StatusHeader {
+        height: 3;
+        background: $panel;
+    }
+    #header-text {
+        width: 1fr;
+        padding: 0 1;
+    }
+    #header-text > * {
+        height: 1;
+    }
+    """
 
     status: reactive[Status | None] = reactive(None, always_update=True)
     link: reactive[Link] = reactive(Link)
@@ -149,6 +189,17 @@ class StatusHeader(Horizontal):
 
 class FaultBanner(Static):
     """The latest fault in plain words: what happened, and what to do. Hidden when clear."""
+
+    DEFAULT_CSS = """
+    FaultBanner {
+        height: auto;
+        max-height: 4;
+        padding: 0 1;
+        background: $error-darken-2;
+        color: white;
+        text-style: bold;
+    }
+    """
 
     message: reactive[str] = reactive("")
 

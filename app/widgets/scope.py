@@ -12,7 +12,7 @@ from textual.geometry import Size
 from textual.strip import Strip
 from textual.widget import Widget
 
-from app.widgets.braille import Trace, render
+from app.plotting.braille import Trace, render
 
 LABEL_WIDTH = 8
 AXIS_STYLE = Style(dim=True)

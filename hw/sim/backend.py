@@ -55,6 +55,7 @@ class SimBackend:
         self._a_now = [0.0] * n
         self.plant.actuator_positions(self._a_now)
         self._duty = [0.0] * n
+        self._switch_ns = 0  # when the last written duty reaches the valves
         self._estop = False
         self._open = [1.0] * n  # how much of its duty each valve opens to (jam_valve)
         self._lies: dict[int, tuple[int | None, int, int]] = {}  # joint: (frozen word, stuck)
@@ -102,9 +103,16 @@ class SimBackend:
 
         A new duty reaches the valve at the start of the next PWM period. While the
         E-stop is pressed it is remembered but the valves stay closed.
+
+        The plant is not integrated up to now first unless the last duty is due by then:
+        the new one is scheduled from the plant's own time, exactly where it would apply,
+        so a read and a write a few µs apart cost one plant step, not two.
         """
-        self._advance()
-        delay_s = (next_period_ns(self._t_ns, self._period_ns) - self._t_ns) * 1e-9
+        now = self.clock.now_ns()
+        if self._t_ns < self._switch_ns <= now or now - self._t_ns > self._step_ns:
+            self._advance()  # the last duty is due by now, or the plant is far behind
+        self._switch_ns = next_period_ns(now, self._period_ns)
+        delay_s = (self._switch_ns - self._t_ns) * 1e-9
         for i, actuator in enumerate(self.plant.actuators):
             duty = quantise_duty(duty_pct[i], self._resolution)
             self._duty[i] = duty
@@ -131,7 +139,8 @@ class SimBackend:
             for actuator in self.plant.actuators:
                 actuator.command(0.0, 0.0)
         else:
-            delay_s = (next_period_ns(self._t_ns, self._period_ns) - self._t_ns) * 1e-9
+            self._switch_ns = next_period_ns(self._t_ns, self._period_ns)
+            delay_s = (self._switch_ns - self._t_ns) * 1e-9
             for actuator, duty in zip(self.plant.actuators, self._duty, strict=True):
                 actuator.command(duty, delay_s)
 

@@ -1,6 +1,5 @@
-"""What the TUI reads and draws without a controller: coefficient files (the machine
-file's schema, errors naming file and key), path files (errors naming the line), the
-braille raster of the Scope tab and the decimation of the plotext plots."""
+"""What the TUI reads without a controller: coefficient files (the machine file's schema,
+errors naming file and key) and path files (errors naming the line)."""
 
 from __future__ import annotations
 
@@ -9,7 +8,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from rich.style import Style
 
 from app.coefficient_files import (
     CoefficientFileError,
@@ -18,8 +16,6 @@ from app.coefficient_files import (
     parse_coefficients,
     save_coefficients,
 )
-from app.widgets.braille import Trace, columns, render
-from app.widgets.run_plot import decimate, steady_velocity
 from control.motion.path_files import PathFileError, parse_csv, parse_tsv, read_path, resample
 from hw.machine import load_machine
 
@@ -134,40 +130,3 @@ def test_a_bad_csv_header_lists_the_joints(tmp_path: Path) -> None:
         read_path(path, UNIMATE, HERE)
     with pytest.raises(PathFileError, match="cannot read"):
         read_path(tmp_path / "missing.csv", UNIMATE, HERE)
-
-
-# -- drawing -------------------------------------------------------------------------------
-
-def test_the_braille_raster_joins_a_step_into_one_line() -> None:
-    t = np.linspace(0.0, 1.0, 1000)
-    y = np.where(t < 0.5, 0.0, 1.0)
-    low, high = columns(t, y, (0.0, 1.0), (0.0, 1.0), 40, 40)
-    assert (low <= high).all(), "every column drawn"
-    jump = int(np.argmax(high - low))
-    assert low[jump] == 0 and high[jump] == 39  # the vertical of the step is drawn
-    strips = render([Trace(t, y, Style(color="red"))], (0.0, 1.0), (-0.1, 1.1), 20, 5)
-    assert len(strips) == 5 and all(s.cell_length == 20 for s in strips)
-    assert all(0x2800 <= ord(c) <= 0x28FF or c == " " for s in strips for c in s.text)
-
-
-def test_the_braille_raster_leaves_nan_gaps_and_sparse_data_joined() -> None:
-    t = np.linspace(0.0, 1.0, 2000)
-    y = np.where((t > 0.4) & (t < 0.6), np.nan, t)
-    low, high = columns(t, y, (0.0, 1.0), (0.0, 1.0), 100, 40)
-    assert (low[45:55] > high[45:55]).all()  # nothing drawn where desired is NaN
-    sparse_t, sparse_y = np.array([0.0, 1.0]), np.array([0.0, 1.0])
-    low, high = columns(sparse_t, sparse_y, (0.0, 1.0), (0.0, 1.0), 50, 50)
-    assert (low <= high).all()
-
-
-def test_decimation_keeps_every_peak() -> None:
-    t = np.linspace(0.0, 1.0, 20_000)
-    y = np.sin(40 * t)
-    y[12_345] = 5.0
-    tt, yy = decimate(t, y, 400)
-    assert len(tt) <= 400 and yy.max() == 5.0 and yy.min() == pytest.approx(-1.0, abs=1e-3)
-
-
-def test_steady_velocity_is_plotdatas_second_half_slope() -> None:
-    t = np.linspace(0.0, 2.0, 201)
-    assert steady_velocity(t, 3.0 * t + 1.0) == pytest.approx(3.0)

@@ -1,4 +1,5 @@
-"""Moves tab: a step form runs a move on the simulator and its run appears in Runs; an
+"""Moves tab: a step form runs a move on the simulator and its run appears in Runs; Abort
+holds, and a run the recorder could not save is kept in Runs and saved elsewhere; an
 invalid field shows its error and runs nothing; the end-point form lists every inverse
 solution; the rig initialises and runs its sequence of positions and dwell times; a
 path file is played, and a malformed one is reported with its line."""
@@ -9,9 +10,10 @@ import asyncio
 from pathlib import Path
 
 import numpy as np
-from textual.widgets import DataTable, OptionList, Switch, TextArea
+from textual.widgets import DataTable, Input, OptionList, Switch, TextArea
 
-from app.tabs.moves import POSE_FIELDS, EndPointForm, MovesTab
+from app.tabs.end_point_form import POSE_FIELDS, EndPointForm
+from app.tabs.moves import MovesTab
 from app.tabs.runs import RunsTab
 from app.widgets.fields import NumberField
 from control.layout import Mode
@@ -74,6 +76,51 @@ def test_step_runs_on_the_simulator_and_appears_in_runs(tui, data_dir: Path) -> 
             await pilot.press("x")
             await tui.until(lambda: list((data_dir / "plots").glob("*.svg")), what="export")
             assert list((data_dir / "plots").glob("*.txt"))
+
+    asyncio.run(scenario())
+
+
+def test_abort_holds_and_an_unsaved_run_is_kept_and_saved_elsewhere(tui, tmp_path: Path
+                                                                     ) -> None:
+    blocker = tmp_path / "not-a-directory"  # the recorder cannot save under a file
+    blocker.write_text("a file where the data directory's parent should be\n")
+    tui.data_dir = blocker / "runs"
+    elsewhere = tmp_path / "elsewhere"
+
+    async def scenario() -> None:
+        app = tui.app(lockstep=False)  # real time: the move is still under way at Abort
+        async with app.run_test(size=SIZE) as pilot:
+            start = await tui.ready(app, pilot)
+            await pilot.press("f2")
+            await choose(app, pilot, "Step")
+            app.query_one("#form-step JointField Select").value = 1  # Rotate
+            field(app, "step", "target").text = f"{start.position[1] + 20.0:.1f}"
+            field(app, "step", "duration").text = "20"
+            tab = app.query_one(MovesTab)
+            await pilot.press("ctrl+s")
+            await tui.until(lambda: tab.handle is not None, what="the move to start")
+            await tui.until(lambda: app.client.status().move_done > 0, what="the move under way")
+            await pilot.click("#move-abort")
+            await tui.until(lambda: tab.last_result is not None, timeout=20,
+                            what="the aborted move to end")
+            result = tab.last_result
+            assert result.status == "aborted by operator" and result.files is None, result.status
+            assert "Not a directory" in (result.save_error or ""), result.save_error
+            assert app.client.status().mode == Mode.HOLD
+            await pilot.press("f6")
+            runs = app.query_one(RunsTab)
+            await tui.until(lambda: runs.unsaved, what="the unsaved run kept")
+            assert runs.unsaved[0] is result.run
+            await tui.until(lambda: app.query_one("#runs-table", DataTable).row_count,
+                            what="the unsaved run listed")
+            runs.open_latest()
+            await tui.until(lambda: runs.run is result.run, what="the unsaved run opened")
+            app.query_one("#runs-save-dir", Input).value = str(elsewhere)
+            save = app.query_one("#runs-save-button")
+            await tui.until(lambda: save.region.height, what="the save button laid out")
+            await pilot.click(save)
+            await tui.until(lambda: list(elsewhere.glob("*-step.json")), what="saved elsewhere")
+            await tui.until(lambda: not runs.unsaved, what="no longer listed as unsaved")
 
     asyncio.run(scenario())
 

@@ -1,0 +1,107 @@
+"""The Moves tab's end point form: an end-effector pose (section 4.3), every inverse solution
+inside the limits listed nearest first, and a joint-space ramp to the one picked."""
+
+from __future__ import annotations
+
+import numpy as np
+from rich.text import Text
+from textual import on
+from textual.app import ComposeResult
+from textual.widgets import Button, DataTable, Static
+
+from app.tabs.move_forms import MoveForm
+from app.widgets.fields import FieldError, NumberCheck, NumberField, seconds_check
+from control.motion import moves
+from control.motion.plan import APPROACH_SPEED, MovePlan, moving_joints
+from hw.machine import Machine
+from kinematics import Unreachable
+from kinematics.unimate import Unimate2000B
+
+POSE_FIELDS = (("x", "mm", "x"), ("y", "mm", "y"), ("z", "mm", "z"), ("γ", "°", "gamma"),
+               ("β", "°", "beta"), ("α", "°", "alpha"))
+
+
+class EndPointForm(MoveForm):
+    KIND = "end_point"
+    LABEL = "End point"
+    HELP = ("End-effector position and X-Y-Z fixed angles (section 4.3); every inverse "
+            "solution inside the limits is listed, nearest first — pick another with the "
+            "cursor.")
+
+    def __init__(self, machine: Machine, model: Unimate2000B | None) -> None:
+        super().__init__(machine, model)
+        self.solutions = np.zeros((0, machine.n_joints))
+        self.problem = ""
+
+    def fields(self) -> ComposeResult:
+        for name, unit, key in POSE_FIELDS:
+            yield NumberField(name, NumberCheck(name, unit), id=f"pose-{key}")
+        yield NumberField("ramp time (blank: auto)", seconds_check("ramp time", optional=True),
+                          id="ramp_time")
+        yield Button("Pose from the current position", id="pose-current")
+        yield Static("", id="ik-state")
+        yield DataTable(id="ik-solutions", cursor_type="row", zebra_stripes=True)
+
+    def on_mount(self) -> None:
+        table = self.query_one("#ik-solutions", DataTable)
+        table.add_columns("#", *[f"{j.name} {j.symbol}" for j in self.machine.joints])
+
+    def fill(self, current: np.ndarray) -> None:
+        pose = self.model.pose(current)
+        for (_, _, key), value in zip(POSE_FIELDS, pose, strict=True):
+            f = self.field(f"pose-{key}")
+            f.input.placeholder = f"{value:.3f}"
+            if not f.text:
+                f.text = f"{value:.3f}"
+
+    @on(Button.Pressed, "#pose-current")
+    def _pose_current(self, event: Button.Pressed) -> None:
+        event.stop()
+        pose = self.model.pose(self.here)
+        for (_, _, key), value in zip(POSE_FIELDS, pose, strict=True):
+            self.field(f"pose-{key}").text = f"{value:.3f}"
+
+    def pose(self) -> np.ndarray:
+        return np.array([self.field(f"pose-{key}").value() for _, _, key in POSE_FIELDS])
+
+    def solve(self, current: np.ndarray) -> None:
+        """Every solution of the typed pose, nearest ``current`` first, into the table."""
+        table = self.query_one("#ik-solutions", DataTable)
+        state = self.query_one("#ik-state", Static)
+        try:
+            pose = self.pose()
+            self.solutions = self.model.inverse(pose, near=current)
+            self.problem = ""
+        except FieldError as exc:
+            self.solutions, self.problem = np.zeros((0, 6)), str(exc)
+        except Unreachable as exc:
+            self.solutions = np.zeros((0, 6))
+            self.problem = (f"unreachable: {exc}. Change the position or the angles "
+                            "(the current pose is always reachable: press the button above).")
+        chosen = table.cursor_row if table.row_count == len(self.solutions) else 0
+        table.clear()
+        for k, q in enumerate(self.solutions):
+            table.add_row(str(k + 1), *[f"{v:.2f}" for v in q], key=str(k))
+        if len(self.solutions):
+            table.move_cursor(row=min(chosen, len(self.solutions) - 1))
+            state.update(Text(f"{len(self.solutions)} solution(s) inside the limits; "
+                              "row 1 is nearest the current position", "green"))
+        else:
+            state.update(Text(self.problem, "bold red"))
+
+    def plan(self, current: np.ndarray, dt: float) -> MovePlan:
+        self.solve(current)
+        if not len(self.solutions):
+            raise ValueError(self.problem or "no solution")
+        k = self.query_one("#ik-solutions", DataTable).cursor_row
+        q = self.solutions[max(0, min(k, len(self.solutions) - 1))]
+        ramp_time = self.field("ramp_time").value()
+        if ramp_time is None:
+            speeds = np.array([APPROACH_SPEED * j.max_speed for j in self.machine.joints])
+            ramp_time = max(0.5, float(np.max(np.abs(q - current) / speeds)))
+        path = moves.ramp(current, q, ramp_time, dt=dt, machine=self.machine)
+        return MovePlan("end_point", f"end point, solution {k + 1}", path,
+                        meta={"pose": self.pose().tolist(), "solution": q.tolist(),
+                              "solution_index": int(k), "ramp_time": ramp_time},
+                        moving=moving_joints(path),
+                        note=f"joint-space ramp to solution {k + 1} in {ramp_time:.2f} s")

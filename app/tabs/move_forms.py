@@ -1,0 +1,309 @@
+"""The Moves tab's forms: the thesis's movement menus (option.c, function.c; sections 3.5 and
+5.2). A form validates its fields as they are typed and turns them into a ``MovePlan``
+(``control.motion.plan``) from where the joints are.
+
+Here the joint-space moves: single step, multi-step (all six joints; on the rig, the
+sequence of positions and dwell times of function.c MultiStep), ramp, sine, and the rig's
+set pulse (open loop) and initialise. The end point form is in ``end_point_form``, the path
+file and via points forms in ``path_forms``.
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import numpy as np
+from textual import on
+from textual.app import ComposeResult
+from textual.containers import Horizontal, VerticalScroll
+from textual.message import Message
+from textual.widgets import Button, Input, Select, Static
+
+from app.widgets.fields import (
+    FieldError,
+    JointField,
+    NumberCheck,
+    NumberField,
+    position_check,
+    seconds_check,
+    set_position_limits,
+)
+from control.motion import moves
+from control.motion.plan import MovePlan, moving_joints
+from hw.machine import Machine
+from kinematics.unimate import Unimate2000B
+
+MAX_SEQUENCE = 10
+
+
+def mid_range(machine: Machine) -> np.ndarray:
+    """``(J,)``: the middle of every joint's range, where a form takes the joints to be
+    before the controller reports."""
+    return np.array([(j.lower + j.upper) / 2 for j in machine.joints])
+
+
+class MoveForm(VerticalScroll):
+    """One kind of move: fields, and ``plan`` from them and the current position.
+
+    ``here`` is where the joints are, set by the tab as the controller reports it (the
+    middle of every joint's range until then); a form reads it, never the tab.
+    """
+
+    KIND: ClassVar[str] = ""
+    LABEL: ClassVar[str] = ""
+    HELP: ClassVar[str] = ""
+
+    class PreviewWanted(Message):
+        """The form's plan may have changed (not by a typed field): preview it again."""
+
+    def __init__(self, machine: Machine, model: Unimate2000B | None) -> None:
+        super().__init__(id=f"form-{self.KIND}", classes="move-form")
+        self.machine = machine
+        self.model = model
+        self.here = mid_range(machine)
+
+    def compose(self) -> ComposeResult:
+        yield Static(self.help_text(), classes="form-help")
+        yield from self.fields()
+
+    def help_text(self) -> str:
+        return self.HELP
+
+    def fields(self) -> ComposeResult:
+        yield from ()
+
+    def plan(self, current: np.ndarray, dt: float) -> MovePlan:
+        raise NotImplementedError
+
+    def fill(self, current: np.ndarray) -> None:
+        """Show the current position as the defaults (placeholders)."""
+
+    def field(self, id: str) -> NumberField:
+        return self.query_one(f"#{id}", NumberField)
+
+    def joint(self) -> int:
+        return self.query_one(JointField).index if self.machine.n_joints > 1 else 0
+
+    def start_vector(self, current: np.ndarray, j: int) -> np.ndarray:
+        start = current.copy()
+        value = self.field("start").value()
+        if value is not None:
+            start[j] = value
+        return start
+
+    def joint_fields(self, what: tuple[str, ...]) -> ComposeResult:
+        """A joint chooser (unless there is one joint) and position fields for it."""
+        m = self.machine
+        if m.n_joints > 1:
+            yield JointField("joint", m.joints)
+        j0 = m.joints[0]
+        for name in what:
+            optional = name == "start"
+            label = "start (blank: here)" if optional else name
+            yield NumberField(label, position_check(j0, m, name, optional=optional), id=name)
+
+    @on(Select.Changed)
+    def _joint_changed(self, event: Select.Changed) -> None:
+        if isinstance(event.select.parent, JointField):
+            joint = self.machine.joints[self.joint()]
+            for f in self.query(NumberField):
+                if f.id in ("start", "target", "end"):
+                    set_position_limits(f, joint, self.machine, f.id)
+            self.fill(self.here)
+
+
+class StepForm(MoveForm):
+    KIND = "step"
+    LABEL = "Step"
+    HELP = ("One joint steps to a target; the others hold (option.c SingleStepInput; the "
+            "rig's Step from a start to an end point).")
+
+    def fields(self) -> ComposeResult:
+        yield from self.joint_fields(("start", "target"))
+        yield NumberField("duration (blank: auto)", seconds_check("duration", optional=True),
+                          id="duration")
+
+    def fill(self, current: np.ndarray) -> None:
+        q = current[self.joint()]
+        self.field("start").input.placeholder = f"{q:.2f}"
+        if not self.field("target").text:
+            self.field("target").input.placeholder = f"{q:.2f}"
+
+    def plan(self, current: np.ndarray, dt: float) -> MovePlan:
+        j = self.joint()
+        start = self.start_vector(current, j)
+        target = self.field("target").value()
+        duration = self.field("duration").value()
+        path = moves.step(start, j, target, duration, dt=dt, machine=self.machine)
+        joint = self.machine.joints[j]
+        return MovePlan("step", f"step {joint.name} to {target:g}{joint.symbol}", path,
+                        meta={"joint": joint.name, "start": float(start[j]),
+                              "target": float(target)}, moving=(j,))
+
+
+class MultiStepForm(MoveForm):
+    KIND = "multi_step"
+    LABEL = "Multi-step"
+    HELP = "Every joint steps to its own target at once (option.c MultiStepInput)."
+
+    def fields(self) -> ComposeResult:
+        for j, joint in enumerate(self.machine.joints):
+            yield NumberField(joint.name, position_check(joint, self.machine, "target"),
+                              id=f"target{j}")
+        yield NumberField("duration (blank: auto)", seconds_check("duration", optional=True),
+                          id="duration")
+        yield Button("Targets from the current position", id="from-current")
+
+    def fill(self, current: np.ndarray) -> None:
+        for j in range(self.machine.n_joints):
+            f = self.field(f"target{j}")
+            f.input.placeholder = f"{current[j]:.2f}"
+
+    @on(Button.Pressed, "#from-current")
+    def _from_current(self, event: Button.Pressed) -> None:
+        event.stop()
+        for j in range(self.machine.n_joints):
+            self.field(f"target{j}").text = f"{self.here[j]:.2f}"
+
+    def plan(self, current: np.ndarray, dt: float) -> MovePlan:
+        targets = [self.field(f"target{j}").value() for j in range(self.machine.n_joints)]
+        duration = self.field("duration").value()
+        path = moves.multi_step(current, targets, duration, dt=dt, machine=self.machine)
+        return MovePlan("multi_step", "multi-step", path,
+                        meta={"targets": [float(t) for t in targets]},
+                        moving=moving_joints(path))
+
+
+class SequenceForm(MoveForm):
+    KIND = "multi_step"
+    LABEL = "Multi-step"
+    HELP = ("Step to each position in turn and stay there for its dwell time "
+            "(function.c MultiStep).")
+
+    def fields(self) -> ComposeResult:
+        joint = self.machine.joints[0]
+        yield NumberField("steps", NumberCheck("number of steps", "", 1, MAX_SEQUENCE,
+                                               integer=True), "3", id="count")
+        for i in range(MAX_SEQUENCE):
+            with Horizontal(classes="sequence-row", id=f"row{i}"):
+                yield NumberField(f"{i + 1}. position", position_check(joint, self.machine,
+                                                                      f"step {i + 1} position"),
+                                  id=f"pos{i}")
+                yield NumberField("dwell", seconds_check(f"step {i + 1} dwell"), "2",
+                                  id=f"dwell{i}")
+
+    def on_mount(self) -> None:
+        self._rows(3)
+
+    @on(Input.Changed, "#count Input")
+    def _count_changed(self, event: Input.Changed) -> None:
+        try:
+            count = int(self.field("count").check.parse(event.value) or 1)
+        except FieldError:
+            return
+        self._rows(count)
+
+    def _rows(self, count: int) -> None:
+        for i in range(MAX_SEQUENCE):
+            self.query_one(f"#row{i}").display = i < count
+
+    def plan(self, current: np.ndarray, dt: float) -> MovePlan:
+        count = int(self.field("count").value() or 1)
+        steps = [(self.field(f"pos{i}").value(), self.field(f"dwell{i}").value())
+                 for i in range(count)]
+        path = moves.rig_sequence(current, steps, dt=dt, machine=self.machine)
+        return MovePlan("multi_step", f"sequence of {count} steps", path,
+                        meta={"steps": [[float(p), float(d)] for p, d in steps]},
+                        moving=(0,))
+
+
+class StartEndForm(MoveForm):
+    """A one-joint move between a start (blank: where the joint is) and an end field."""
+
+    def fill(self, current: np.ndarray) -> None:
+        self.field("start").input.placeholder = f"{current[self.joint()]:.2f}"
+
+    def ends(self, current: np.ndarray) -> tuple[int, np.ndarray, np.ndarray]:
+        """The joint, and the start and end joint vectors (the others stay where they are)."""
+        j = self.joint()
+        start = self.start_vector(current, j)
+        end = start.copy()
+        end[j] = self.field("end").value()
+        return j, start, end
+
+
+class RampForm(StartEndForm):
+    KIND = "ramp"
+    LABEL = "Ramp"
+    HELP = "From a start to an end position at constant speed, then hold (function.c RampInput)."
+
+    def fields(self) -> ComposeResult:
+        yield from self.joint_fields(("start", "end"))
+        yield NumberField("ramp time", seconds_check("ramp time"), "2", id="ramp_time")
+        yield NumberField("total (blank: auto)", seconds_check("total duration", optional=True),
+                          id="total")
+
+    def plan(self, current: np.ndarray, dt: float) -> MovePlan:
+        j, start, end = self.ends(current)
+        ramp_time = self.field("ramp_time").value()
+        path = moves.ramp(start, end, ramp_time, self.field("total").value(), dt=dt,
+                          machine=self.machine)
+        joint = self.machine.joints[j]
+        return MovePlan("ramp", f"ramp {joint.name} to {end[j]:g}{joint.symbol}", path,
+                        meta={"joint": joint.name, "start": float(start[j]),
+                              "end": float(end[j]), "ramp_time": ramp_time},
+                        moving=(j,))
+
+
+class SineForm(StartEndForm):
+    KIND = "sine"
+    LABEL = "Sine"
+    HELP = ("start + (end − start)/2 · (1 − cos 2πt/T): at the end at T/2, back at T "
+            "(function.c Sinewave).")
+
+    def fields(self) -> ComposeResult:
+        yield from self.joint_fields(("start", "end"))
+        yield NumberField("period T", seconds_check("period"), "4", id="period")
+        yield NumberField("duration", seconds_check("duration"), "8", id="duration")
+
+    def plan(self, current: np.ndarray, dt: float) -> MovePlan:
+        j, start, end = self.ends(current)
+        period, duration = self.field("period").value(), self.field("duration").value()
+        path = moves.sine(start, end, period, duration, dt=dt, machine=self.machine)
+        joint = self.machine.joints[j]
+        return MovePlan("sine", f"sine {joint.name} {start[j]:g}↔{end[j]:g}{joint.symbol}",
+                        path, meta={"joint": joint.name, "start": float(start[j]),
+                                    "end": float(end[j]), "period": period,
+                                    "duration": duration},
+                        moving=(j,))
+
+
+class PulseForm(MoveForm):
+    KIND = "set_pulse"
+    LABEL = "Set pulse"
+    HELP = ("Open loop: a constant duty for a time, recorded (function.c SetPulse). Positive "
+            "drives the ram up. The controller stops it at a limit.")
+
+    def fields(self) -> ComposeResult:
+        yield NumberField("duty", NumberCheck("duty", " %", -100, 100, nonzero=True), "20",
+                          id="duty")
+        yield NumberField("duration", seconds_check("duration", high=60), "1", id="duration")
+
+    def plan(self, current: np.ndarray, dt: float) -> MovePlan:
+        duty, duration = self.field("duty").value(), self.field("duration").value()
+        samples = round(duration / dt) + 1
+        profile = np.zeros((samples, self.machine.n_joints))
+        profile[:, 0] = duty
+        return MovePlan("set_pulse", f"pulse {duty:g} % for {duration:g} s", profile=profile,
+                        meta={"duty": duty, "duration": duration}, moving=(0,))
+
+
+class InitialiseForm(MoveForm):
+    KIND = "initialise"
+    LABEL = "Initialise"
+    HELP = ("Drive the ram down at 20 % until it rests on the bottom stop, then zero the "
+            "encoder (section 3.5; function.c Initialise). Needed before any closed-loop move "
+            "on the rig.")
+
+    def plan(self, current: np.ndarray, dt: float) -> MovePlan:
+        return MovePlan("initialise", "initialise")

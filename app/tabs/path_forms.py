@@ -1,0 +1,181 @@
+"""The Moves tab's path forms: a path from a file (the thesis's time/position data files, or
+a CSV of joint columns), and a smooth path through via points, in joint space or on the
+tool's x y z with γ and β held (section 6.4)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from rich.text import Text
+from textual import on, work
+from textual.app import ComposeResult
+from textual.containers import Horizontal
+from textual.message import Message
+from textual.widgets import Button, Input, Label, Static, Switch, TextArea
+
+from app.tabs.move_forms import MoveForm
+from app.widgets.fields import NumberCheck, NumberField
+from control.motion.path_files import PathFileError, PathPoints, read_path, resample
+from control.motion.plan import MovePlan, moving_joints
+from control.motion.robot_model import has_unimate_model
+from hw.machine import Machine
+from kinematics.unimate import Unimate2000B
+
+
+class PathFileForm(MoveForm):
+    KIND = "path"
+    LABEL = "Path file"
+
+    def help_text(self) -> str:
+        if self.machine.n_joints == 1:
+            return ("A time/position TSV as the thesis's data files (time<TAB>position per "
+                    "line), or a CSV with a header t,Ram. Seconds and mm.")
+        return ("A CSV with a header of joint names (t,In/Out,Rotate,…; a joint left out "
+                "stays where it is) or a TSV of time then six positions. Seconds, mm, deg.")
+
+    @dataclass
+    class Loaded(Message, bubble=False):
+        """The file ``source`` was read (from the loading worker)."""
+
+        points: PathPoints
+        source: str
+
+    @dataclass
+    class Refused(Message, bubble=False):
+        """The file could not be used; ``problem`` names the line (from the loading worker)."""
+
+        problem: str
+
+    def __init__(self, machine: Machine, model: Unimate2000B | None) -> None:
+        super().__init__(machine, model)
+        self.points: PathPoints | None = None
+        self.loaded_from = ""
+
+    def fields(self) -> ComposeResult:
+        with Horizontal(classes="field"):
+            yield Label("file", classes="field-label")
+            yield Input(placeholder="path.csv or path.tsv", id="path-file", compact=True)
+        yield Static("", id="path-state")
+
+    @on(Input.Submitted, "#path-file")
+    def _submitted(self, event: Input.Submitted) -> None:
+        event.stop()
+        self.load(event.value, self.here)
+
+    @work(thread=True, exclusive=True, group="path-file")
+    def load(self, text: str, current: np.ndarray) -> None:
+        try:
+            points = read_path(text, self.machine, tuple(current))
+        except PathFileError as exc:
+            self.post_message(self.Refused(str(exc)))
+            return
+        self.post_message(self.Loaded(points, text))
+
+    def on_path_file_form_refused(self, message: Refused) -> None:
+        self.points = None
+        self.loaded_from = ""
+        self.query_one("#path-state", Static).update(Text(
+            f"{message.problem}. Fix the file and press Enter in the field again.", "bold red"))
+
+    def on_path_file_form_loaded(self, message: Loaded) -> None:
+        points = self.points = message.points
+        self.loaded_from = message.source
+        self.query_one("#path-state", Static).update(Text(
+            f"{len(points.t)} points over {points.duration:g} s from {message.source}", "green"))
+        self.post_message(self.PreviewWanted())
+
+    def plan(self, current: np.ndarray, dt: float) -> MovePlan:
+        wanted = self.query_one("#path-file", Input).value
+        if self.points is None or wanted != self.loaded_from:
+            raise ValueError("load the file first: type its path and press Enter")
+        path = resample(self.points, dt)
+        return MovePlan("path", f"path {Path(self.loaded_from).name}", path,
+                        meta={"file": str(Path(self.loaded_from).expanduser().resolve())},
+                        moving=moving_joints(path))
+
+
+class ViaPointsForm(MoveForm):
+    KIND = "via_points"
+    LABEL = "Via points"
+    HELP = ("A smooth path from here through points, one per line: every joint's position "
+            "(joint space, section 6.4's via points), or with Cartesian on the tool's x y z in "
+            "mm with γ and β held (section 6.4). Numbers separated by spaces or commas.")
+
+    def fields(self) -> ComposeResult:
+        if self.cartesian_allowed:
+            with Horizontal(classes="field"):
+                yield Label("Cartesian (x y z)", classes="field-label")
+                yield Switch(value=False, id="via-cartesian")
+        yield NumberField("speed fraction", NumberCheck("speed fraction", "", 0.0, 1.0,
+                                                        strict_low=True), "0.5", id="speed")
+        yield Label("points", classes="field-label")
+        yield TextArea(id="via-points", soft_wrap=False, show_line_numbers=True)
+        yield Button("Add the current position", id="via-add")
+
+    @property
+    def cartesian_allowed(self) -> bool:
+        return has_unimate_model(self.machine)
+
+    @property
+    def cartesian(self) -> bool:
+        return self.cartesian_allowed and self.query_one("#via-cartesian", Switch).value
+
+    def help_text(self) -> str:
+        names = " ".join(j.name for j in self.machine.joints)
+        return f"{self.HELP} Joint order: {names}."
+
+    def on_text_area_changed(self, event: TextArea.Changed) -> None:
+        self.post_message(self.PreviewWanted())
+
+    def on_switch_changed(self, event: Switch.Changed) -> None:
+        event.stop()
+        self.post_message(self.PreviewWanted())
+
+    @on(Button.Pressed, "#via-add")
+    def _add_current(self, event: Button.Pressed) -> None:
+        event.stop()
+        row = self.model.pose(self.here)[:3] if self.cartesian else self.here
+        area = self.query_one("#via-points", TextArea)
+        text = area.text.rstrip("\n")
+        area.text = (text + "\n" if text else "") + " ".join(f"{v:.2f}" for v in row)
+
+    def points(self) -> np.ndarray:
+        """The typed points ``(M, J)`` or ``(M, 3)``; ValueError naming the line and the fix."""
+        width = 3 if self.cartesian else self.machine.n_joints
+        what = "x y z (mm)" if self.cartesian else f"{width} joint positions"
+        rows = []
+        for n, line in enumerate(self.query_one("#via-points", TextArea).text.splitlines(), 1):
+            parts = line.replace(",", " ").split()
+            if not parts:
+                continue
+            try:
+                row = [float(p) for p in parts]
+            except ValueError:
+                raise ValueError(f"point line {n}: {line.strip()!r} is not numbers; "
+                                 f"type {what}") from None
+            if len(row) != width or not all(math.isfinite(v) for v in row):
+                raise ValueError(f"point line {n}: {len(row)} numbers; type {what}")
+            rows.append(row)
+        if not rows:
+            raise ValueError(f"type at least one point, one per line: {what}")
+        return np.array(rows)
+
+    def plan(self, current: np.ndarray, dt: float) -> MovePlan:
+        from control.motion.cartesian import cartesian_path  # scipy's splines: loaded on first use
+        from control.motion.trajectory import via_path
+
+        points = self.points()
+        fraction = self.field("speed").value()
+        meta = {"points": points.tolist(), "speed_fraction": fraction}
+        if self.cartesian:
+            path = cartesian_path(current, points, self.machine, dt=dt,
+                                  speed_fraction=fraction).q
+            return MovePlan("cartesian", f"Cartesian path through {len(points)} points", path,
+                            meta=meta, moving=moving_joints(path))
+        path = via_path(np.vstack([current, points]), self.machine, dt=dt,
+                        speed_fraction=fraction).q
+        return MovePlan("via_points", f"path through {len(points)} via points", path,
+                        meta=meta, moving=moving_joints(path))
