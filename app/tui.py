@@ -56,6 +56,11 @@ FAULT_ADVICE = {
     "ui_lost": "The UI missed its heartbeat; it is back now. Run the move again.",
     "crash": "Every valve is closed. Quit (^Q) and start servodesk again.",
     "initialise": "Check that the ram can move down freely, then run Initialise again (Moves).",
+    "path_row": "The move's data was damaged in shared memory; the robot holds. Run the move "
+                "again; if it repeats, report it.",
+    "overrun": "The controller could not keep its 1 ms ticks (a flooded link, a starved CPU); "
+               "the robot holds. Check the I/O board and what else runs, then run the move "
+               "again.",
 }
 
 
@@ -68,6 +73,9 @@ def estop_advice(reason: str, port: str | None) -> str:
         return f"Check the I/O board's cable and power{where}; when the link is back, press ^R."
     if reason.startswith("controller error"):
         return "A fault in the controller: quit (^Q), restart servodesk, and report the message."
+    if reason.startswith("feedback fault"):
+        return ("Do not trust that joint's reading: check its encoder, cable and valve and the "
+                "hydraulic supply before you press ^R.")
     return "Every valve is closed. When it is safe, press ^R to release (the joints then hold)."
 
 
