@@ -116,7 +116,8 @@ class MoveResult:
 
     @property
     def complete(self) -> bool:
-        return self.status == "complete"
+        """Every row was followed (a stall in it is listed in the run and its status)."""
+        return self.status == "complete" or self.status.startswith("complete, ")
 
     def summaries(self) -> list[tuple[str, StepSummary]]:
         """``(label, summary)`` per joint that moved, the approach left out
@@ -365,22 +366,25 @@ class ControlClient:
         if isinstance(record, MoveDone):
             handle = self._moves.get(record.move_id)
             if handle is not None:
-                self._finish(handle, record.status, record.saved)
+                self._finish(handle, record.status, record.saved, record.gaps)
         elif isinstance(record, Crash):
             event = Event(Fault("crash", -1, f"controller crashed: {record.message}"))
         self.events.put(event)
         if self.on_event is not None:
             self.on_event(event)
 
-    def _finish(self, handle: MoveHandle, status: str, saved: str | None) -> None:
-        """Turn a finished move's record into a saved run and free its segment."""
+    def _finish(self, handle: MoveHandle, status: str, saved: str | None,
+                gaps: tuple[tuple[float, float], ...] = ()) -> None:
+        """Turn a finished move's record into a saved run (its stalls, ``gaps`` of (t s,
+        length s), listed in its metadata) and free its segment."""
         if self._moves.pop(handle.move_id, None) is None:
             return
         buf = handle.segment.buf
         recorded = int.from_bytes(buf[MoveLayout.RECORDED_OFFSET:MoveLayout.RECORDED_OFFSET + 8],
                                   "little")
         record = handle.layout.record(buf)[:recorded].copy()
-        run = run_from_record(self.machine, handle.kind, status, handle.meta, record, self.dt)
+        meta = {**handle.meta, "gaps": [list(gap) for gap in gaps]} if gaps else handle.meta
+        run = run_from_record(self.machine, handle.kind, status, meta, record, self.dt)
         files, error = None, ""
         if saved:
             files = RunFiles.from_json(Path(saved))

@@ -14,7 +14,8 @@ class LatencyStats:
         self.period_ns = period_ns
         self.overrun_fraction = overrun_fraction
         self.window_start_ns = 0  # the current one-second window of the overload watch
-        self.window_overruns = 0
+        self.window_ticks = 0  # ticks in it, and how many of them ended past their deadline
+        self.window_late = 0
         self.late_ns = 0
         self.late_max_ns = 0
         self.late_min_ns = -1  # none yet
@@ -53,19 +54,20 @@ class LatencyStats:
         period = self.period_ns
         deadline += period
         behind = now - deadline
+        self.window_ticks += 1
         if behind > 0:
             missed = behind // period + 1
             self.overruns += missed
+            self.window_late += 1
             deadline += missed * period
         return deadline
 
     def overloaded(self, now: int) -> float:
-        """Once a second: the fraction of that second's periods overrun if it is more than
-        ``overrun_fraction`` (a board flooding the link, a starved CPU), else 0."""
+        """Once a second: the fraction of that second's ticks that overran if it is more than
+        ``overrun_fraction`` (a board flooding the link, a starved CPU), else 0. One long
+        stall is one late tick: the move goes on, and the stall is listed in its run."""
         if now - self.window_start_ns < 1_000_000_000:
             return 0.0
-        periods = (now - self.window_start_ns) / self.period_ns
-        fraction = (self.overruns - self.window_overruns) / periods if self.window_start_ns else 0
-        self.window_start_ns, self.window_overruns = now, self.overruns
+        fraction = self.window_late / self.window_ticks if self.window_ticks else 0.0
+        self.window_start_ns, self.window_ticks, self.window_late = now, 0, 0
         return fraction if fraction > self.overrun_fraction else 0.0
-

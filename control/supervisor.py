@@ -100,12 +100,15 @@ class Supervisor:
         self.open_since = [0] * self.n
 
     def speed(self, j: int, u: float) -> float:
-        """Signed actuator speed (units/ns) that output ``u`` (%) should give: none up to the
-        minimum PWM, ``max_speed`` at 100 % (the machine file's nominal line)."""
-        p = self.min_pwm[j][0 if u > 0.0 else 1]
-        over = abs(u) - p
+        """Signed actuator speed (units/ns) that output ``u`` (%) should at least give: the
+        machine file's nominal line (nothing up to the minimum PWM, ``max_speed`` at 100 %)
+        with the deadband widened by ``open_margin_pct``, since gravity and friction slow a
+        joint most near its deadband."""
+        up = u > 0.0
+        over = abs(u) - self.open_at[j][0 if up else 1]
         if over <= 0.0:
             return 0.0
+        p = self.min_pwm[j][0 if up else 1]
         return math.copysign(self.speed_per_ns[j] * over / (100.0 - p), u)
 
     def sample(self, now: int, actuator: list[float], position: list[float],

@@ -41,6 +41,7 @@ import numpy as np
 
 from control.commands import DUTY_KINDS, MOVE_KINDS, SMOOTH_KINDS, STEP_KINDS
 from hw.machine import Joint, Machine
+from hw.transmission import Transmission
 
 if TYPE_CHECKING:
     from control.motion.plan import MovePlan
@@ -76,7 +77,8 @@ def check_kind(kind: str, *, profile: bool) -> None:
 
 
 def check_rows(path: np.ndarray, machine: Machine, where: Where) -> None:
-    """Every kind: ``path (N, J)`` rows finite and inside every joint's limits."""
+    """Every kind: ``path (N, J)`` rows finite and inside every joint's limits, and every
+    actuator inside its stops (the Yaw reading includes Bend, its actuator does not)."""
     lower, upper = np.array(machine.lower), np.array(machine.upper)
     bad = np.argwhere(~np.isfinite(path) | (path < lower) | (path > upper))
     if len(bad):
@@ -85,6 +87,19 @@ def check_rows(path: np.ndarray, machine: Machine, where: Where) -> None:
             machine.joints[j].check_target(float(path[k, j]), machine.name)
         except ValueError as exc:
             raise MoveRefused(f"{exc} at {where(k)}", k) from None
+    transmission = Transmission(machine)
+    actuator = transmission.actuators_of(path)
+    beyond = np.argwhere((actuator < lower) | (actuator > upper))
+    if len(beyond):
+        k, j = (int(i) for i in beyond[0])
+        joint, partner = machine.joints[j], machine.joints[transmission.coupled_to[j]]
+        raise MoveRefused(
+            f"{joint.name} {path[k, j]:g}{joint.symbol} with {partner.name} at "
+            f"{path[k, transmission.coupled_to[j]]:g}{partner.symbol} puts {joint.name}'s "
+            f"actuator at {actuator[k, j]:.1f}{joint.symbol}, past its stops "
+            f"{joint.limit_text()} (its reading includes {partner.name}'s) at {where(k)}: "
+            f"move {partner.name} first, or choose a {joint.name} target nearer "
+            f"{partner.name}'s angle", k)
 
 
 def check_speeds(t: np.ndarray, q: np.ndarray, machine: Machine, where: Where,

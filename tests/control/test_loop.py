@@ -349,12 +349,31 @@ def test_a_second_with_over_a_fifth_of_its_ticks_overrun_aborts_the_move_and_hol
     segment = start_move(controller, [HOME] * 3000, "path")  # up on a joint that never moves
     try:
         ticks(controller, backend, 1100)
-        controller.latency.overruns += 300  # a flooded link: 300 of the next 1000 ticks late
-        ticks(controller, backend, 1000)
+        for k in range(1000):  # a flooded link: three ticks in ten end past their deadline
+            ticks(controller, backend, 1)
+            deadline = controller.deadline
+            controller.latency.next_deadline(deadline, deadline + (1_500_000 if k % 10 < 3
+                                                                   else 100_000))
         fault = next(p for name, p in events(client) if name == "fault")
         assert fault["kind"] == "overrun" and "% of the last second's ticks" in fault["message"]
         assert controller.modes.move is None and controller.modes.mode == Mode.HOLD
         assert not controller.guards.latched
+    finally:
+        shm.release(segment, unlink=True)
+
+
+def test_one_long_stall_is_not_an_overload(rig) -> None:
+    controller, backend, client = rig
+    controller.modes.set_coefficients("track", pi(UNIMATE, 1.0, 0.0))
+    segment = start_move(controller, [HOME] * 3000, "path")
+    try:
+        for k in range(2100):
+            ticks(controller, backend, 1)
+            deadline = controller.deadline
+            controller.latency.next_deadline(deadline, deadline + (900_000_000 if k == 1500
+                                                                   else 100_000))
+        assert controller.modes.move is not None
+        assert [p for name, p in events(client) if name == "fault"] == []
     finally:
         shm.release(segment, unlink=True)
 

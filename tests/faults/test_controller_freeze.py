@@ -1,16 +1,22 @@
 """A frozen controller (SIGSTOP): the client's heartbeats and E-stop go through shared
 memory and its commands through a queue, so nothing the operator calls blocks. ``estop()``
 returns at once and the E-stop latches on the first tick after SIGCONT; ``close()`` of a
-controller that stays frozen returns within 2 s, killing it."""
+controller that stays frozen returns within 2 s, killing it; a stall in a move is listed
+in the run."""
 
 from __future__ import annotations
 
 import contextlib
+import json
 import os
+import re
 import signal
 import time
 
+import numpy as np
+
 from control import ControllerError
+from control.motion import moves
 
 
 def test_estop_never_waits_on_a_frozen_controller_and_wins_when_it_wakes(
@@ -49,3 +55,28 @@ def test_close_of_a_controller_that_stays_frozen_returns_within_2_s(controller,
     assert not client.alive
     with contextlib.suppress(ProcessLookupError):
         os.kill(pid, signal.SIGCONT)
+
+
+def test_a_controller_stalled_mid_move_says_so_in_the_run(controller, until,
+                                                         measured) -> None:
+    """A 3 s SIGSTOP of the controller in the middle of a move: the move goes on after it,
+    and the saved run says "complete, with a 3.0 s controller stall" and lists the gap in
+    its JSON, instead of a silent hole in a run called complete."""
+    client = controller(heartbeat_timeout_s=30.0)  # this test is not about the client's
+    start = np.array(client.status().position)
+    end = start.copy()
+    end[1] += 5.0
+    handle = client.move(moves.sine(start, end, period=2.0, duration=4.0,
+                                    machine=client.machine), kind="sine")
+    until(lambda: client.status().move_done > 1000, 10.0, "the move to run")
+    os.kill(client.pid, signal.SIGSTOP)
+    time.sleep(3.0)
+    os.kill(client.pid, signal.SIGCONT)
+    result = client.wait(handle, timeout=30)
+    assert re.fullmatch(r"complete, with a 3\.\d s controller stall", result.status), \
+        result.status
+    saved = json.loads(result.files.json.read_text())
+    ((at, length),) = saved["meta"]["gaps"]
+    measured("stall_listed_s", length, "s")
+    assert 2.9 <= length <= 4.0 and 0.9 < at < 2.5
+    assert saved["status"] == result.status

@@ -91,19 +91,27 @@ def test_a_following_error_aborts_the_move_and_holds_where_the_joint_is(controll
     assert not status.estop or status.fault.startswith("feedback fault: In/Out's valve")
 
 
-def test_a_joint_that_cannot_hold_gets_its_valves_closed(controller, until) -> None:
+def test_a_joint_that_cannot_hold_gets_its_valves_closed(controller, until, measured) -> None:
     """Bend stops responding while holding (its hold gains zeroed: the gain check refuses
-    such a set, so the test overrides it) and its target is moved 40° away: after the
-    following-error window the controller closes every valve and latches, with a fault
-    naming Bend."""
-    client = controller(lockstep=True)
+    such a set, so the test overrides it) and its target is moved 40° away: within 250 ms
+    of the controller's clock (measured from its status) it closes every valve and
+    latches, with a fault naming Bend."""
+    client = controller()
     hold = UNIMATE.hold
     dead_bend = dataclasses.replace(
         hold, name="dead_bend",
         kp=tuple((0.0,) if j == BEND else k for j, k in enumerate(hold.kp)),
         ki=tuple(0.0 if j == BEND else k for j, k in enumerate(hold.ki)))
     client.set_coefficients("hold", dead_bend, override="test: Bend made unable to hold")
+    before = client.status().desired[BEND]
     client.jog_position(BEND, 40.0)
+    moved = client.status
+    until(lambda: moved().desired[BEND] != before, 5.0, "the target to move")
+    target_at = client.status().time_s
+    until(lambda: client.status().estop, 5.0, "the latch")
+    trip_ms = measured("zeroed_hold_gains_trip_ms", (client.status().time_s - target_at) * 1e3,
+                       "ms")
+    assert trip_ms <= 250 + 20  # the status is polled: allow a few ticks of lag
     fault = client.wait_event("fault", 30.0, lambda e: e.payload["kind"] == "following_error")
     assert fault.payload["joint"] == BEND
     assert fault.message.startswith("following error: Bend is ")
@@ -111,3 +119,20 @@ def test_a_joint_that_cannot_hold_gets_its_valves_closed(controller, until) -> N
     until(lambda: client.status().estop, 2.0, "the latch")
     status = client.status()
     assert status.valve == (0.0,) * 6 and status.fault.startswith("following error: Bend")
+
+
+def test_steps_of_any_size_inside_the_limits_complete(controller) -> None:
+    """Each joint steps across 90 % of its range and back to the middle: errors far beyond
+    any following-error distance, closed at the speed the saturated valve gives, so every
+    step completes (the rule for steps, docs/supervisor.md)."""
+    client = controller(lockstep=True)
+    for j, joint in enumerate(UNIMATE.joints):
+        here = np.array(client.status().position)
+        low = joint.lower + 0.05 * (joint.upper - joint.lower)
+        high = joint.upper - 0.05 * (joint.upper - joint.lower)
+        for target in (low, high, here[j]):
+            path = moves.step(here, j, target, duration=8.0, machine=UNIMATE)
+            result = client.wait(client.move(path, kind="step"), timeout=120)
+            assert result.complete, (joint.name, target, result.status)
+            here = np.array(client.status().position)
+            assert abs(here[j] - target) < 5 * joint.tolerance, (joint.name, here[j], target)

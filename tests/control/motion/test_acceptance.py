@@ -89,6 +89,19 @@ def test_rows_must_be_finite_and_inside_the_limits_whatever_the_kind() -> None:
         check_path(path[:, :3], "path", UNIMATE, DT)
 
 
+def test_a_yaw_target_its_actuator_cannot_reach_from_where_bend_is_is_refused() -> None:
+    """Yaw reads its actuator plus Bend (rtshare.h joint_dep); the stops act on the actuator,
+    so Yaw −150° with Bend at +90° would need the actuator at −240°, past its −169° stop."""
+    path = np.tile(HOME, (10, 1))
+    path[:, 3] = 90.0
+    path[5:, 4] = -150.0
+    with pytest.raises(MoveRefused, match=r"Yaw -150° with Bend at 90° puts Yaw's actuator at "
+                                          r"-240.0°, past its stops -169…174° .* at sample 5"):
+        check_path(path, "step", UNIMATE, DT)
+    path[:, 3] = 0.0
+    check_path(path, "step", UNIMATE, DT)
+
+
 def test_kinds_and_what_they_carry() -> None:
     with pytest.raises(MoveRefused, match="unknown move kind 'wiggle'"):
         check_path(jumping_path(), "wiggle", UNIMATE, DT)
@@ -162,7 +175,7 @@ FAR = HOME + np.array([500, 100, 25, 100, 150, 170])
                        machine=UNIMATE),
     lambda: moves.sine(HOME, HOME + np.array([500, 0, 0, 0, 0, 0]), 500 * math.pi / 400, 4.0,
                        machine=UNIMATE),
-    lambda: trajectory.via_path(np.vstack([HOME, HOME + np.array([400, 60, 20, 90, -90, 150]),
+    lambda: trajectory.via_path(np.vstack([HOME, HOME + np.array([400, 60, 20, 90, -60, 150]),
                                            HOME + np.array([100, -30, -20, 0, 40, 0])]), UNIMATE).q,
     lambda: cartesian_path(np.array([1400.0, -20, 5, -10, 30, 20]),
                            unimate.pose(np.array([1400.0, -20, 5, -10, 30, 20]))[:3]
