@@ -35,12 +35,9 @@ def parse_coefficients(text: str, machine: Machine, filename: str = "<text>"
     except tomllib.TOMLDecodeError as exc:
         raise CoefficientFileError(f"{filename}: not valid TOML: {exc}") from None
     try:
-        out = dict(parse_coefficient_tables(doc, filename, machine.n_joints))
+        return dict(parse_coefficient_tables(doc, filename, machine.n_joints))
     except MachineError as exc:
         raise CoefficientFileError(str(exc)) from None
-    for name, c in out.items():
-        _check_taps(c, f"{filename}: coefficients.{name}")
-    return out
 
 
 def load_coefficients(path: str | Path, machine: Machine) -> dict[str, Coefficients]:

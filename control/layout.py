@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from hw.backend import LinkCounters
-from hw.machine import Coefficients
+from hw.machine import MAX_TAPS, Coefficients
 
 if TYPE_CHECKING:
     from control.latency import LatencyStats
@@ -30,7 +30,6 @@ if TYPE_CHECKING:
 LAYOUT_VERSION = 2
 CONTROL_MAGIC = b"SDSK"
 MOVE_MAGIC = b"SDMV"
-MAX_TAPS = 8
 HIST_BIN_NS = 5_000  # 5 µs bins, Table 2.1
 HIST_BINS = 400  # 0-2 ms, plus one overflow bin
 FAULT_TEXT = 160

@@ -10,7 +10,10 @@ with ``--machine PATH`` can fix it from the message alone.
 from __future__ import annotations
 
 import math
+import re
+import reprlib
 import tomllib
+import unicodedata
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from importlib import resources
@@ -22,6 +25,41 @@ BUILTIN = {"unimate2000b": "unimate2000b.toml", "unimate": "unimate2000b.toml", 
 JOINT_KINDS = {"prismatic": "mm", "revolute": "deg"}
 ENCODER_KINDS = ("gray", "quadrature")
 MIN_FERROR_DIVISOR = 10.0  # min_following_error defaults to following_error / 10
+MAX_FILE_BYTES = 1 << 20  # the Unimate's description is 8 kB; a file this large is not one
+MAX_TAPS = 8  # taps per kp, w or filter list that the controller's shared memory holds
+# Characters refused in a file's strings and path: controls (ESC, newline, DEL, C1), format
+# characters (bidi overrides, zero-width), line and paragraph separators, lone surrogates
+# (an undecodable file name). Names are printed as they are, so they must print as text.
+UNPRINTABLE = frozenset({"Cc", "Cf", "Cs", "Zl", "Zp"})
+
+# The physical range of every number (docs/machines.md gives each its reason).
+SAMPLE_TIME_MS = (0.1, 100.0)
+VALVE_PERIOD_US = (100.0, 10_000.0)
+VALVE_RESOLUTION_PCT = (0.01, 10.0)  # the I/O board's protocol carries it in 0.01 % units
+ENCODER_BITS = (1, 32)
+SETTLE_MS = 65.0  # the I/O board's protocol carries it in µs, 16 bits
+GRAY_SETTLE_MS = 0.001  # a multiplexed encoder's lamp needs time to light: at least 1 µs
+GRADIENT = (1e-6, 10.0)  # |joint units per count|
+COUPLING = 10.0  # |coupling|
+DOWN_SCALE = (0.01, 1.0)
+GAIN_UNIT = (1e-3, 1e3)
+COEFFICIENT = 1e6  # |any gain, weight, tap or limit of eq. 5.1|
+FILTER_DIVISOR = (1e-3, 1e6)
+DH_LENGTHS = (-10_000.0, 10_000.0)  # a and d, mm
+DH_ANGLES = (-360.0, 360.0)  # alpha and theta, degrees
+
+
+@dataclass(frozen=True)
+class KindRanges:
+    """Ranges that depend on a joint's kind, in its units (mm or degrees)."""
+
+    position: float  # |limits| and |encoder constant|
+    speed: tuple[float, float]  # max_speed, units/s
+    accel: tuple[float, float]  # max_accel, units/s²
+
+
+KIND_RANGES = {"prismatic": KindRanges(100_000.0, (0.1, 10_000.0), (1.0, 1e6)),
+               "revolute": KindRanges(3_600.0, (0.1, 3_600.0), (1.0, 1e6))}
 
 
 class MachineError(ValueError):
@@ -202,26 +240,83 @@ def builtin_names() -> list[str]:
 
 
 def load_machine(spec: str | Path) -> Machine:
-    """Load a built-in machine by name (``unimate2000b``, ``rig``) or a TOML file by path."""
+    """Load a built-in machine by name (``unimate2000b``, ``rig``) or a TOML file by path.
+
+    Every failure is a MachineError naming the file: missing, unreadable, not a regular
+    file, too large, not UTF-8, not TOML, or a value out of its range.
+    """
     text_spec = str(spec)
     if text_spec in BUILTIN:
         ref = resources.files("hw.machines").joinpath(BUILTIN[text_spec])
         return parse_machine(ref.read_text(encoding="utf-8"), Path(str(ref)))
     path = Path(spec)
-    if not path.is_file():
-        raise MachineError(
-            f"{path}: no such machine file (built-in machines: {', '.join(builtin_names())})"
-        )
-    return parse_machine(path.read_text(encoding="utf-8"), path)
+    _check_path(path)
+    return parse_machine(_read_text(path), path)
 
 
 def parse_machine(text: str, path: Path) -> Machine:
-    """Parse and validate the text of a machine file; ``path`` is used in messages."""
+    """Parse and validate the text of a machine file; ``path`` is used in messages.
+
+    A file that describes the simulator's plant (``[plant]``, ``[joints.plant]``) has
+    it checked too, so a machine that loads is one the simulator can run.
+    """
+    _check_path(path)
+    machine = _Reader(path.name).machine(_parse_toml(text, path.name), path)
+    if machine.plant or any(j.plant for j in machine.joints):
+        from hw.sim.backend import check_plant  # hw.sim imports this module: import late
+
+        check_plant(machine)
+    return machine
+
+
+def _check_path(path: Path) -> None:
+    """Refuse a path that would not print as text: every message names the file."""
+    where = _unprintable(str(path))
+    if where is not None:
+        raise MachineError(f"{str(path)!r}: a machine file's path must print as text, and "
+                           f"character {where} is {str(path)[where]!r}: rename the file")
+
+
+def _read_text(path: Path) -> str:
+    """The text of machine file ``path``; MachineError naming it if it has none to give."""
     try:
-        doc = tomllib.loads(text)
+        if path.is_dir():
+            raise MachineError(f"{path}: is a directory: give the machine file inside it")
+        if not path.exists():
+            raise MachineError(f"{path}: no such machine file (built-in machines: "
+                               f"{', '.join(builtin_names())})")
+        if not path.is_file():
+            raise MachineError(f"{path}: not a regular file: give a machine TOML file")
+        with path.open("rb") as file:
+            data = file.read(MAX_FILE_BYTES + 1)
+    except OSError as exc:
+        raise MachineError(f"{path}: cannot read it: {exc.strerror or exc}") from None
+    if len(data) > MAX_FILE_BYTES:
+        raise MachineError(f"{path}: larger than {MAX_FILE_BYTES >> 10} kB, so not a machine "
+                           f"description (the Unimate's is 8 kB)")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        raise MachineError(f"{path}: line {line}: byte {data[exc.start]:#04x} is not UTF-8 "
+                           f"text: save the file as UTF-8") from None
+
+
+def _parse_toml(text: str, filename: str) -> dict[str, Any]:
+    try:
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise MachineError(f"{path.name}: not valid TOML: {exc}") from None
-    return _Reader(path.name).machine(doc, path)
+        raise MachineError(f"{filename}: not valid TOML: {exc}") from None
+    except RecursionError:
+        raise MachineError(f"{filename}: arrays or tables nested too deeply to be a machine "
+                           f"description") from None
+    except ValueError as exc:  # an integer literal past int's 4300-digit conversion limit
+        match = re.search(r"[0-9_]{4300,}", text)
+        if match is None:
+            raise MachineError(f"{filename}: not valid TOML: {exc}") from None
+        line = text.count("\n", 0, match.start()) + 1
+        raise MachineError(f"{filename}: line {line}: an integer of thousands of digits: no "
+                           f"machine value is larger than a float holds (1.8e308)") from None
 
 
 def parse_coefficient_tables(doc: Mapping[str, Any], filename: str,
@@ -253,7 +348,7 @@ class _Reader:
     def only(self, doc: Mapping[str, Any], key: str, allowed: set[str]) -> None:
         unknown = sorted(set(doc) - allowed)
         if unknown:
-            raise self.fail(key or "top level", f"unknown key(s) {', '.join(unknown)}; "
+            raise self.fail(key or "top level", f"unknown key(s) {', '.join(map(_key, unknown))}; "
                             f"allowed: {', '.join(sorted(allowed))}")
 
     def number(self, doc: Mapping[str, Any], key: str, name: str, default: float | None = None,
@@ -265,26 +360,45 @@ class _Reader:
             return default
         return self.check_number(doc[name], full, low, high, strict_low)
 
+    def whole(self, doc: Mapping[str, Any], key: str, name: str, default: int | None,
+              low: int, high: int) -> int:
+        value = self.number(doc, key, name, default, low, high)
+        if value != int(value):
+            raise self.fail(_join(key, name), f"must be a whole number, got {value:g}")
+        return int(value)
+
     def check_number(self, value: Any, full: str, low: float = -math.inf, high: float = math.inf,
                      strict_low: bool = False) -> float:
         if isinstance(value, bool) or not isinstance(value, int | float):
-            raise self.fail(full, f"must be a number, got {value!r}")
-        value = float(value)
-        if not math.isfinite(value):
-            raise self.fail(full, f"must be finite, got {value}")
-        too_low = value <= low if strict_low else value < low
-        if too_low or value > high:
+            raise self.fail(full, f"must be a number, got {_shown(value)}")
+        try:
+            number = float(value)
+        except OverflowError:
+            raise self.fail(full, f"{_shown(value)} is larger than any machine value (a float "
+                                  f"holds 1.8e308)") from None
+        if not math.isfinite(number):
+            raise self.fail(full, f"must be finite, got {number}")
+        too_low = number <= low if strict_low else number < low
+        if too_low or number > high:
             bound = f"> {low:g}" if strict_low else f">= {low:g}"
             rng = bound if high == math.inf else f"in {low:g}…{high:g}"
-            raise self.fail(full, f"{value:g} out of range (must be {rng})")
-        return value
+            raise self.fail(full, f"{number:.10g} out of range (must be {rng})")
+        return number
 
-    def numbers(self, value: Any, full: str, length: int | None = None) -> tuple[float, ...]:
+    def numbers(self, value: Any, full: str, length: int | None = None,
+                low: float = -math.inf, high: float = math.inf) -> tuple[float, ...]:
         if not isinstance(value, list):
-            raise self.fail(full, f"must be a list of numbers, got {value!r}")
+            raise self.fail(full, f"must be a list of numbers, got {_shown(value)}")
         if length is not None and len(value) != length:
             raise self.fail(full, f"must have {length} entries, got {len(value)}")
-        return tuple(self.check_number(v, f"{full}[{i}]") for i, v in enumerate(value))
+        return tuple(self.check_number(v, f"{full}[{i}]", low, high) for i, v in enumerate(value))
+
+    def coefficient_list(self, value: Any, full: str, length: int | None = None
+                         ) -> tuple[float, ...]:
+        """Numbers of eq. 5.1: at most ``MAX_TAPS`` of them unless ``length`` says how many."""
+        if length is None and isinstance(value, list) and len(value) > MAX_TAPS:
+            raise self.fail(full, f"{len(value)} taps; the controller takes at most {MAX_TAPS}")
+        return self.numbers(value, full, length, -COEFFICIENT, COEFFICIENT)
 
     def string(self, doc: Mapping[str, Any], key: str, name: str, default: str | None = None,
                choices: tuple[str, ...] | None = None) -> str:
@@ -293,13 +407,24 @@ class _Reader:
         if value is None:
             raise self.fail(full, "missing string")
         if not isinstance(value, str) or not value:
-            raise self.fail(full, f"must be a non-empty string, got {value!r}")
+            raise self.fail(full, f"must be a non-empty string, got {_shown(value)}")
+        self.check_text(value, full)
         if choices is not None and value not in choices:
-            raise self.fail(full, f"{value!r} is not one of {', '.join(choices)}")
+            raise self.fail(full, f"{_shown(value)} is not one of {', '.join(choices)}")
         return value
+
+    def check_text(self, value: str, full: str) -> None:
+        """Refuse text that does not print as itself (docs/machines.md: strings)."""
+        where = _unprintable(value)
+        if where is not None:
+            raise self.fail(full, f"{_shown(value)}: character {where} is {value[where]!r}, which "
+                                  f"does not print: names, titles and notes are shown as they "
+                                  f"are, so remove it")
 
     def plant(self, doc: Mapping[str, Any], key: str) -> Mapping[str, float]:
         table = self.table(doc, key, "plant", optional=True)
+        for name in table:
+            self.check_text(name, _join(key, "plant"))
         return MappingProxyType(
             {name: self.check_number(v, _join(key, f"plant.{name}")) for name, v in table.items()}
         )
@@ -323,21 +448,23 @@ class _Reader:
                 raise self.fail(f"joints[{i}].key", f"duplicate joint key {k!r}")
         joints = tuple(self.joint(j, i, keys) for i, j in enumerate(raw_joints))
         encoder_kind = self.string(enc, "encoder", "kind", choices=ENCODER_KINDS)
-        bits = self.number(enc, "encoder", "bits", 16.0 if encoder_kind == "quadrature" else None,
-                           low=1, high=32)
-        if bits != int(bits):
-            raise self.fail("encoder.bits", f"must be a whole number, got {bits:g}")
+        bits = self.whole(enc, "encoder", "bits", 16 if encoder_kind == "quadrature" else None,
+                          *ENCODER_BITS)
+        self.encoder_words(joints, encoder_kind, bits)
         return Machine(
             name=self.string(head, "machine", "name"),
             title=self.string(head, "machine", "title"),
             path=path,
-            sample_time_s=self.number(head, "machine", "sample_time_ms", low=0.05, high=100) / 1e3,
-            valve_period_us=self.number(valve, "valve", "period_us", low=0, strict_low=True),
-            valve_resolution_pct=self.number(valve, "valve", "resolution_pct", low=0, high=100,
-                                             strict_low=True),
+            sample_time_s=self.number(head, "machine", "sample_time_ms", None,
+                                      *SAMPLE_TIME_MS) / 1e3,
+            valve_period_us=self.number(valve, "valve", "period_us", None, *VALVE_PERIOD_US),
+            valve_resolution_pct=self.number(valve, "valve", "resolution_pct", None,
+                                             *VALVE_RESOLUTION_PCT),
             encoder_kind=encoder_kind,
-            encoder_bits=int(bits),
-            encoder_settle_s=self.number(enc, "encoder", "settle_ms", 0.0, low=0) / 1e3,
+            encoder_bits=bits,
+            encoder_settle_s=self.number(enc, "encoder", "settle_ms", 0.0,
+                                         GRAY_SETTLE_MS if encoder_kind == "gray" else 0.0,
+                                         SETTLE_MS) / 1e3,
             joints=joints,
             coefficients=self.coefficient_sets(doc, len(joints)),
             kinematics_model=self.kinematics_model(doc),
@@ -346,6 +473,28 @@ class _Reader:
             supervision=self.supervision(doc),
         )
 
+    def encoder_words(self, joints: tuple[Joint, ...], kind: str, bits: int) -> None:
+        """Refuse limits the encoders' words cannot cover. A Gray word reads counts
+        0…2^bits − 1 absolutely; a quadrature count is signed (two's complement), so it
+        covers 2^(bits − 1) − 1 counts either way from wherever the joint powered up."""
+        top = (1 << bits) - 1
+        for i, j in enumerate(joints):
+            gradient, constant = j.encoder.gradient, j.encoder.constant
+            counts = math.ceil((j.upper - j.lower) / abs(gradient))
+            need = counts.bit_length() + (kind == "quadrature")
+            if need > bits:
+                raise self.fail(f"joints[{i}].limits",
+                                f"{j.name}'s {j.limit_text()} is {counts} counts of "
+                                f"{abs(gradient):g} {j.unit}, more than {bits}-bit {kind} "
+                                f"words cover: it needs encoder.bits = {need} or a coarser "
+                                f"encoder.gradient")
+            ends = sorted(round((q - constant) / gradient) for q in (j.lower, j.upper))
+            if kind == "gray" and (ends[0] < 0 or ends[1] > top):
+                raise self.fail(f"joints[{i}].encoder.constant",
+                                f"{j.name}'s limits {j.limit_text()} read counts "
+                                f"{ends[0]}…{ends[1]}, outside the {bits}-bit words' 0…{top}: "
+                                f"the constant is the position at count 0")
+
     def supervision(self, doc: Mapping[str, Any]) -> Supervision:
         table = self.table(doc, "", "supervisor", optional=True)
         key = "supervisor"
@@ -353,9 +502,6 @@ class _Reader:
                                "range_margin_counts", "glitch_limit", "overrun_fraction",
                                "stall_ms"})
         d = Supervision()
-        glitch_limit = self.number(table, key, "glitch_limit", d.glitch_limit, low=1, high=1000)
-        if glitch_limit != int(glitch_limit):
-            raise self.fail(f"{key}.glitch_limit", f"must be a whole number, got {glitch_limit:g}")
         return Supervision(
             window_s=self.number(table, key, "window_ms", d.window_s * 1e3, low=10,
                                  high=1000) / 1e3,
@@ -365,7 +511,7 @@ class _Reader:
                                         low=0, high=100),
             range_margin_counts=self.number(table, key, "range_margin_counts",
                                             d.range_margin_counts, low=1, high=1e6),
-            glitch_limit=int(glitch_limit),
+            glitch_limit=self.whole(table, key, "glitch_limit", d.glitch_limit, 1, 1000),
             overrun_fraction=self.number(table, key, "overrun_fraction", d.overrun_fraction,
                                          low=0, high=1, strict_low=True),
             stall_s=self.number(table, key, "stall_ms", d.stall_s * 1e3, low=2,
@@ -383,7 +529,9 @@ class _Reader:
         name = self.string(doc, key, "name")
         kind = self.string(doc, key, "kind", choices=tuple(JOINT_KINDS))
         unit = self.string(doc, key, "unit", choices=(JOINT_KINDS[kind],))
-        lower, upper = self.numbers(doc.get("limits"), f"{key}.limits", 2)
+        ranges = KIND_RANGES[kind]
+        lower, upper = self.numbers(doc.get("limits"), f"{key}.limits", 2,
+                                    -ranges.position, ranges.position)
         if lower >= upper:
             raise self.fail(f"{key}.limits", f"lower {lower:g} must be below upper {upper:g}")
         pos, neg = self.numbers(doc.get("min_pwm"), f"{key}.min_pwm", 2)
@@ -393,41 +541,58 @@ class _Reader:
         polarity = self.number(doc, key, "polarity")
         if polarity not in (1.0, -1.0):
             raise self.fail(f"{key}.polarity", f"must be 1 or -1, got {polarity:g}")
+        encoder = self.encoder_cal(doc, index, keys, ranges.position)
+        tolerance = self.tolerance(doc, key, abs(encoder.gradient), upper - lower, unit)
+        ferror = self.number(doc, key, "following_error", None, tolerance, upper - lower)
         return Joint(
             key=keys[index], name=name, kind=kind, unit=unit, lower=lower, upper=upper,
             min_pwm_pos=pos, min_pwm_neg=neg, polarity=int(polarity),
-            max_speed=self.number(doc, key, "max_speed", low=0, strict_low=True),
-            max_accel=self.number(doc, key, "max_accel", low=0, strict_low=True),
-            tolerance=self.number(doc, key, "tolerance", low=0, strict_low=True),
-            following_error=(ferror := self.number(doc, key, "following_error", low=0,
-                                                   strict_low=True)),
-            min_following_error=self.number(doc, key, "min_following_error",
-                                            ferror / MIN_FERROR_DIVISOR, low=0,
-                                            high=ferror, strict_low=True),
-            encoder=self.encoder_cal(doc, index, keys),
-            down_scale=self.number(doc, key, "down_scale", 1.0, low=0, high=1, strict_low=True),
-            gain_unit=self.number(doc, key, "gain_unit", 1.0, low=0, strict_low=True),
+            max_speed=self.number(doc, key, "max_speed", None, *ranges.speed),
+            max_accel=self.number(doc, key, "max_accel", None, *ranges.accel),
+            tolerance=tolerance,
+            following_error=ferror,
+            min_following_error=self.number(
+                doc, key, "min_following_error", max(ferror / MIN_FERROR_DIVISOR, tolerance),
+                tolerance, ferror),
+            encoder=encoder,
+            down_scale=self.number(doc, key, "down_scale", 1.0, *DOWN_SCALE),
+            gain_unit=self.number(doc, key, "gain_unit", 1.0, *GAIN_UNIT),
             plant=self.plant(doc, key),
         )
 
-    def encoder_cal(self, joint: Mapping[str, Any], index: int, keys: list[str]) -> EncoderCal:
+    def tolerance(self, doc: Mapping[str, Any], key: str, count: float, span: float,
+                  unit: str) -> float:
+        """The settle band: at least one encoder count, at most the joint's range."""
+        tolerance = self.number(doc, key, "tolerance", None, 0.0, span, strict_low=True)
+        if tolerance < count:
+            raise self.fail(f"{key}.tolerance", f"{tolerance:g} {unit} is less than one encoder "
+                                                f"count ({count:g} {unit}): a move could never "
+                                                f"be seen to settle")
+        return tolerance
+
+    def encoder_cal(self, joint: Mapping[str, Any], index: int, keys: list[str],
+                    position: float) -> EncoderCal:
         key = f"joints[{index}].encoder"
         doc = self.table(joint, f"joints[{index}]", "encoder")
         self.only(doc, key, {"gradient", "constant", "coupled_to", "coupling"})
         gradient = self.number(doc, key, "gradient")
-        if gradient == 0:
-            raise self.fail(f"{key}.gradient", "must not be zero")
+        low, high = GRADIENT
+        if not low <= abs(gradient) <= high:
+            raise self.fail(f"{key}.gradient", f"{gradient:g} out of range (its size must be in "
+                                               f"{low:g}…{high:g} units a count, its sign is "
+                                               f"the direction)")
         coupled = doc.get("coupled_to")
         if coupled is not None and coupled not in keys:
-            raise self.fail(f"{key}.coupled_to", f"{coupled!r} is not a joint key "
+            raise self.fail(f"{key}.coupled_to", f"{_shown(coupled)} is not a joint key "
                             f"(joints: {', '.join(keys)})")
         if coupled is not None and keys.index(coupled) == index:
             raise self.fail(f"{key}.coupled_to", "a joint cannot be coupled to itself")
         return EncoderCal(
             gradient=gradient,
-            constant=self.number(doc, key, "constant"),
+            constant=self.number(doc, key, "constant", None, -position, position),
             coupled_to=None if coupled is None else keys.index(coupled),
-            coupling=self.number(doc, key, "coupling", 0.0 if coupled is None else None),
+            coupling=self.number(doc, key, "coupling", 0.0 if coupled is None else None,
+                                 -COUPLING, COUPLING),
         )
 
     def coefficient_sets(self, doc: Mapping[str, Any], n: int,
@@ -436,6 +601,8 @@ class _Reader:
         sets = self.table(doc, "", "coefficients")
         if not sets:
             raise self.fail("coefficients", "no [coefficients.NAME] table")
+        for name in sets:
+            self.check_text(name, "coefficients")
         for name in required:
             if name not in sets:
                 raise self.fail(f"coefficients.{name}", "missing coefficient set")
@@ -453,21 +620,22 @@ class _Reader:
             name=name,
             note=self.string(doc, key, "note", default=name),
             kp=self.taps(doc.get("kp"), f"{key}.kp", n),
-            ki=self.numbers(doc.get("ki"), f"{key}.ki", n),
-            kd=self.numbers(doc.get("kd"), f"{key}.kd", n),
+            ki=self.coefficient_list(doc.get("ki"), f"{key}.ki", n),
+            kd=self.coefficient_list(doc.get("kd"), f"{key}.kd", n),
             w=self.taps(doc.get("w"), f"{key}.w", n),
-            filter=self.numbers(doc.get("filter"), f"{key}.filter"),
-            filter_divisor=self.number(doc, key, "filter_divisor", low=0, strict_low=True),
-            integral_limit=self.number(doc, key, "integral_limit", low=0),
+            filter=self.coefficient_list(doc.get("filter"), f"{key}.filter"),
+            filter_divisor=self.number(doc, key, "filter_divisor", None, *FILTER_DIVISOR),
+            integral_limit=self.number(doc, key, "integral_limit", None, 0, COEFFICIENT),
             duty_limit=self.number(doc, key, "duty_limit", 100.0, low=0, high=100,
                                    strict_low=True),
-            kv=self.numbers(doc["kv"], f"{key}.kv", n) if "kv" in doc else (),
+            kv=self.coefficient_list(doc["kv"], f"{key}.kv", n) if "kv" in doc else (),
         )
 
     def taps(self, value: Any, full: str, n: int) -> tuple[tuple[float, ...], ...]:
         if not isinstance(value, list) or len(value) != n:
-            raise self.fail(full, f"must be a list of {n} tap lists (one per joint), got {value!r}")
-        return tuple(self.numbers(v, f"{full}[{i}]") for i, v in enumerate(value))
+            raise self.fail(full, f"must be a list of {n} tap lists (one per joint), "
+                                  f"got {_shown(value)}")
+        return tuple(self.coefficient_list(v, f"{full}[{i}]") for i, v in enumerate(value))
 
     def kinematics_model(self, doc: Mapping[str, Any]) -> str | None:
         kin = self.table(doc, "", "kinematics", optional=True)
@@ -487,9 +655,44 @@ class _Reader:
             joint = self.string(row, key, "joint", choices=tuple(keys))
             if any(r.joint == keys.index(joint) for r in out):
                 raise self.fail(f"{key}.joint", f"joint {joint!r} drives more than one DH row")
-            out.append(DHRow(keys.index(joint), *(self.number(row, key, f)
-                                                   for f in ("alpha", "a", "d", "theta"))))
+            out.append(DHRow(keys.index(joint),
+                             alpha=self.number(row, key, "alpha", None, *DH_ANGLES),
+                             a=self.number(row, key, "a", None, *DH_LENGTHS),
+                             d=self.number(row, key, "d", None, *DH_LENGTHS),
+                             theta=self.number(row, key, "theta", None, *DH_ANGLES)))
         return tuple(out)
+
+
+class _Brief(reprlib.Repr):
+    """``repr`` cut to a length a message can carry; an integer too long for ``repr`` (over
+    4300 digits) is given by its size."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.maxstring = self.maxother = 60
+
+    def repr_int(self, x: int, level: int) -> str:
+        if x.bit_length() > 64:
+            return f"<an integer of {x.bit_length()} bits>"
+        return repr(x)
+
+
+_BRIEF = _Brief()
+
+
+def _shown(value: Any) -> str:
+    """A file's value as a message shows it: repr-escaped, at most a line long."""
+    return _BRIEF.repr(value)
+
+
+def _key(name: str) -> str:
+    """A TOML key as a message shows it: as it is when it prints, else escaped."""
+    return name if _unprintable(name) is None and len(name) <= 60 else _shown(name)
+
+
+def _unprintable(text: str) -> int | None:
+    """Index of the first character of ``text`` that does not print as itself, or None."""
+    return next((i for i, c in enumerate(text) if unicodedata.category(c) in UNPRINTABLE), None)
 
 
 def _join(key: str, name: str) -> str:

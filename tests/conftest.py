@@ -1,4 +1,5 @@
-"""Suite-wide settings, what each test costs, and the I/O board emulator every serial test starts.
+"""Suite-wide settings, what each test costs, the I/O board emulator every serial test starts,
+and the files that are no machine description (the loader, the CLI and the client refuse them).
 
 Under CI, hypothesis replays a fixed set of examples. Locally every run explores
 new examples (that is how the bugs in docs/errata.md and the fault suite were
@@ -182,3 +183,67 @@ def emulator(tmp_path: Path) -> Iterator[Callable[..., EmulatorProcess]]:
     yield start
     for process in started:
         process.kill()
+
+
+# -- files that are no machine description ---------------------------------------------------
+
+MACHINE_BYTES = (ROOT / "hw" / "machines" / "unimate2000b.toml").read_bytes()
+
+
+def _written(tmp_path: Path, name: str, data: bytes) -> Path:
+    (tmp_path / name).write_bytes(data)
+    return tmp_path / name
+
+
+def _edited(tmp_path: Path, name: str, old: bytes, new: bytes) -> Path:
+    assert MACHINE_BYTES.count(old) == 1, old
+    return _written(tmp_path, name, MACHINE_BYTES.replace(old, new))
+
+
+def _directory(tmp_path: Path) -> Path:
+    (tmp_path / "machines.toml").mkdir()
+    return tmp_path / "machines.toml"
+
+
+def _fifo(tmp_path: Path) -> Path:
+    os.mkfifo(tmp_path / "fifo.toml")  # opened for reading, it would wait for a writer
+    return tmp_path / "fifo.toml"
+
+
+SAMPLE = b"sample_time_ms = 1.0"
+TITLE = b'"Unimate 2000B six-axis hydraulic robot"'
+# What a hostile tester gave for a machine file (issue 12): how to make it, and the error it
+# must be refused with (a regex searched in the one line; the CLI puts "servodesk: " first).
+NOT_MACHINES: dict[str, tuple[Callable[[Path], Path], str]] = {
+    "not-utf8": (lambda d: _edited(d, "latin1.toml", TITLE, b'"Unimate 2000B \xe9"'),
+                 r"latin1\.toml: line 7: byte 0xe9 is not UTF-8 text: save the file as UTF-8"),
+    "directory": (_directory, r"machines\.toml: is a directory"),
+    "fifo": (_fifo, r"fifo\.toml: not a regular file"),
+    "io-error": (lambda d: Path("/proc/self/mem"),  # reading it fails, even for root
+                 r"^/proc/self/mem: cannot read it: Input/output error$"),
+    "missing": (lambda d: d / "nope.toml", r"nope\.toml: no such machine file"),
+    "over-1MB": (lambda d: _written(d, "big.toml", MACHINE_BYTES + b"#" * (1 << 20) + b"\n"),
+                 r"big\.toml: larger than 1024 kB"),
+    "nested-5000-deep": (lambda d: _edited(d, "deep.toml", SAMPLE,
+                                           b"sample_time_ms = " + b"[" * 5000 + b"]" * 5000),
+                         r"^deep\.toml: arrays or tables nested too deeply"),
+    "int-of-5000-digits": (lambda d: _edited(d, "long.toml", SAMPLE,
+                                             b"sample_time_ms = " + b"9" * 5000),
+                           r"^long\.toml: line 8: an integer of thousands of digits"),
+    "int-wider-than-a-float": (lambda d: _edited(d, "wide.toml", SAMPLE,
+                                                 b"sample_time_ms = 1" + b"0" * 400),
+                               r"^wide\.toml: machine\.sample_time_ms: <an integer of 1329 "
+                               r"bits> is larger than any machine value"),
+    "escape-in-title": (lambda d: _edited(d, "title.toml", TITLE, b'"Unimate\\u001b[2J"'),
+                        r"^title\.toml: machine\.title: 'Unimate\\x1b\[2J': character 7 is "
+                        r"'\\x1b', which does not print"),
+    "escape-in-path": (lambda d: _written(d, "bad\x1b[2J.toml", MACHINE_BYTES),
+                       r"^'.*/bad\\x1b\[2J\.toml': a machine file's path must print as text"),
+}
+
+
+@pytest.fixture(params=sorted(NOT_MACHINES))
+def not_a_machine(request: pytest.FixtureRequest, tmp_path: Path) -> tuple[Path, str]:
+    """A file that is no machine description, and the regex its refusal must match."""
+    make, message = NOT_MACHINES[request.param]
+    return make(tmp_path), message

@@ -24,6 +24,12 @@ from hw.sim.valve import next_period_ns, quantise_duty
 MAX_CATCH_UP_NS = 1_000_000_000  # a plant left alone longer is simulated for the last second only
 
 
+def check_plant(machine: Machine) -> None:
+    """Raise MachineError, naming the file and the key, if the simulator cannot run the
+    machine file's plant (``hw.machine.parse_machine`` asks, so a machine that loads runs)."""
+    SimBackend(machine, lockstep=True)
+
+
 class SimBackend:
     """Simulated machine: plant, PWM output and encoders, with an E-stop input.
 

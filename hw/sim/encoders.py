@@ -47,7 +47,7 @@ from dataclasses import dataclass
 from statistics import NormalDist
 
 from hw.gray import binary_to_gray
-from hw.machine import Machine, MachineError
+from hw.machine import Machine
 from hw.sim.plant import MACHINE_KEYS, PlantKeys
 from hw.transmission import Transmission
 
@@ -89,15 +89,12 @@ class Lamp:
     @classmethod
     def from_machine(cls, machine: Machine) -> Lamp:
         keys = PlantKeys(machine, "plant", machine.plant, MACHINE_KEYS)
-        if machine.encoder_settle_s <= 0.0:
-            raise MachineError(f"{machine.path.name}: encoder.settle_ms: must be > 0 for "
-                               f"multiplexed Gray-code encoders")
         return cls(
             heat_s=machine.encoder_settle_s / 3.0,
-            cool_s=keys.number("lamp_cool_ms", positive=True) / 1e3,
-            ripple=keys.number("lamp_ripple", positive=True, high=0.5),
-            spread=keys.number("photocell_spread", low=0.0, high=0.9),
-            dropouts_per_s=keys.number("lamp_dropouts_per_s", low=0.0),
+            cool_s=keys.number("lamp_cool_ms") / 1e3,
+            ripple=keys.number("lamp_ripple"),
+            spread=keys.number("photocell_spread"),
+            dropouts_per_s=keys.number("lamp_dropouts_per_s"),
         )
 
     def light(self, slot_s: float, period_s: float) -> float:

@@ -72,6 +72,7 @@ from hw.transmission import Transmission
 GRAVITY = 9.81  # m/s^2
 VAPOUR_PA = -1.0e5  # gauge pressure at which oil cavitates (absolute zero)
 STEP_S = 1.0e-3  # nominal plant step; each actuator subdivides it as its stability needs
+MIN_STEP_S = 10e-6  # an oil column stiffer than this would take 100 steps a millisecond
 
 # machine-level [plant] keys; the lamp_* and photocell_* keys are read by hw.sim.encoders
 MACHINE_KEYS = {"supply_mpa", "relief_mpa", "bulk_modulus_mpa", "column_loss_ms",
@@ -85,12 +86,33 @@ REVOLUTE_KEYS = {"disp_a_m3_per_rad", "disp_b_m3_per_rad", "inertia_kgm2", "grav
                  "gravity_phase_deg", "coulomb_nm", "stiction_nm", "viscous_nm_s_per_rad"}
 
 
+# The physical range of every key, in the key's units (docs/machines.md gives the reasons).
+RANGES = {
+    "supply_mpa": (1.0, 35.0), "relief_mpa": (1.0, 50.0), "bulk_modulus_mpa": (100.0, 2500.0),
+    "column_loss_ms": (0.0, 100.0), "spool_time_ms": (0.1, 100.0),
+    "valve_rated_drop_mpa": (0.5, 35.0),
+    "lamp_cool_ms": (1.0, 1000.0), "lamp_ripple": (0.001, 0.5), "photocell_spread": (0.0, 0.9),
+    "lamp_dropouts_per_s": (0.0, 100.0),
+    "dead_volume_a_m3": (1e-6, 0.1), "dead_volume_b_m3": (1e-6, 0.1),
+    "valve_rated_lpm": (0.1, 1000.0), "valve_b_ratio": (0.1, 10.0), "null_leak_lpm": (0.0, 10.0),
+    "overlap_pos_pct": (0.0, 99.0), "overlap_neg_pct": (0.0, 99.0), "b_at_supply": (0.0, 1.0),
+    "area_a_m2": (1e-5, 1.0), "area_b_m2": (1e-5, 1.0), "mass_kg": (0.1, 1e5),
+    "load_kg": (0.0, 1e5), "load_min_kg": (0.0, 1e5), "load_max_kg": (0.0, 1e5),
+    "incline_deg": (-90.0, 90.0), "coulomb_n": (0.0, 1e6), "stiction_n": (0.0, 1e6),
+    "viscous_n_s_per_m": (0.0, 1e7),
+    "disp_a_m3_per_rad": (1e-7, 0.1), "disp_b_m3_per_rad": (1e-7, 0.1),
+    "inertia_kgm2": (1e-3, 1e5), "gravity_nm": (0.0, 1e6), "gravity_phase_deg": (-180.0, 180.0),
+    "coulomb_nm": (0.0, 1e6), "stiction_nm": (0.0, 1e6), "viscous_nm_s_per_rad": (0.0, 1e6),
+}
+
+
 class PlantKeys:
     """Typed reads from one ``plant`` mapping; every error names the file and the key."""
 
     def __init__(self, machine: Machine, where: str, table: Mapping[str, float],
                  allowed: set[str]) -> None:
         self.file = machine.path.name
+        self.machine = machine.name
         self.where = where
         self.table = table
         unknown = sorted(set(table) - allowed)
@@ -98,18 +120,23 @@ class PlantKeys:
             raise MachineError(f"{self.file}: {where}: unknown key(s) {', '.join(unknown)}; "
                                f"allowed: {', '.join(sorted(allowed))}")
 
-    def number(self, name: str, default: float | None = None, low: float = -math.inf,
-               high: float = math.inf, positive: bool = False) -> float:
+    def fail(self, name: str, what: str) -> MachineError:
+        return MachineError(f"{self.file}: {self.where}.{name}: {what}")
+
+    def number(self, name: str, default: float | None = None, *, at_least: str = "",
+               low: float = -math.inf, high: float = math.inf) -> float:
+        """Key ``name`` within its range in ``RANGES`` and within ``low``…``high``
+        (``at_least`` names the key that sets ``low``)."""
         if name not in self.table:
             if default is None:
-                raise MachineError(f"{self.file}: {self.where}.{name}: missing number")
+                raise self.fail(name, "missing number")
             return default
         value = self.table[name]
-        if positive and value <= 0:
-            raise MachineError(f"{self.file}: {self.where}.{name}: {value:g} must be > 0")
+        low, high = max(low, RANGES[name][0]), min(high, RANGES[name][1])
         if not low <= value <= high:
-            raise MachineError(f"{self.file}: {self.where}.{name}: {value:g} out of range "
-                               f"(must be in {low:g}…{high:g})")
+            because = f", at least {at_least}" if at_least else ""
+            raise self.fail(name, f"{value:g} out of range (must be in {low:g}…{high:g}"
+                                  f"{because})")
         return value
 
 
@@ -132,20 +159,21 @@ class Hydraulics:
     @classmethod
     def from_machine(cls, machine: Machine, supply_mpa: float | None = None) -> Hydraulics:
         keys = PlantKeys(machine, "plant", machine.plant, MACHINE_KEYS)
-        supply = keys.number("supply_mpa", positive=True, high=35.0)
+        supply = keys.number("supply_mpa")
         if supply_mpa is not None:
-            if not 0.0 < supply_mpa <= 35.0:
-                raise ValueError(f"supply pressure {supply_mpa:g} MPa is outside 0…35 MPa "
-                                 f"(machine {machine.name})")
+            low, high = RANGES["supply_mpa"]
+            if not low <= supply_mpa <= high:
+                raise ValueError(f"supply pressure {supply_mpa:g} MPa is outside {low:g}…"
+                                 f"{high:g} MPa (machine {machine.name})")
             supply = supply_mpa
-        relief = keys.number("relief_mpa", math.inf, low=supply)
+        relief = keys.number("relief_mpa", math.inf, at_least="supply_mpa", low=supply)
         return cls(
             supply_pa=supply * 1e6,
             relief_pa=relief * 1e6,
-            bulk_modulus_pa=keys.number("bulk_modulus_mpa", positive=True) * 1e6,
-            column_loss_s=keys.number("column_loss_ms", 0.0, low=0.0) / 1e3,
-            spool_time_s=keys.number("spool_time_ms", positive=True) / 1e3,
-            rated_drop_pa=keys.number("valve_rated_drop_mpa", positive=True) * 1e6,
+            bulk_modulus_pa=keys.number("bulk_modulus_mpa") * 1e6,
+            column_loss_s=keys.number("column_loss_ms", 0.0) / 1e3,
+            spool_time_s=keys.number("spool_time_ms") / 1e3,
+            rated_drop_pa=keys.number("valve_rated_drop_mpa") * 1e6,
         )
 
 
@@ -178,81 +206,122 @@ class ActuatorParams:
 
     @classmethod
     def from_joint(cls, machine: Machine, index: int, hyd: Hydraulics,
-                   load_kg: float | None, polarity: float) -> ActuatorParams:
+                   load_kg: float | None, polarity: float, *, options: bool = False
+                   ) -> ActuatorParams:
+        """Joint ``index``'s actuator; ``options`` says the load or the supply pressure is the
+        caller's, not the file's (a joint that cannot hold is then a ValueError)."""
         joint = machine.joints[index]
         where = f"joints[{index}].plant"
         if joint.kind == "prismatic":
             keys = PlantKeys(machine, where, joint.plant, COMMON_KEYS | PRISMATIC_KEYS)
             unit_si = 1e-3
-            disp_a = keys.number("area_a_m2", positive=True)
-            disp_b = keys.number("area_b_m2", positive=True)
-            load = _load(keys, joint, machine, load_kg)
-            mass = keys.number("mass_kg", positive=True) + load
-            incline = math.radians(keys.number("incline_deg", 0.0, -90.0, 90.0))
+            disp_a = keys.number("area_a_m2")
+            disp_b = keys.number("area_b_m2")
+            bare = keys.number("mass_kg")
+            lightest, load = _load(keys, joint, machine, load_kg)
+            mass = bare + load
+            incline = math.radians(keys.number("incline_deg", 0.0))
             gravity_const, gravity_cos, phase = -mass * GRAVITY * math.sin(incline), 0.0, 0.0
             friction = ("coulomb_n", "stiction_n", "viscous_n_s_per_m")
         else:
             keys = PlantKeys(machine, where, joint.plant, COMMON_KEYS | REVOLUTE_KEYS)
             unit_si = math.pi / 180.0
-            disp_a = keys.number("disp_a_m3_per_rad", positive=True)
-            disp_b = keys.number("disp_b_m3_per_rad", positive=True)
-            mass = keys.number("inertia_kgm2", positive=True)
-            gravity_const, gravity_cos = 0.0, -keys.number("gravity_nm", 0.0, low=0.0)
-            phase = math.radians(keys.number("gravity_phase_deg", 0.0, -180.0, 180.0))
+            disp_a = keys.number("disp_a_m3_per_rad")
+            disp_b = keys.number("disp_b_m3_per_rad")
+            bare, lightest = keys.number("inertia_kgm2"), 0.0
+            mass = bare
+            gravity_const, gravity_cos = 0.0, -keys.number("gravity_nm", 0.0)
+            phase = math.radians(keys.number("gravity_phase_deg", 0.0))
             friction = ("coulomb_nm", "stiction_nm", "viscous_nm_s_per_rad")
-        coulomb = keys.number(friction[0], low=0.0)
-        b_at_supply = keys.number("b_at_supply", 0.0, 0.0, 1.0) == 1.0
+        coulomb = keys.number(friction[0])
+        b_at_supply = keys.number("b_at_supply", 0.0)
+        if b_at_supply not in (0.0, 1.0):
+            raise keys.fail("b_at_supply", f"must be 0 or 1, got {b_at_supply:g}")
         params = cls(
             unit_si=unit_si,
             lower=joint.lower * unit_si,
             upper=joint.upper * unit_si,
             disp_a=disp_a,
             disp_b=disp_b,
-            dead_a=keys.number("dead_volume_a_m3", positive=True),
-            dead_b=0.0 if b_at_supply else keys.number("dead_volume_b_m3", positive=True),
-            b_at_supply=b_at_supply,
+            dead_a=keys.number("dead_volume_a_m3"),
+            dead_b=0.0 if b_at_supply else keys.number("dead_volume_b_m3"),
+            b_at_supply=bool(b_at_supply),
             mass=mass,
             gravity_const=gravity_const,
             gravity_cos=gravity_cos,
             gravity_phase=phase,
             coulomb=coulomb,
-            stiction=keys.number(friction[1], coulomb, low=coulomb),
-            viscous=keys.number(friction[2], 0.0, low=0.0),
+            stiction=keys.number(friction[1], coulomb, at_least=friction[0], low=coulomb),
+            viscous=keys.number(friction[2], 0.0),
             polarity=polarity,
             valve=_valve(keys, joint, machine, hyd),
         )
-        params.check_holds(hyd, joint, machine)
+        params.check_stiffness(hyd, bare + lightest, keys)
+        params.check_holds(hyd, joint, keys, options)
         return params
 
-    def check_holds(self, hyd: Hydraulics, joint: Joint, machine: Machine) -> None:
-        """Raise if the supply cannot hold the joint against its largest gravity load."""
+    def stable_step(self, hyd: Hydraulics, mass: float) -> float:
+        """Longest step, s, that integrates the stiffest oil column on ``mass`` stably with
+        margin 2.
+
+        The step is symplectic Euler on the mass and oil spring plus an explicit
+        loss term; it is stable while ``omega^2 h (h + 2 loss) < 4``, and omega is
+        largest at an end of the stroke, where a chamber holds only its dead volume.
+        """
+        stiffness = (self.disp_a**2 / self.dead_a
+                     + (0.0 if self.b_at_supply else self.disp_b**2 / self.dead_b))
+        omega2 = hyd.bulk_modulus_pa * stiffness / mass
+        loss = hyd.column_loss_s
+        return -loss + math.sqrt(loss**2 + 2.0 / omega2)
+
+    def check_stiffness(self, hyd: Hydraulics, lightest: float, keys: PlantKeys) -> None:
+        """Refuse oil columns too stiff to simulate: they must take steps of ``MIN_STEP_S``
+        or longer, even with the lightest load the file allows (``lightest``, kg or kg m²)."""
+        step = self.stable_step(hyd, lightest)
+        if step < MIN_STEP_S:
+            raise MachineError(f"{keys.file}: {keys.where}: its oil columns ring too fast to "
+                               f"simulate: they need steps of {step * 1e6:.3g} µs, the "
+                               f"simulator's shortest is {MIN_STEP_S * 1e6:g} µs: more mass or "
+                               f"dead volume, or less area, bulk_modulus_mpa or column_loss_ms")
+
+    def check_holds(self, hyd: Hydraulics, joint: Joint, keys: PlantKeys, options: bool) -> None:
+        """Raise if the supply cannot hold the joint against its largest gravity load: a
+        MachineError naming the key when the numbers are the file's, else a ValueError."""
         if self.b_at_supply and self.disp_a <= self.disp_b:
-            raise MachineError(f"{machine.path.name}: joints[{machine.joints.index(joint)}]"
-                               f".plant: with b_at_supply the a side must be the larger")
+            raise MachineError(f"{keys.file}: {keys.where}: with b_at_supply the a side must "
+                               f"be the larger")
         push_up = hyd.supply_pa * (self.disp_a - self.disp_b if self.b_at_supply else self.disp_a)
         push_down = hyd.supply_pa * self.disp_b
         pull_down = abs(self.gravity_cos) - self.gravity_const
         pull_up = abs(self.gravity_cos) + self.gravity_const
         ratio = max(pull_down / push_up, pull_up / push_down)
-        if ratio >= 1.0:
-            raise ValueError(f"{joint.name} cannot hold its load: it needs more than "
-                             f"{ratio * hyd.supply_pa / 1e6:.1f} MPa, the supply is "
-                             f"{hyd.supply_pa / 1e6:g} MPa (machine {machine.name})")
+        if ratio < 1.0:
+            return
+        needs = (f"{joint.name} cannot hold its load: it needs more than "
+                 f"{ratio * hyd.supply_pa / 1e6:.1f} MPa, the supply is "
+                 f"{hyd.supply_pa / 1e6:g} MPa")
+        if options:
+            raise ValueError(f"{needs} (machine {keys.machine})")
+        raise MachineError(f"{keys.file}: {keys.where}: {needs} (plant.supply_mpa): raise the "
+                           f"supply, or give the joint more area or less load")
 
     def gravity(self, q: float) -> float:
         """Gravity force or moment on the joint at position ``q`` (SI), towards larger readings."""
         return self.gravity_const + self.gravity_cos * math.cos(q + self.gravity_phase)
 
 
-def _load(keys: PlantKeys, joint: Joint, machine: Machine, load_kg: float | None) -> float:
-    """Payload hanging on a prismatic joint, from the option or the machine file."""
-    low = keys.number("load_min_kg", 0.0, low=0.0)
-    high = keys.number("load_max_kg", math.inf, low=low)
-    load = keys.number("load_kg", 0.0, low, high) if load_kg is None else load_kg
+def _load(keys: PlantKeys, joint: Joint, machine: Machine, load_kg: float | None
+          ) -> tuple[float, float]:
+    """The lightest payload the file allows on a prismatic joint, and the one it carries: the
+    option's, else the file's ``load_kg`` (default the lightest)."""
+    low = keys.number("load_min_kg", 0.0)
+    high = keys.number("load_max_kg", RANGES["load_max_kg"][1], at_least="load_min_kg", low=low)
+    load = (keys.number("load_kg", low, at_least="load_min_kg", low=low, high=high)
+            if load_kg is None else load_kg)
     if not low <= load <= high:
         raise ValueError(f"{joint.name} load {load:g} kg is outside {low:g}…{high:g} kg "
                          f"(machine {machine.name})")
-    return load
+    return low, load
 
 
 def _valve(keys: PlantKeys, joint: Joint, machine: Machine, hyd: Hydraulics) -> Valve:
@@ -263,14 +332,12 @@ def _valve(keys: PlantKeys, joint: Joint, machine: Machine, hyd: Hydraulics) -> 
     """
     half_step = machine.valve_resolution_pct / 2.0
     return Valve.from_ratings(
-        lap_pos_pct=keys.number("overlap_pos_pct", max(joint.min_pwm_pos - half_step, 0.0),
-                                0.0, 99.0),
-        lap_neg_pct=keys.number("overlap_neg_pct", max(joint.min_pwm_neg - half_step, 0.0),
-                                0.0, 99.0),
-        rated_lpm=keys.number("valve_rated_lpm", positive=True),
+        lap_pos_pct=keys.number("overlap_pos_pct", max(joint.min_pwm_pos - half_step, 0.0)),
+        lap_neg_pct=keys.number("overlap_neg_pct", max(joint.min_pwm_neg - half_step, 0.0)),
+        rated_lpm=keys.number("valve_rated_lpm"),
         rated_drop_pa=hyd.rated_drop_pa,
-        b_ratio=keys.number("valve_b_ratio", 1.0, low=0.1, high=10.0),
-        null_leak_lpm=keys.number("null_leak_lpm", 0.0, low=0.0),
+        b_ratio=keys.number("valve_b_ratio", 1.0),
+        null_leak_lpm=keys.number("null_leak_lpm", 0.0),
         supply_pa=hyd.supply_pa,
         spool_time_s=hyd.spool_time_s,
     )
@@ -306,19 +373,7 @@ class Actuator:
         self.switch_in = math.inf
         self.pa, self.pb = self.holding_pressures(q)
         self._force = self.pa * params.disp_a - self.pb * params.disp_b
-        self._max_h = self.stable_step()
-
-    def stable_step(self) -> float:
-        """Longest step, s, that integrates the stiffest oil column stably with margin 2.
-
-        The step is symplectic Euler on the mass and oil spring plus an explicit
-        loss term; it is stable while ``omega^2 h (h + 2 loss) < 4``, and omega is
-        largest at an end of the stroke, where a chamber holds only its dead volume.
-        """
-        p = self._p
-        stiffness = p.disp_a**2 / p.dead_a + (0.0 if p.b_at_supply else p.disp_b**2 / p.dead_b)
-        omega2 = self._beta * stiffness / p.mass
-        return -self._loss + math.sqrt(self._loss**2 + 2.0 / omega2)
+        self._max_h = params.stable_step(hyd, params.mass)
 
     def holding_pressures(self, q: float) -> tuple[float, float]:
         """Chamber pressures that hold the load still at ``q``, nearest to half supply each."""
@@ -453,8 +508,10 @@ class Plant:
                  load_kg: float | None = None, supply_mpa: float | None = None) -> None:
         self.transmission = Transmission(machine)
         self.hydraulics = Hydraulics.from_machine(machine, supply_mpa)
+        options = load_kg is not None or supply_mpa is not None
         self.params = tuple(ActuatorParams.from_joint(machine, i, self.hydraulics, load_kg,
-                                                      self.transmission.polarity[i])
+                                                      self.transmission.polarity[i],
+                                                      options=options)
                             for i in range(machine.n_joints))
         start = self.actuator_start(machine, initial)
         self.actuators = tuple(Actuator(p, self.hydraulics, a * p.unit_si)
@@ -472,10 +529,16 @@ class Plant:
                                  f"{machine.name}, got {len(q)}")
         a = [0.0] * machine.n_joints
         self.transmission.actuators_from_joints(q, a)
-        for joint, value in zip(machine.joints, a, strict=True):
-            if not joint.lower <= value <= joint.upper:
-                raise ValueError(f"{joint.name} initial actuator position {value:g}{joint.symbol}"
-                                 f" is outside {joint.limit_text()} (machine {machine.name})")
+        for i, (joint, value) in enumerate(zip(machine.joints, a, strict=True)):
+            if joint.lower <= value <= joint.upper:
+                continue
+            outside = (f"{joint.name} initial actuator position {value:g}{joint.symbol} is "
+                       f"outside {joint.limit_text()}")
+            if initial is not None:
+                raise ValueError(f"{outside} (machine {machine.name})")
+            raise MachineError(f"{machine.path.name}: joints[{i}].encoder.coupling: {outside} "
+                               f"with every joint mid-range, where the simulator starts: the "
+                               f"coupling is too large for these limits")
         return a
 
     def step(self, h: float) -> None:

@@ -290,6 +290,20 @@ def test_a_bad_machine_file_starts_nothing(tmp_path: Path, leftovers) -> None:
     assert leftovers(os.getpid()) == before
 
 
+def test_a_file_that_is_no_machine_description_starts_nothing(not_a_machine: tuple[Path, str],
+                                                              leftovers) -> None:
+    """ControlClient on a file that cannot be read as a machine (not UTF-8, a directory, an
+    I/O error, nested 5000 deep, an integer wider than a float…): one line of MachineError
+    naming the file, before any segment or process."""
+    path, message = not_a_machine
+    before = leftovers(os.getpid())
+    with pytest.raises(MachineError) as refused:
+        ControlClient(path)
+    one_line(str(refused.value), "")
+    assert re.search(message, str(refused.value)), str(refused.value)
+    assert leftovers(os.getpid()) == before
+
+
 # -- coefficient files --------------------------------------------------------------------
 
 TOML_NUMBER = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(-1000, 1000))

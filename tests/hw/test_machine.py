@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import errno
+import os
+import re
 import tomllib
 from pathlib import Path
 
@@ -10,6 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from hw.machine import MachineError, load_machine, parse_machine
+from hw.sim.backend import SimBackend
 
 MACHINES = Path(__file__).resolve().parents[2] / "hw" / "machines"
 UNIMATE_TEXT = (MACHINES / "unimate2000b.toml").read_text()
@@ -93,6 +97,52 @@ BAD = [
     (("[valve]", "valve = 3\n[valves]"), r"unknown key\(s\) valves"),
     (("bits = 13", "bits = 13.5"), r"encoder\.bits: must be a whole number"),
     (("[machine]", "[machine"), r"not valid TOML"),
+    # issue 12: what a hostile tester found accepted, each refused naming its key
+    (("period_us = 325.0", "period_us = 1e-300"),
+     r"valve\.period_us: 1e-300 out of range \(must be in 100…10000\)$"),
+    (("gradient = -0.2617", "gradient = -5e-324"),
+     r"joints\[0\]\.encoder\.gradient: -4\.94066e-324 out of range \(its size must be in "
+     r"1e-06…10 units a count"),
+    (("mass_kg = 60.0", "mass_kg = 1e-300"),
+     r"joints\[0\]\.plant\.mass_kg: 1e-300 out of range \(must be in 0\.1…100000\)$"),
+    (("settle_ms = 6.0", "settle_ms = 1e300"), r"encoder\.settle_ms: 1e\+300 out of range"),
+    (("settle_ms = 6.0", "settle_ms = 0"),
+     r"encoder\.settle_ms: 0 out of range \(must be in 0\.001…65\)$"),
+    (("limits = [976.0, 2041.0]", "limits = [-1e308, 1e308]"),
+     r"joints\[0\]\.limits\[0\]: -1e\+308 out of range \(must be in -100000…100000\)$"),
+    (("bits = 13", "bits = 12"),
+     r"joints\[1\]\.limits: Rotate's -110…110° is 7458 counts of 0\.0295 deg, more than "
+     r"12-bit gray words cover: it needs encoder\.bits = 13 or a coarser encoder\.gradient$"),
+    (("gradient = 0.01432, constant = -27.0", "gradient = 0.01432, constant = -20.0"),
+     r"joints\[2\]\.encoder\.constant: Up/Down's limits -27…30° read counts -489…3492, "
+     r"outside the 13-bit words' 0…8191"),
+    (("sample_time_ms = 1.0", "sample_time_ms = 0.05"),
+     r"machine\.sample_time_ms: 0\.05 out of range \(must be in 0\.1…100\)$"),
+    (("tolerance = 0.3", "tolerance = 0.01"),
+     r"joints\[2\]\.tolerance: 0\.01 deg is less than one encoder count \(0\.01432 deg\)"),
+    (("following_error = 12.0", "following_error = 0.2"),
+     r"joints\[2\]\.following_error: 0\.2 out of range \(must be in 0\.3…57\)$"),
+    (("coupling = 1.0", "coupling = 1e9"), r"joints\[4\]\.encoder\.coupling: 1000000000 out of"),
+    (("d = 1066.8", "d = 1e12"), r"kinematics\.dh\[0\]\.d: 1e\+12 out of range"),
+    (("kp = [[10.0], [10.0]", "kp = [[10.0, 1, 2, 3, 4, 5, 6, 7, 8], [10.0]"),
+     r"coefficients\.hold\.kp\[0\]: 9 taps; the controller takes at most 8$"),
+    (("ki = [200.0, 29.0, 100.0", "ki = [2e300, 29.0, 100.0"),
+     r"coefficients\.hold\.ki\[0\]: 2e\+300 out of range \(must be in -1e\+06…1e\+06\)$"),
+    (("filter_divisor = 6.0", "filter_divisor = 1e-300"),
+     r"coefficients\.hold\.filter_divisor: 1e-300 out of range"),
+    (("inertia_kgm2 = 0.3", "inertia_kgm2 = 0.001"),
+     r"joints\[5\]\.plant: its oil columns ring too fast to simulate: they need steps of "
+     r"5\.\d+ µs, the simulator's shortest is 10 µs"),
+    (("gravity_nm = 1500.0", "gravity_nm = 1e6"),
+     r"joints\[2\]\.plant: Up/Down cannot hold its load: it needs more than \d+\.\d MPa, the "
+     r"supply is 6\.9 MPa \(plant\.supply_mpa\): raise the supply"),
+    (("lamp_ripple = 0.05", "lamp_ripple = 5e-324"), r"plant\.lamp_ripple: 4\.94066e-324 out of"),
+    (('name = "Up/Down"', 'name = "Up\\nDown"'),
+     r"joints\[2\]\.name: 'Up\\nDown': character 2 is '\\n', which does not print"),
+    (('note = "option.c hold_coeff"', 'note = "option.c \\u202ehold_coeff"'),
+     r"coefficients\.hold\.note: .*character 9 is '\\u202e', which does not print"),
+    (("[coefficients.thesis_pi]", '[coefficients."\\u001b[31mred"]'),
+     r"coefficients: '\\x1b\[31mred': character 0 is '\\x1b'"),
 ]
 
 
@@ -103,6 +153,60 @@ def test_bad_file_names_file_key_and_problem(edit: tuple[str, str], message: str
     text = UNIMATE_TEXT.replace(old, new, 1)
     with pytest.raises(MachineError, match=r"^unimate2000b\.toml: .*" + message):
         parse_machine(text, MACHINES / "unimate2000b.toml")
+
+
+def test_a_quadrature_count_must_reach_the_whole_range_either_way() -> None:
+    """A signed count from wherever the ram powered up: 12000 counts either way need 15 bits."""
+    text = RIG_TEXT.replace('kind = "quadrature"', 'kind = "quadrature"\nbits = 14')
+    with pytest.raises(MachineError, match=r"^rig\.toml: joints\[0\]\.limits: Ram's 0…1200mm is "
+                                           r"12000 counts of 0\.1 mm, more than 14-bit quadrature "
+                                           r"words cover: it needs encoder\.bits = 15"):
+        parse_machine(text, MACHINES / "rig.toml")
+    wide = parse_machine(text.replace("bits = 14", "bits = 15"), Path("rig.toml"))
+    assert wide.encoder_bits == 15
+
+
+def test_the_standstill_error_limit_is_never_inside_the_settle_band() -> None:
+    """MIN_FERROR defaults to FERROR / 10, but not below the tolerance: a joint holding inside
+    its settle band is never a following error."""
+    text = UNIMATE_TEXT.replace("following_error = 12.0", "following_error = 2.0")
+    updown = parse_machine(text, Path("ferror.toml")).joints[2]
+    assert (updown.tolerance, updown.min_following_error) == (0.3, 0.3)
+
+
+def test_a_file_without_a_plant_loads_and_the_simulator_names_what_it_lacks() -> None:
+    """A machine for real hardware only needs no [plant]; a file with one has it checked as it
+    loads, and the simulator refuses a file without naming the first key it needs."""
+    text = re.sub(r"(?m)^\[(joints\.)?plant\]\n(?:^(?!\[).*\n)*", "", RIG_TEXT)
+    assert "plant" not in tomllib.loads(text) and "area_a_m2" not in text
+    machine = parse_machine(text, Path("hardware.toml"))
+    with pytest.raises(MachineError, match=r"^hardware\.toml: plant\.supply_mpa: missing number$"):
+        SimBackend(machine, lockstep=True)
+
+
+def test_a_file_that_is_no_machine_description_is_refused_naming_it(
+        not_a_machine: tuple[Path, str]) -> None:
+    path, message = not_a_machine
+    with pytest.raises(MachineError) as refused:
+        load_machine(path)
+    assert re.search(message, str(refused.value)), str(refused.value)
+    assert "\n" not in str(refused.value)
+
+
+def test_an_unreadable_file_is_refused_naming_it(tmp_path: Path,
+                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    """A file its reader may not read (mode 000). Root reads any file, so for root the
+    operating system's refusal is simulated."""
+    path = tmp_path / "secret.toml"
+    path.write_text(UNIMATE_TEXT)
+    path.chmod(0)
+    if os.geteuid() == 0:
+        def refuse(self: Path, *args: object, **kwargs: object) -> None:
+            raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(self))
+        monkeypatch.setattr(Path, "open", refuse)
+    with pytest.raises(MachineError, match=rf"^{re.escape(str(path))}: cannot read it: "
+                                           r"Permission denied$"):
+        load_machine(path)
 
 
 def test_feed_forward_gains_are_optional_and_checked() -> None:

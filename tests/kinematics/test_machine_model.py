@@ -60,7 +60,10 @@ def test_a_modified_machine_file_changes_fk_and_ik(tmp_path: Path) -> None:
     for old, new in (("d = 1066.8", "d = 900.0"), ("a = 120.65", "a = 80.0"),
                      ("d = 200.0", "d = 150.0"), ("d = 440.0", "d = 300.0"),
                      ("limits = [976.0, 2041.0]", "limits = [700.0, 1800.0]"),
-                     ("limits = [-27.0, 30.0]", "limits = [-40.0, 45.0]")):
+                     ("limits = [-27.0, 30.0]", "limits = [-40.0, 45.0]"),
+                     # its encoder reads from the new lower limit: count 0 is at -40°
+                     ("gradient = 0.01432, constant = -27.0",
+                      "gradient = 0.01432, constant = -40.0")):
         assert text.count(old) == 1, old
         text = text.replace(old, new)
     path = tmp_path / "unimate_modified.toml"

@@ -151,29 +151,29 @@ def test_initial_positions_are_checked_against_the_limits() -> None:
 # -- parameters ---------------------------------------------------------------------------
 
 def edited(name: str, old: str, new: str) -> Machine:
+    """The machine of built-in file ``name`` with ``old`` replaced: its plant is checked as it
+    loads, so a bad plant number is refused there, before any simulator is built."""
     text = (MACHINES / name).read_text()
     assert old in text
     return parse_machine(text.replace(old, new, 1), MACHINES / name)
 
 
 def test_missing_key_names_file_and_key() -> None:
-    machine = edited("unimate2000b.toml", "inertia_kgm2 = 120.0\n", "")
     with pytest.raises(MachineError,
                        match=r"unimate2000b.toml: joints\[2\].plant.inertia_kgm2: missing number"):
-        Plant(machine)
+        edited("unimate2000b.toml", "inertia_kgm2 = 120.0\n", "")
 
 
 def test_key_of_the_wrong_joint_kind_is_refused_with_the_allowed_list() -> None:
-    machine = edited("rig.toml", "coulomb_n = 75.0", "coulomb_nm = 75.0")
     with pytest.raises(MachineError, match=r"rig.toml: joints\[0\].plant: unknown key\(s\) "
                                            r"coulomb_nm; allowed: .*coulomb_n,"):
-        Plant(machine)
+        edited("rig.toml", "coulomb_n = 75.0", "coulomb_nm = 75.0")
 
 
 def test_bad_machine_level_value() -> None:
-    machine = edited("rig.toml", "bulk_modulus_mpa = 1000.0", "bulk_modulus_mpa = -3.0")
-    with pytest.raises(MachineError, match=r"rig.toml: plant.bulk_modulus_mpa: -3 must be > 0"):
-        Plant(machine)
+    with pytest.raises(MachineError, match=r"rig.toml: plant.bulk_modulus_mpa: -3 out of range "
+                                           r"\(must be in 100…2500\)"):
+        edited("rig.toml", "bulk_modulus_mpa = 1000.0", "bulk_modulus_mpa = -3.0")
 
 
 def test_load_and_supply_options_are_checked() -> None:

@@ -1,0 +1,36 @@
+"""``servodesk machine FILE`` and ``servodesk --machine FILE``, run in-process: a file that is
+no machine description is one line on stderr and exit 2, never a traceback."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+
+from app import cli
+from app.tui import ServodeskApp
+
+BUILTIN = Path(__file__).resolve().parents[2] / "hw" / "machines"
+
+
+@pytest.mark.parametrize("form", ["servodesk machine FILE", "servodesk --machine FILE"])
+def test_a_file_that_is_no_machine_description_is_one_line_and_exit_2(
+        not_a_machine: tuple[Path, str], form: str, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    path, message = not_a_machine
+    monkeypatch.setattr(ServodeskApp, "run", lambda self: pytest.fail(f"the TUI opened {path}"))
+    argv = ["machine", str(path)] if form == "servodesk machine FILE" else ["--machine", str(path)]
+    code = cli.main(argv)
+    out, err = capsys.readouterr()
+    assert (code, out) == (2, ""), err
+    line = err.removesuffix("\n")
+    assert line.startswith("servodesk: ") and "\n" not in line, err
+    assert re.search(message, line.removeprefix("servodesk: ")), line
+
+
+def test_a_machine_is_described_from_its_file(capsys: pytest.CaptureFixture[str]) -> None:
+    assert cli.main(["machine", str(BUILTIN / "rig.toml")]) == 0
+    out, err = capsys.readouterr()
+    assert out.startswith(f"Single-axis hydraulic test rig (rig) from {BUILTIN / 'rig.toml'}\n")
+    assert err == ""
