@@ -9,7 +9,8 @@ selects a derandomized profile.
 Cost: a test that starts a process (the control subprocess through
 ``ControlClient``, the emulator, a CLI, tmux) or the TUI is marked ``slow`` here,
 centrally (``pytest_collection_modifyitems``), so that ``pytest -m "not slow"``
-is the inner loop. Every other test is watched: one that starts a process
+is the inner loop; so is a test that starts nothing but runs for minutes (an
+exhaustive property). Every other test is watched: one that starts a process
 anyway fails at teardown, naming what it started and where to mark it.
 """
 
@@ -60,6 +61,11 @@ SLOW_TESTS = (
     "tests/control/test_seqlock.py::test_reader_never_sees_a_torn_record",  # spawned writer
     "tests/control/test_shm.py::test_orphan_of_a_killed_process_is_cleaned_up",
 )
+# Single tests that start nothing but run for minutes: exhaustive variants of fast properties.
+LONG_TESTS = (
+    "tests/hw/test_machine_fuzz.py::"
+    "test_ten_thousand_changed_machine_files_load_and_run_or_name_their_key",
+)
 # Audit events (PEP 578) of a process start. A multiprocessing "spawn" start raises none
 # (CPython 3.11): such a test must be listed above by hand, as test_seqlock's is.
 PROCESS_EVENTS = frozenset({"subprocess.Popen", "os.fork", "os.forkpty", "os.posix_spawn",
@@ -80,7 +86,7 @@ def _starts_processes(item: pytest.Item) -> bool:
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     for item in items:
-        if _starts_processes(item):
+        if _starts_processes(item) or item.nodeid.split("[")[0] in LONG_TESTS:
             item.add_marker(pytest.mark.slow)
 
 
