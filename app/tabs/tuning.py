@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from functools import partial
 from pathlib import Path
 
 from rich.text import Text
@@ -24,7 +25,7 @@ from app.desk import Desk
 from app.tabs.tab import TabPage
 from app.widgets.dialogs import EditValueScreen
 from control.layout import MAX_TAPS, Mode
-from hw.machine import Coefficients
+from hw.machine import COEFFICIENT, FILTER_DIVISOR, Coefficients
 
 JOINT_COLUMNS = ("joint", "kp taps", "ki", "kd", "w taps", "kv feed-forward")
 COMMON_COLUMNS = ("filter taps", "filter divisor", "integral limit", "duty limit %")
@@ -42,6 +43,8 @@ def parse_taps(text: str, allow_empty: bool = True) -> tuple[float, ...]:
             from None
     if not all(math.isfinite(t) for t in taps):
         raise ValueError("taps must be finite numbers")
+    if any(abs(t) > COEFFICIENT for t in taps):
+        raise ValueError(f"taps must lie within ±{COEFFICIENT:g}, as in a machine file")
     if len(taps) > MAX_TAPS:
         raise ValueError(f"{len(taps)} taps: the controller takes at most {MAX_TAPS}")
     return taps
@@ -219,12 +222,15 @@ class TuningTab(TabPage):
                                              hint), done)
 
     def _parser(self, table: str, column: int):
+        """The check of a cell: the machine file's range for its key (docs/machines.md), so
+        every set the tab builds can be saved and loaded back."""
+        gain = partial(parse_number, low=-COEFFICIENT, high=COEFFICIENT)
         if table == "tuning-joints":
-            return {1: lambda s: parse_taps(s, allow_empty=False), 2: parse_number,
-                    3: parse_number, 4: parse_taps, 5: parse_number}[column]
+            return {1: lambda s: parse_taps(s, allow_empty=False), 2: gain,
+                    3: gain, 4: parse_taps, 5: gain}[column]
         return {0: lambda s: parse_taps(s, allow_empty=False),
-                1: lambda s: parse_number(s, 0.0, strict_low=True),
-                2: lambda s: parse_number(s, 0.0),
+                1: lambda s: parse_number(s, *FILTER_DIVISOR),
+                2: lambda s: parse_number(s, 0.0, COEFFICIENT),
                 3: lambda s: parse_number(s, 0.0, 100.0, strict_low=True)}[column]
 
     def _changed(self, c: Coefficients, table: str, row: int, column: int,

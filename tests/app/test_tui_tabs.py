@@ -4,17 +4,21 @@ from __future__ import annotations
 
 import asyncio
 import re
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+import pytest
 from textual.widgets import DataTable, Input
 
-from app.coefficient_files import load_coefficients
+from app.coefficient_files import load_coefficients, save_coefficients
 from app.tabs.latency import LatencyTab
 from app.tabs.scope import JointScope, ScopeTab
+from app.tabs.tuning import parse_number, parse_taps
 from app.widgets.dialogs import EditValueScreen
 from app.widgets.live_text import LiveText
 from app.widgets.scope import ScopePlot
+from hw.machine import COEFFICIENT, FILTER_DIVISOR, load_machine
 from kinematics import unimate
 
 SIZE = (160, 48)
@@ -193,3 +197,17 @@ def test_latency_tab_shows_table_2_1_and_runs_a_fresh_test(tui, monkeypatch) -> 
             await tui.until(lambda: "fresh" in tui.text(fresh), what="the fresh table")
 
     asyncio.run(scenario())
+
+
+def test_the_tuning_tab_takes_only_what_a_machine_file_takes(tmp_path: Path) -> None:
+    """A coefficient typed in the Tuning tab lies in the machine file's range (issue 12): at
+    its ends a set saves and loads back; past them the cell says why."""
+    machine = load_machine("rig")
+    with pytest.raises(ValueError, match=r"taps must lie within ±1e\+06"):
+        parse_taps("0.5, -2e6")
+    with pytest.raises(ValueError, match=r"out of range: enter a value ≥ -1e\+06 and ≤ 1e\+06"):
+        parse_number("1e7", -COEFFICIENT, COEFFICIENT)
+    extreme = replace(machine.track, kp=(parse_taps("1e6, -1e6"),), ki=(-COEFFICIENT,),
+                      filter_divisor=FILTER_DIVISOR[0], integral_limit=COEFFICIENT)
+    path = save_coefficients(tmp_path / "extreme", {"track": extreme}, machine)
+    assert load_coefficients(path, machine)["track"].kp == ((1e6, -1e6),)
