@@ -27,6 +27,7 @@ ENCODER_KINDS = ("gray", "quadrature")
 MIN_FERROR_DIVISOR = 10.0  # min_following_error defaults to following_error / 10
 MAX_FILE_BYTES = 1 << 20  # the Unimate's description is 8 kB; a file this large is not one
 MAX_TAPS = 8  # taps per kp, w or filter list that the controller's shared memory holds
+MAX_JOINTS = 16  # joints the I/O board's protocol drives (docs/protocol.md, CONFIG)
 # Characters refused in a file's strings and path: controls (ESC, newline, DEL, C1), format
 # characters (bidi overrides, zero-width), line and paragraph separators, lone surrogates
 # (an undecodable file name). Names are printed as they are, so they must print as text.
@@ -441,6 +442,9 @@ class _Reader:
         raw_joints = doc.get("joints")
         if not isinstance(raw_joints, list) or not raw_joints:
             raise self.fail("joints", "missing: at least one [[joints]] table is required")
+        if len(raw_joints) > MAX_JOINTS:
+            raise self.fail("joints", f"{len(raw_joints)} [[joints]] tables; the I/O board "
+                                      f"drives at most {MAX_JOINTS}")
         keys = [self.string(j, f"joints[{i}]", "key") if isinstance(j, dict) else ""
                 for i, j in enumerate(raw_joints)]
         for i, k in enumerate(keys):

@@ -141,6 +141,8 @@ BAD = [
      r"joints\[2\]\.name: 'Up\\nDown': character 2 is '\\n', which does not print"),
     (('note = "option.c hold_coeff"', 'note = "option.c \\u202ehold_coeff"'),
      r"coefficients\.hold\.note: .*character 9 is '\\u202e', which does not print"),
+    (("[coefficients.hold]", "[[joints]]\n" * 11 + "[coefficients.hold]"),
+     r"joints: 17 \[\[joints\]\] tables; the I/O board drives at most 16$"),
     (("[coefficients.thesis_pi]", '[coefficients."\\u001b[31mred"]'),
      r"coefficients: '\\x1b\[31mred': character 0 is '\\x1b'"),
 ]
