@@ -24,6 +24,7 @@ from typing import Any
 BUILTIN = {"unimate2000b": "unimate2000b.toml", "unimate": "unimate2000b.toml", "rig": "rig.toml"}
 JOINT_KINDS = {"prismatic": "mm", "revolute": "deg"}
 ENCODER_KINDS = ("gray", "quadrature")
+KINEMATICS_MODELS = ("unimate2000b",)  # closed-form models control.motion.robot_model solves
 MIN_FERROR_DIVISOR = 10.0  # min_following_error defaults to following_error / 10
 MAX_FILE_BYTES = 1 << 20  # the Unimate's description is 8 kB; a file this large is not one
 MAX_TAPS = 8  # taps per kp, w or filter list that the controller's shared memory holds
@@ -644,7 +645,9 @@ class _Reader:
     def kinematics_model(self, doc: Mapping[str, Any]) -> str | None:
         kin = self.table(doc, "", "kinematics", optional=True)
         self.only(kin, "kinematics", {"model", "dh"})
-        return self.string(kin, "kinematics", "model") if "model" in kin else None
+        if "model" not in kin:
+            return None
+        return self.string(kin, "kinematics", "model", choices=KINEMATICS_MODELS)
 
     def dh(self, doc: Mapping[str, Any], keys: list[str]) -> tuple[DHRow, ...]:
         rows = self.table(doc, "", "kinematics", optional=True).get("dh", [])

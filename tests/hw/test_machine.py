@@ -141,6 +141,8 @@ BAD = [
      r"joints\[2\]\.name: 'Up\\nDown': character 2 is '\\n', which does not print"),
     (('note = "option.c hold_coeff"', 'note = "option.c \\u202ehold_coeff"'),
      r"coefficients\.hold\.note: .*character 9 is '\\u202e', which does not print"),
+    (('model = "unimate2000b"', 'model = "unimate2000"'),
+     r"kinematics\.model: 'unimate2000' is not one of unimate2000b$"),
     (("[coefficients.hold]", "[[joints]]\n" * 11 + "[coefficients.hold]"),
      r"joints: 17 \[\[joints\]\] tables; the I/O board drives at most 16$"),
     (("[coefficients.thesis_pi]", '[coefficients."\\u001b[31mred"]'),
