@@ -75,6 +75,7 @@ OUTGOING = 64  # commands waiting for the channel; more means the controller is 
 CLOSE_WAIT_S = 1.0  # close(): how long the controller may take to stop before it is killed
 DEATH_S = 0.25
 _SESSIONS = itertools.count(1)  # several clients in one process get their own segments
+_MOVES = itertools.count(1)  # and so do their moves (a move's segment may outlive its client)
 SPIN_US = 150.0  # spin before each deadline: keeps the core and its caches (benchmarks/loop.py)
 
 
@@ -546,7 +547,7 @@ class ControlClient:
         encoded = encode_meta(meta)
         layout = MoveLayout(samples, self.machine.n_joints, len(encoded))
         move_id = next(self._ids)
-        segment = shm.create(f"mv{move_id}", layout.size,
+        segment = shm.create(f"mv{next(_MOVES)}", layout.size,
                              f"a {kind} move of {samples * self.dt:.1f} s")
         layout.write_header(segment.buf)
         layout.write_meta(segment.buf, encoded)

@@ -4,8 +4,9 @@
 the data directory, and a run of a few thousand samples does not fit. Where
 mounting is not allowed the tmpfs case is skipped and the unwritable case (a
 data directory whose parent is a file) still runs. Either way the operator is
-told, the run is kept in memory, nothing half-written is left, and the run can
-be saved elsewhere.
+told, the run is kept in memory and in its move segment, nothing half-written is
+left, and the run can be saved elsewhere; the next start saves it from the segment
+(tests/faults/test_saving.py shows that after a client exits).
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from control import ControlClient, MoveResult
+from control import ControlClient, MoveResult, shm
 from control.motion import moves
 from control.recorder import RecorderError, load_run, save_run
 from hw.machine import load_machine
@@ -61,11 +62,16 @@ def assert_kept_and_saved_elsewhere(result: MoveResult, path: np.ndarray, elsewh
     assert result.complete and result.files is None
     assert reason in result.save_error
     assert result.save_error.startswith("run not saved (cannot save the step run in ")
-    assert result.save_error.endswith("it is kept in memory: save it elsewhere from the Runs tab")
+    assert result.save_error.endswith("it is kept in memory (save it elsewhere from the Runs "
+                                      "tab) and in shared memory, where the next start saves it")
     assert result.run.samples == len(path)
     np.testing.assert_allclose(result.run.desired, path, atol=1e-9)
     files = save_run(result.run, elsewhere)
     assert load_run(files.json) == result.run
+    kept = [n for n in shm.leftover_segments()
+            if shm.owner_pid(n) == os.getpid() and shm.is_move_segment(n)]
+    assert len(kept) == 1, "the unsaved run's segment was not kept"
+    shm.release(shm.attach(kept[0]), unlink=True)  # this process lives on: no start recovers
 
 
 def test_a_full_disk_keeps_the_run_in_memory_and_leaves_nothing_half_written(

@@ -128,3 +128,30 @@ def test_a_controller_killed_with_its_client_leaves_the_run_to_the_next_start(
     assert info.samples >= 500
     doc = json.loads(info.files.json.read_text())
     assert doc["meta"]["recovered"] is True
+
+
+def test_a_run_its_client_could_not_save_is_saved_by_the_next_start(tmp_path: Path) -> None:
+    """The data directory is unusable when the move ends (a file where it should be): the
+    client keeps the run in its segment and exits; once the directory is usable, the next
+    start saves the run, marked recovered."""
+    runs = tmp_path / "runs"
+    runs.write_text("a file where the runs' directory should be")
+    script = textwrap.dedent("""
+        import json, sys
+        from control import ControlClient
+        from control.motion import moves
+        with ControlClient("unimate2000b", lockstep=True, data_dir=sys.argv[1],
+                           heartbeat_timeout_s=3.0) as client:
+            start = client.status().position
+            path = moves.step(start, 1, start[1] + 10.0, duration=2.0, machine=client.machine)
+            result = client.wait(client.move(path, kind="step"), timeout=60)
+        print(json.dumps({"error": result.save_error}), flush=True)
+    """)
+    done = subprocess.run([sys.executable, "-c", script, str(runs)], capture_output=True,
+                          text=True, timeout=120, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert done.returncode == 0, done.stderr
+    assert "where the next start saves it" in json.loads(done.stdout)["error"]
+    runs.unlink()
+    notices = recover_runs()
+    (info,) = list_runs(runs)
+    assert info.status == "recovered: complete" and info.samples == 2001, notices
