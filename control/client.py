@@ -171,6 +171,7 @@ class ControlClient:
         self.realtime = False
         self.dead = ""
         self._moves: dict[int, MoveHandle] = {}
+        self._kept: dict[str, str] = {}  # run id: segment of a run not saved, for the next start
         self._ids = itertools.count(1)
         self._outgoing: queue.Queue[Command] = queue.Queue(OUTGOING)
         self._closing = threading.Event()
@@ -398,8 +399,19 @@ class ControlClient:
                          "the Runs tab) and in shared memory, where the next start saves it")
         handle.result = MoveResult(handle.move_id, status, run, files, error, handle.plan,
                                    self.machine)
-        shm.release(handle.segment, unlink=files is not None or not run.samples)
+        kept = files is None and bool(run.samples)
+        if kept:
+            self._kept[str(handle.meta["run_id"])] = handle.segment.name
+        shm.release(handle.segment, unlink=not kept)
         handle.done.set()
+
+    def release_kept(self, run: Run) -> None:
+        """``run``, which could not be saved, has been saved elsewhere: let go of the copy
+        kept in shared memory for the next start to recover."""
+        name = self._kept.pop(str(run.meta.get("run_id")), None)
+        if name is not None:
+            with contextlib.suppress(FileNotFoundError):
+                shm.release(shm.attach(name), unlink=True)
 
     # -- commands ------------------------------------------------------------------------
 
