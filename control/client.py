@@ -184,7 +184,7 @@ class ControlClient:
             for which in self.coefficients}
         self._models: tuple[DeadbandModel | None, ...] = (None,) * self.machine.n_joints
         # runs a dead process left unsaved first, then the clean-up (control/recovery.py)
-        notices = recover_runs() + shm.cleanup_orphans()[1]
+        notices = recover_runs(self.data_dir) + shm.cleanup_orphans()[1]
         self.layout = ControlLayout(self.machine.n_joints)
         self._segment = shm.create(f"ctl{next(_SESSIONS)}", self.layout.size,
                                    "the controller's status")

@@ -75,19 +75,19 @@ def left(tmp_path: Path):
 
 def test_a_finished_move_its_client_never_saved_is_saved_and_marked(left, tmp_path) -> None:
     segment = left()
-    notices = recover_runs()
+    notices = recover_runs(tmp_path / "fallback")
     (info,) = list_runs(tmp_path / "runs")
     run = load_run(info.files.json)
     assert run.status == "recovered: complete" and run.samples == ROWS
     assert run.meta["recovered"] is True and run.meta["run_id"] == segment.meta["run_id"]
     assert segment.gone()
     assert any(str(info.files.json) in n for n in notices)
-    assert recover_runs() == [] and len(list_runs(tmp_path / "runs")) == 1
+    assert recover_runs(tmp_path / "fallback") == [] and len(list_runs(tmp_path / "runs")) == 1
 
 
 def test_a_move_that_never_ended_says_so(left, tmp_path) -> None:
     left(status="", recorded=200)
-    recover_runs()
+    recover_runs(tmp_path / "fallback")
     (info,) = list_runs(tmp_path / "runs")
     assert info.status == "recovered: interrupted: the client and the controller died"
     assert info.samples == 200
@@ -103,7 +103,7 @@ def test_a_save_killed_before_its_json_is_redone_and_its_leftovers_cleared(left,
     (runs / f"{base}.csv").write_text("half")
     (runs / f".{dead_pid()}-0123.tmp").write_text("half")
     (runs / f".{os.getpid()}-4567.tmp").write_text("a live saver's")
-    recover_runs()
+    recover_runs(tmp_path / "fallback")
     (info,) = list_runs(runs)
     assert load_run(info.files.json).samples == ROWS
     assert not (runs / f".{dead_pid()}-0123.tmp").exists()
@@ -115,19 +115,29 @@ def test_a_save_killed_before_its_json_is_redone_and_its_leftovers_cleared(left,
 def test_a_save_killed_after_its_json_is_not_saved_twice(left, tmp_path) -> None:
     segment = left()
     save_run(segment.run(), tmp_path / "runs")
-    recover_runs()
+    recover_runs(tmp_path / "fallback")
     (info,) = list_runs(tmp_path / "runs")
     assert info.status == "complete" and segment.gone()
 
 
-def test_a_run_that_cannot_be_saved_now_stays_for_the_next_start(left, tmp_path) -> None:
+def test_a_run_its_own_directory_cannot_take_goes_to_the_starting_clients(left,
+                                                                        tmp_path) -> None:
+    left()
+    (tmp_path / "runs").write_text("a file where the runs' directory should be")
+    recover_runs(tmp_path / "fallback")
+    (info,) = list_runs(tmp_path / "fallback")
+    assert info.status == "recovered: complete"
+
+
+def test_a_run_that_can_be_saved_nowhere_now_stays_for_the_next_start(left, tmp_path) -> None:
     segment = left()
     (tmp_path / "runs").write_text("a file where the runs' directory should be")
-    notices = recover_runs()
+    (tmp_path / "fallback").write_text("and another where the fallback should be")
+    notices = recover_runs(tmp_path / "fallback")
     assert any("kept for the next start" in n for n in notices), notices
     assert not segment.gone()
     (tmp_path / "runs").unlink()
-    recover_runs()
+    recover_runs(tmp_path / "fallback")
     assert segment.gone() and len(list_runs(tmp_path / "runs")) == 1
 
 
@@ -136,7 +146,7 @@ def test_a_segment_that_is_not_a_move_is_removed_with_a_notice(tmp_path) -> None
     with shm._untracked():
         junk = shared_memory.SharedMemory(name, create=True, size=4096)
     try:
-        notices = recover_runs()
+        notices = recover_runs(tmp_path / "fallback")
         assert any(n.startswith(f"removed {name}: not a move segment") for n in notices)
         assert name not in shm.leftover_segments()
     finally:

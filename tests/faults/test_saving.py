@@ -80,7 +80,7 @@ def test_a_saver_killed_anywhere_loses_no_run(tmp_path: Path, measured, where: s
     assert saver.wait(60) == -signal.SIGKILL and "saved" not in rest, "the kill never came"
     wait_dead(controller)
     before = list_runs(runs)
-    notices = recover_runs()
+    notices = recover_runs(tmp_path / "fallback")
     assert list_runs(runs), notices
     (info,) = list_runs(runs)
     run = load_run(info.files.json)
@@ -122,7 +122,7 @@ def test_a_controller_killed_with_its_client_leaves_the_run_to_the_next_start(
     client.kill()
     client.wait(30)
     wait_dead(controller)
-    recover_runs()
+    recover_runs(tmp_path / "fallback")
     (info,) = list_runs(runs)
     assert info.status == "recovered: interrupted: the client and the controller died"
     assert info.samples >= 500
@@ -152,6 +152,6 @@ def test_a_run_its_client_could_not_save_is_saved_by_the_next_start(tmp_path: Pa
     assert done.returncode == 0, done.stderr
     assert "where the next start saves it" in json.loads(done.stdout)["error"]
     runs.unlink()
-    notices = recover_runs()
+    notices = recover_runs(tmp_path / "fallback")
     (info,) = list_runs(runs)
     assert info.status == "recovered: complete" and info.samples == 2001, notices
