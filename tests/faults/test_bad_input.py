@@ -21,6 +21,8 @@ import math
 import os
 import re
 import string
+import subprocess
+import sys
 import tomllib
 from collections.abc import Iterator, Sequence
 from pathlib import Path
@@ -416,6 +418,33 @@ def test_fk_and_ik_numbers(measured, command: str, values: list[str]) -> None:
         last = err.strip().splitlines()[-1]
         assert last.startswith((f"servodesk {command}: ", "servodesk: error: ",
                                 f"usage: servodesk {command}")), err
+
+
+ROOT = Path(__file__).resolve().parents[2]
+POSE = ["1200", "-440", "1187.45", "0", "-90", "0"]  # fk of In/Out 1000 mm, the rest 0
+
+
+def servodesk(argv: list[str], stdout: int = subprocess.PIPE) -> subprocess.CompletedProcess:
+    """The real ``python -m app ARGV`` in a subprocess, warnings shown as a user sees them."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "PYTHONWARNINGS": "default"}
+    return subprocess.run([sys.executable, "-m", "app", *argv], cwd=ROOT, env=env,
+                          stdout=stdout, stderr=subprocess.PIPE, text=True, timeout=60)
+
+
+@pytest.mark.parametrize("argv", [["fk", "1000", "0", "0", "0", "0", "0", "--json"],
+                                  ["ik", *POSE, "--json"], ["ik", *POSE],
+                                  ["machine", "--json"], ["machine", "rig"]])
+def test_a_reader_that_goes_away_ends_the_command_quietly(argv: list[str]) -> None:
+    """``servodesk ik … --json | head`` where head has already gone: no BrokenPipeError
+    traceback, nothing on stderr, and exit status 141 (128 + SIGPIPE, what the shell shows
+    for a command killed by SIGPIPE: the output was cut short)."""
+    read, write = os.pipe()
+    os.close(read)  # the reader is gone before the command writes a byte
+    try:
+        done = servodesk(argv, stdout=write)
+    finally:
+        os.close(write)
+    assert (done.returncode, done.stderr) == (141, "")
 
 
 @fuzz(200)
