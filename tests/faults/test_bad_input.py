@@ -402,12 +402,14 @@ CLI_NUMBER = st.one_of(NUMBER_TEXT, st.floats(-3000, 3000).map(repr),
                        st.sampled_from(["-1e3", "-inf", "-nan", "--", "-h", "-x", "1e5000"]))
 
 
+@pytest.mark.filterwarnings("error")
 @fuzz(300)
 @given(command=st.sampled_from(["fk", "ik"]), values=st.lists(CLI_NUMBER, min_size=6,
                                                                 max_size=6))
 def test_fk_and_ik_numbers(measured, command: str, values: list[str]) -> None:
     """``servodesk fk`` / ``ik`` with any six arguments: exit 0 with a result, or exit 2
-    with one line saying which number is wrong (or argparse's usage line); no traceback."""
+    with one line saying which number is wrong (or argparse's usage line); no traceback
+    and no warning (numpy's, of an overflow: a warning fails the test)."""
     measured.example()
     code, out, err = run_cli([command, *values])
     assert "Traceback" not in err
@@ -445,6 +447,34 @@ def test_a_reader_that_goes_away_ends_the_command_quietly(argv: list[str]) -> No
     finally:
         os.close(write)
     assert (done.returncode, done.stderr) == (141, "")
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    (["fk", "1e308", "0", "0", "0", "0", "0"], "In/Out 1e+308 mm is too large: the pose overflows"),
+    (["fk", "--json", "-1.7e308", "0", "0", "0", "0", "0"], "In/Out -1.7e+308 mm is too large"),
+    (["ik", "1e200", "0", "0", "0", "0", "0"], "x 1e+200 mm is too large"),
+    (["ik", "0", "0", "-1e300", "0", "0", "0", "--json"], "z -1e+300 mm is too large"),
+    (["ik", *POSE, "--near", "1000", "1e308", "0", "0", "0", "0"],
+     "--near Rotate 1e+308° is too large: the distance to it overflows"),
+    (["ik", *POSE, "--json", "--near", "1e308", "0", "0", "0", "0", "0"],
+     "--near In/Out 1e+308 mm is too large"),
+])
+def test_numbers_that_overflow_are_an_error_naming_the_input(argv: list[str],
+                                                             message: str) -> None:
+    """Finite numbers so large that a result is not a finite number (the pose, a solution, the
+    distance to --near): exit 2 with one line naming the input; nothing on stdout and no
+    numpy warning."""
+    done = servodesk(argv)
+    assert (done.returncode, done.stdout) == (2, "")
+    one_line(done.stderr.strip(), f"servodesk {argv[0]}: {message}")
+
+
+def test_large_numbers_that_do_not_overflow_still_give_a_result() -> None:
+    """In/Out 1e300 mm is far outside its limits but its pose is finite: fk answers, noting
+    the limits, without a warning."""
+    done = servodesk(["fk", "1e300", "0", "0", "0", "0", "0"])
+    assert done.returncode == 0 and done.stderr == ""
+    assert "note: In/Out outside the joint limits" in done.stdout
 
 
 @fuzz(200)
