@@ -77,7 +77,7 @@ def _read_bounded(file: BinaryIO, bound: FileBound, path: Path,
         data += chunk
         if len(data) > bound.size:
             raise error(_past(path, f"more than {_bytes(bound.size)}", bound))
-        cut = _safe_cut(data, max(counted, len(data) - len(chunk) - 1))
+        cut = _safe_cut(data, max(counted, len(data) - len(chunk)))
         if cut > counted:
             ends += _line_ends(data, counted, cut)
             counted = cut
