@@ -343,13 +343,17 @@ class ControlClient:
                 return  # the channel is gone: the monitor thread reports the death
 
     def _watch(self) -> None:
+        """Dispatch the controller's events and report its death."""
         while not self._closing.is_set():
             try:
                 if self._conn.poll(0.01):
                     self._dispatch(Event(self._conn.recv()))
             except (EOFError, OSError):
                 self._died("the control process closed its channel")
-            if not self.dead and not self.alive:
+            # poll on every pass, after the death too: it reaps an exited controller at once
+            # rather than leaving a zombie until close()
+            exited = self._process.poll() is not None
+            if exited and not self.dead:
                 self._died(f"the control process exited (code {self._process.returncode})")
             if self.dead:
                 self._closing.wait(0.05)

@@ -3,10 +3,13 @@
 Under CI, hypothesis replays a fixed set of examples. Locally every run explores
 new examples (that is how the bugs in docs/errata.md and the fault suite were
 found); in CI a run must not fail on an example no one has seen, so ``CI=true``
-selects a derandomized profile.
+selects a derandomized profile. The deep variants of the file-parser properties
+(tests/faults/test_bad_input.py, ``deep_fuzz``: 10,000 examples each locally)
+replay only 200 there, to keep CI short.
 
 Cost: a test that starts a process (the control subprocess through
-``ControlClient``, the emulator, a CLI, tmux) or the TUI is marked ``slow`` here,
+``ControlClient``, the emulator, a CLI, tmux) or the TUI, or that takes seconds
+without one (a file at its size bound, a deep fuzz), is marked ``slow`` here,
 centrally (``pytest_collection_modifyitems``), so that ``pytest -m "not slow"``
 is the inner loop. Every other test is watched: one that starts a process
 anyway fails at teardown, naming what it started and where to mark it.
@@ -54,10 +57,18 @@ SLOW_FIXTURES = {
     "runs": "tests/control/identify/test_sysid.py",    # ControlClient's excitation runs
     "robot": "tests/control/identify/test_tuning.py",  # ControlClient
 }
-# Single tests that start one in their body.
+# Single tests that start one in their body, or that take seconds without one.
 SLOW_TESTS = (
     "tests/control/test_seqlock.py::test_reader_never_sees_a_torn_record",  # spawned writer
     "tests/control/test_shm.py::test_orphan_of_a_killed_process_is_cleaned_up",
+    # files at their size bound: 600,001 points parsed, 2-4 s each
+    "tests/control/motion/test_path_files.py::test_a_path_file_at_its_bound_loads",
+    "tests/control/motion/test_cartesian.py::test_a_pose_file_at_its_bound_is_read",
+    # 10,000 hypothesis examples each, about a minute (slow under tests/faults/ already; listed
+    # for their own cost, should the file-parser properties ever leave that folder)
+    "tests/faults/test_bad_input.py::test_tsv_path_files_deeply",
+    "tests/faults/test_bad_input.py::test_csv_path_files_deeply",
+    "tests/faults/test_bad_input.py::test_pose_files_deeply",
 )
 # Audit events (PEP 578) of a process start. A multiprocessing "spawn" start raises none
 # (CPython 3.11): such a test must be listed above by hand, as test_seqlock's is.
