@@ -1,11 +1,18 @@
 """The ``servodesk`` command line: one entry point, a subcommand per job.
 
 With no subcommand it opens the TUI on the chosen machine and backend.
+
+A subcommand whose reader goes away (``servodesk ik … --json | head``) stops
+quietly, without a BrokenPipeError traceback, and exits 141: 128 + SIGPIPE, the
+status the shell reports for a command SIGPIPE killed (``yes | head``), so a
+pipeline under ``set -o pipefail`` still sees that the output was cut short.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
+import signal
 import sys
 
 from app import cli_emulate, cli_kinematics, cli_machine
@@ -37,7 +44,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if hasattr(args, "func"):
-        return args.func(args)
+        return run_command(args)
     if args.backend == "serial" and not args.port:
         parser.error("--backend serial needs --port URL (a device, the emulator's pty path or "
                      "socket://HOST:PORT)")
@@ -54,6 +61,20 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         app.shutdown_client()
     return 0 if app.return_code in (None, 0) else app.return_code
+
+
+def run_command(args: argparse.Namespace) -> int:
+    """Run a subcommand; 141 if its output's reader has gone (module docstring)."""
+    try:
+        code = args.func(args)
+        sys.stdout.flush()  # the last output, while a closed pipe can still be caught here
+    except BrokenPipeError:
+        # the interpreter flushes stdout again on its way out: let that write go nowhere
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+        return 128 + signal.SIGPIPE
+    return code
 
 
 if __name__ == "__main__":

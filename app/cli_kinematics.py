@@ -6,6 +6,10 @@ the thesis's actuator order, In/Out in mm, then Rotate, Up/Down, Bend, Yaw,
 Swivel in degrees; a pose is x, y, z in mm and X-Y-Z fixed angles γ, β, α in
 degrees (eq. 4.04). Both solve the ``--machine``'s model (``control.motion.robot_model``:
 its DH lengths and joint limits), the built-in Unimate 2000B by default.
+
+A number too large for the arithmetic (a finite input whose pose, solution or
+distance is not a finite number at the printed 0.001) is an error naming it,
+exit 2, never an ``inf`` or a numpy warning.
 """
 
 from __future__ import annotations
@@ -15,6 +19,7 @@ import json
 import math
 import re
 import sys
+from collections.abc import Callable
 
 import numpy as np
 
@@ -35,6 +40,7 @@ POSE_HELP = ("x (mm)", "y (mm)", "z (mm)", "gamma (deg), about the fixed x axis"
 # A value starting like a negative number (or -inf/-nan) is a value, not an option;
 # argparse's own pattern misses "-1e3", "-inf" and "-nan".
 NEGATIVE_NUMBER = re.compile(r"^-(\d|\.\d|inf|nan)", re.IGNORECASE)
+RESOLUTION = 1e-3  # mm and degrees: the tables print three decimals
 
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
@@ -72,9 +78,9 @@ def run_fk(args: argparse.Namespace) -> int:
     try:
         model = machine_model(args)
         q = parse_numbers([getattr(args, m.lower()) for m in JOINT_ARGS], unimate.JOINTS)
+        pose = finite_results(model.pose, q, model, "the pose")
     except ValueError as exc:
         return fail("fk", exc)
-    pose = model.pose(q)
     outside = [name for name, v, lo, hi in zip(unimate.JOINTS, q, model.lower, model.upper,
                                                strict=True)
                if not lo <= v <= hi]
@@ -98,10 +104,11 @@ def run_ik(args: argparse.Namespace) -> int:
         pose = parse_numbers([getattr(args, m.lower()) for m in POSE_ARGS], POSE_LABELS)
         near = None if args.near is None else parse_numbers(args.near, unimate.JOINTS)
         solutions = model.inverse(pose, near=near)
+        ref = list(model.mid_range) if near is None else near
+        travel = finite_results(lambda r: unimate.distance(solutions, r), ref, model,
+                                "the distance to it", "--near ")
     except (ValueError, Unreachable) as exc:
         return fail("ik", exc)
-    ref = np.array(model.mid_range if near is None else near)
-    travel = unimate.distance(solutions, ref)
     singular = abs(math.sin(math.radians(solutions[0, 4]))) <= unimate.WRIST_TOL
     if args.json:
         print(json.dumps({"pose": named(POSE_NAMES, pose), "near": named(unimate.JOINTS, ref),
@@ -141,6 +148,37 @@ def parse_numbers(texts: list[str], names: tuple[str, ...]) -> list[float]:
             raise ValueError(f"{name} {text!r} must be a finite number")
         values.append(value)
     return values
+
+
+def finite_results(compute: Callable[[list[float]], np.ndarray], q: list[float],
+                   model: unimate.Unimate2000B, what: str, option: str = "") -> np.ndarray:
+    """``compute(q)`` of joint values ``q``; ValueError naming the joint that overflows it
+    when a result is not a finite number at the printed ``RESOLUTION`` (numpy rounds by
+    scaling, so a result past float's largest / 1000 would print as inf)."""
+    with np.errstate(all="ignore"):  # an overflow is the error below, never a numpy warning
+        results = compute(q)
+        if printable(results):
+            return results
+        k = overflowing(compute, q)
+    name, unit, gap = unimate.JOINTS[k], unimate.UNITS[k], "" if unimate.UNITS[k] == "°" else " "
+    raise ValueError(f"{option}{name} {q[k]:g}{gap}{unit} is too large: {what} overflows (is "
+                     f"not a finite number to {RESOLUTION:g}); give a value near its limits "
+                     f"{model.lower[k]:g}…{model.upper[k]:g}{gap}{unit}")
+
+
+def overflowing(compute: Callable[[list[float]], np.ndarray], q: list[float]) -> int:
+    """The joint that overflows ``compute`` on its own, the others at 0 (the largest such),
+    else the largest: only together do they overflow it."""
+    order = sorted(range(len(q)), key=lambda k: -abs(q[k]))
+    alone = (k for k in order
+             if not printable(compute([v if i == k else 0.0 for i, v in enumerate(q)])))
+    return next(alone, order[0])
+
+
+def printable(results: np.ndarray) -> bool:
+    """Whether every result is a finite number at ``RESOLUTION``."""
+    with np.errstate(all="ignore"):
+        return bool(np.isfinite(np.asarray(results, dtype=float) / RESOLUTION).all())
 
 
 def named(names: tuple[str, ...], values: np.ndarray | list[float]) -> dict[str, float]:

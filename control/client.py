@@ -61,7 +61,8 @@ from control.motion.acceptance import accept
 from control.motion.moves import StepSummary
 from control.motion.plan import MovePlan, summaries
 from control.recorder import Run, RunFiles, coefficients_record, default_data_dir, save_run
-from control.runs import run_from_record, start_stamp
+from control.recovery import recover_runs
+from control.runs import encode_meta, run_from_segment, segment_meta
 from control.seqlock import SeqlockReader, SeqlockWriter
 from hw.machine import Coefficients, Machine, load_machine
 
@@ -74,6 +75,7 @@ OUTGOING = 64  # commands waiting for the channel; more means the controller is 
 CLOSE_WAIT_S = 1.0  # close(): how long the controller may take to stop before it is killed
 DEATH_S = 0.25
 _SESSIONS = itertools.count(1)  # several clients in one process get their own segments
+_MOVES = itertools.count(1)  # and so do their moves (a move's segment may outlive its client)
 SPIN_US = 150.0  # spin before each deadline: keeps the core and its caches (benchmarks/loop.py)
 
 
@@ -169,6 +171,7 @@ class ControlClient:
         self.realtime = False
         self.dead = ""
         self._moves: dict[int, MoveHandle] = {}
+        self._kept: dict[str, str] = {}  # run id: segment of a run not saved, for the next start
         self._ids = itertools.count(1)
         self._outgoing: queue.Queue[Command] = queue.Queue(OUTGOING)
         self._closing = threading.Event()
@@ -180,9 +183,11 @@ class ControlClient:
             which: {"passed": None, "summary": "the machine file's set, applied at start"}
             for which in self.coefficients}
         self._models: tuple[DeadbandModel | None, ...] = (None,) * self.machine.n_joints
-        shm.cleanup_orphans()
+        # runs a dead process left unsaved first, then the clean-up (control/recovery.py)
+        notices = recover_runs(self.data_dir) + shm.cleanup_orphans()[1]
         self.layout = ControlLayout(self.machine.n_joints)
-        self._segment = shm.create(f"ctl{next(_SESSIONS)}", self.layout.size)
+        self._segment = shm.create(f"ctl{next(_SESSIONS)}", self.layout.size,
+                                   "the controller's status")
         buf = self._segment.buf
         self.layout.write_header(buf)
         self._words = self.layout.client_words(buf)
@@ -195,9 +200,9 @@ class ControlClient:
             self._coefficient_writers[which].write(*self.layout.coefficients.encode(c))
         config = process.ProcessConfig(
             machine=str(self.machine.path), backend=backend, port=port, seed=seed,
-            lockstep=lockstep, control_segment=self._segment.name, data_dir=str(self.data_dir),
-            period_s=self.dt, spin_us=spin_us, realtime=realtime,
-            heartbeat_timeout_s=heartbeat_timeout_s, orphan_timeout_s=orphan_timeout_s,
+            lockstep=lockstep, control_segment=self._segment.name, period_s=self.dt,
+            spin_us=spin_us, realtime=realtime, heartbeat_timeout_s=heartbeat_timeout_s,
+            orphan_timeout_s=orphan_timeout_s,
             sim_options=dict(sim_options or {}))
         ours, theirs = socket.socketpair()
         self._conn = Connection(ours.detach())
@@ -223,6 +228,8 @@ class ControlClient:
                                         daemon=True)
         for thread in (self._monitor, self._heart, self._sender):
             thread.start()
+        for text in notices:
+            self._dispatch(Event(Notice(text)))
 
     # -- lifecycle -------------------------------------------------------------------
 
@@ -336,13 +343,17 @@ class ControlClient:
                 return  # the channel is gone: the monitor thread reports the death
 
     def _watch(self) -> None:
+        """Dispatch the controller's events and report its death."""
         while not self._closing.is_set():
             try:
                 if self._conn.poll(0.01):
                     self._dispatch(Event(self._conn.recv()))
             except (EOFError, OSError):
                 self._died("the control process closed its channel")
-            if not self.dead and not self.alive:
+            # poll on every pass, after the death too: it reaps an exited controller at once
+            # rather than leaving a zombie until close()
+            exited = self._process.poll() is not None
+            if exited and not self.dead:
                 self._died(f"the control process exited (code {self._process.returncode})")
             if self.dead:
                 self._closing.wait(0.05)
@@ -376,28 +387,35 @@ class ControlClient:
     def _finish(self, handle: MoveHandle, status: str, saved: str | None,
                 gaps: tuple[tuple[float, float], ...] = ()) -> None:
         """Turn a finished move's record into a saved run (its stalls, ``gaps`` of (t s,
-        length s), listed in its metadata) and free its segment."""
+        length s), listed in its metadata) and, once it is saved, unlink its segment: a run
+        that cannot be saved now stays whole there for the next start to recover."""
         if self._moves.pop(handle.move_id, None) is None:
             return
-        buf = handle.segment.buf
-        recorded = int.from_bytes(buf[MoveLayout.RECORDED_OFFSET:MoveLayout.RECORDED_OFFSET + 8],
-                                  "little")
-        record = handle.layout.record(buf)[:recorded].copy()
-        meta = {**handle.meta, "gaps": [list(gap) for gap in gaps]} if gaps else handle.meta
-        run = run_from_record(self.machine, handle.kind, status, meta, record, self.dt)
+        run = run_from_segment(handle.segment.buf, handle.layout, handle.meta, status, gaps)
         files, error = None, ""
         if saved:
             files = RunFiles.from_json(Path(saved))
-        elif recorded:
+        elif run.samples:
             try:
                 files = save_run(run, self.data_dir)
             except OSError as exc:
-                error = (f"run not saved ({exc}); it is kept in memory: save it elsewhere from "
-                         "the Runs tab")
+                error = (f"run not saved ({exc}); it is kept in memory (save it elsewhere from "
+                         "the Runs tab) and in shared memory, where the next start saves it")
         handle.result = MoveResult(handle.move_id, status, run, files, error, handle.plan,
                                    self.machine)
-        shm.release(handle.segment, unlink=True)
+        kept = files is None and bool(run.samples)
+        if kept:
+            self._kept[str(handle.meta["run_id"])] = handle.segment.name
+        shm.release(handle.segment, unlink=not kept)
         handle.done.set()
+
+    def release_kept(self, run: Run) -> None:
+        """``run``, which could not be saved, has been saved elsewhere: let go of the copy
+        kept in shared memory for the next start to recover."""
+        name = self._kept.pop(str(run.meta.get("run_id")), None)
+        if name is not None:
+            with contextlib.suppress(FileNotFoundError):
+                shm.release(shm.attach(name), unlink=True)
 
     # -- commands ------------------------------------------------------------------------
 
@@ -532,28 +550,31 @@ class ControlClient:
         return self.run(MovePlan(kind, kind, profile=duty, meta=dict(meta or {}), moving=moving))
 
     def _start(self, plan: MovePlan) -> MoveHandle:
-        """Send an accepted plan: its path or profile into a new move segment, then StartMove."""
+        """Send an accepted plan: its path or profile, and all its run needs to be saved by
+        whoever outlives the move, into a new move segment; then StartMove."""
         kind, path, profile = plan.kind, plan.path, plan.profile
         samples = len(path if path is not None else profile)
-        layout = MoveLayout(samples, self.machine.n_joints)
+        meta = segment_meta(self.machine, kind, self.dt, self.data_dir, self._process.pid, {
+            "backend": self.backend,
+            "coefficients": {k: {**coefficients_record(c), "check": self.coefficient_checks[k]}
+                             for k, c in self.coefficients.items()},
+            **plan.meta,
+        })
+        encoded = encode_meta(meta)
+        layout = MoveLayout(samples, self.machine.n_joints, len(encoded))
         move_id = next(self._ids)
-        segment = shm.create(f"mv{move_id}", layout.size)
+        segment = shm.create(f"mv{next(_MOVES)}", layout.size,
+                             f"a {kind} move of {samples * self.dt:.1f} s")
         layout.write_header(segment.buf)
+        layout.write_meta(segment.buf, encoded)
         if path is not None:
             layout.desired(segment.buf)[:] = path
         else:
             layout.profile(segment.buf)[:] = profile
-        full_meta = {
-            "backend": self.backend,
-            "start_time": start_stamp(),
-            "coefficients": {k: {**coefficients_record(c), "check": self.coefficient_checks[k]}
-                             for k, c in self.coefficients.items()},
-            **plan.meta,
-        }
-        handle = MoveHandle(move_id, kind, samples, full_meta, plan, segment, layout)
+        handle = MoveHandle(move_id, kind, samples, meta, plan, segment, layout)
         self._moves[move_id] = handle
         try:
-            self._send(StartMove(move_id, segment.name, kind, path is None, full_meta))
+            self._send(StartMove(move_id, segment.name, kind, path is None))
         except BaseException:
             self._moves.pop(move_id, None)
             shm.release(segment, unlink=True)

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import ClassVar
 
 from hw.machine import Coefficients, Machine
@@ -174,14 +174,14 @@ class SetCoefficients(Command):
 
 @dataclass(frozen=True)
 class StartMove(Command):
-    """follow_track (a desired path) or tracking_actuate (a duty profile) from a move segment."""
+    """follow_track (a desired path) or tracking_actuate (a duty profile) from a move segment
+    (which also holds the run's metadata, ``control/runs.py``)."""
 
     NAME: ClassVar[str] = "move"
     move_id: int
     segment: str
     kind: str
     tracking: bool
-    meta: dict[str, object] = field(default_factory=dict)  # run metadata, saved with the run
 
     def __post_init__(self) -> None:
         if isinstance(self.move_id, bool) or not isinstance(self.move_id, int) or self.move_id < 1:
@@ -194,8 +194,6 @@ class StartMove(Command):
             raise CommandError(f"move {self.move_id}: a {self.kind} move plays {what}")
         if not isinstance(self.segment, str) or not self.segment:
             raise CommandError(f"move {self.move_id}: no segment name")
-        if not isinstance(self.meta, dict):
-            raise CommandError(f"move {self.move_id}: metadata must be a dict")
 
 
 @dataclass(frozen=True)

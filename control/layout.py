@@ -27,7 +27,7 @@ from hw.machine import MAX_TAPS, Coefficients
 if TYPE_CHECKING:
     from control.latency import LatencyStats
 
-LAYOUT_VERSION = 2
+LAYOUT_VERSION = 3
 CONTROL_MAGIC = b"SDSK"
 MOVE_MAGIC = b"SDMV"
 HIST_BIN_NS = 5_000  # 5 µs bins, Table 2.1
@@ -246,25 +246,33 @@ class ControlLayout:
 
 
 class MoveLayout:
-    """A move segment: desired path and duty profile in, recorded run out.
+    """A move segment: desired path and duty profile in, recorded run out, and all a run
+    needs to be saved by whoever outlives the move (``control/recovery.py``).
 
-    header (64 B): magic, version, samples N, joints J, then at offset 24 the
-    number of rows recorded so far (one aligned 8-byte store per tick). Then
-    ``desired (N, J)``, ``profile (N, J)`` and ``record (N, 1 + 3J)`` rows of
+    header (64 B): magic, version, samples N, joints J; at offset 24 the number of rows
+    recorded so far (one aligned 8-byte store per tick); at 32 the metadata's length.
+    Then the status text the controller writes when the move ends (``STATUS_TEXT``
+    bytes, empty while it runs), the run's metadata as JSON (written by the client),
+    and ``desired (N, J)``, ``profile (N, J)`` and ``record (N, 1 + 3J)`` rows of
     ``t, desired..., actual..., duty...`` as float64.
     """
 
     HEADER = struct.Struct("<4sIQI")
     RECORDED_OFFSET = 24
+    META_SIZE_OFFSET = 32
+    STATUS_OFFSET = 64
+    STATUS_TEXT = 256
 
-    def __init__(self, samples: int, n: int) -> None:
+    def __init__(self, samples: int, n: int, meta_size: int = 0) -> None:
         if samples < 1:
             raise ValueError("a move needs at least one sample")
         self.samples = samples
         self.n = n
+        self.meta_size = meta_size
         self.row = struct.Struct(f"<{1 + 3 * n}d")
         self.target = struct.Struct(f"<{n}d")
-        self.desired_offset = 64
+        self.meta_offset = self.STATUS_OFFSET + self.STATUS_TEXT
+        self.desired_offset = _align(self.meta_offset + meta_size)
         self.profile_offset = self.desired_offset + 8 * samples * n
         self.record_offset = self.profile_offset + 8 * samples * n
         self.size = self.record_offset + self.row.size * samples
@@ -275,10 +283,12 @@ class MoveLayout:
         if magic != MOVE_MAGIC or version != LAYOUT_VERSION:
             raise ValueError(f"move segment is {magic!r} v{version}, expected {MOVE_MAGIC!r} "
                              f"v{LAYOUT_VERSION}")
-        return cls(samples, n)
+        (meta_size,) = struct.unpack_from("<Q", buf, cls.META_SIZE_OFFSET)
+        return cls(samples, n, meta_size)
 
     def write_header(self, buf: memoryview) -> None:
         self.HEADER.pack_into(buf, 0, MOVE_MAGIC, LAYOUT_VERSION, self.samples, self.n)
+        struct.pack_into("<Q", buf, self.META_SIZE_OFFSET, self.meta_size)
 
     def desired(self, buf: memoryview) -> np.ndarray:
         return np.ndarray((self.samples, self.n), np.float64, buf, self.desired_offset)
@@ -288,6 +298,26 @@ class MoveLayout:
 
     def record(self, buf: memoryview) -> np.ndarray:
         return np.ndarray((self.samples, 1 + 3 * self.n), np.float64, buf, self.record_offset)
+
+    def recorded(self, buf: memoryview) -> int:
+        """Rows recorded so far."""
+        return struct.unpack_from("<Q", buf, self.RECORDED_OFFSET)[0]
+
+    def write_meta(self, buf: memoryview, meta: bytes) -> None:
+        buf[self.meta_offset:self.meta_offset + len(meta)] = meta
+
+    def read_meta(self, buf: memoryview) -> bytes:
+        return bytes(buf[self.meta_offset:self.meta_offset + self.meta_size])
+
+    def write_status(self, buf: memoryview, status: str) -> None:
+        """How the move ended (the controller, once, when it ends); cut to fit."""
+        text = status.encode()[:self.STATUS_TEXT - 1]
+        buf[self.STATUS_OFFSET:self.STATUS_OFFSET + len(text) + 1] = text + b"\0"
+
+    def read_status(self, buf: memoryview) -> str:
+        """The ended move's status, or "" while it runs (or if it never ended)."""
+        raw = bytes(buf[self.STATUS_OFFSET:self.STATUS_OFFSET + self.STATUS_TEXT])
+        return raw.split(b"\0", 1)[0].decode("utf-8", "replace")
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
-from pathlib import Path
 
 from control import commands as cmd
 from control.channel import CommandChannel
@@ -48,7 +47,6 @@ class LoopConfig:
     orphan_timeout_ns: int = 5_000 * MS
     glitch_margin: float = 1.5  # plausible jump = margin x max_speed x elapsed + 3 counts
     initialise: InitialiseConfig = field(default_factory=InitialiseConfig)
-    data_dir: Path | None = None
 
 
 class Controller:
@@ -77,7 +75,7 @@ class Controller:
         self.supervisor = Supervisor(machine, config.period_ns)
         self.modes = ModeMachine(machine, self.transmission, self.encoders, self.guards,
                                  self.outbox, config.period_ns / 1e9, config.initialise)
-        self.saver = RunSaver(machine, config.data_dir, config.period_ns / 1e9)
+        self.saver = RunSaver()
         self.valve = [0.0] * n
         self.client = ClientWatch(self.layout.client_words(control_buf),
                                   config.heartbeat_timeout_ns, config.orphan_timeout_ns)
@@ -394,6 +392,7 @@ class Controller:
         if move.gaps:
             total = sum(length for _, length in move.gaps)
             status += f", with a {total:.1f} s controller stall"
+        move.layout.write_status(move.segment.buf, status)  # for whoever saves the run
         self.outbox.put(MoveDone(move.move_id, status, move.index, gaps=tuple(move.gaps)))
         if self.orphaned:
             self.saver.keep(move, status)

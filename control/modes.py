@@ -38,7 +38,6 @@ class ActiveMove:
 
     move_id: int
     kind: str
-    meta: dict
     segment: object
     layout: MoveLayout
     cells: memoryview  # float64 view of the whole segment
@@ -55,7 +54,7 @@ class ActiveMove:
         """Open the move segment the client filled (``docs/shared_memory.md``)."""
         seg = shm.attach(command.segment)
         recorded = seg.buf[MoveLayout.RECORDED_OFFSET:MoveLayout.RECORDED_OFFSET + 8].cast("Q")
-        return cls(move_id=command.move_id, kind=command.kind, meta=dict(command.meta),
+        return cls(move_id=command.move_id, kind=command.kind,
                    segment=seg, layout=MoveLayout.read_header(seg.buf), cells=seg.buf.cast("d"),
                    recorded=recorded, tracking=command.tracking,
                    smooth=command.kind not in STEP_KINDS, start_ns=now, last_row_ns=now)

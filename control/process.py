@@ -14,7 +14,6 @@ import sys
 import traceback
 from dataclasses import asdict, dataclass
 from multiprocessing.connection import Connection
-from pathlib import Path
 
 from control import shm
 from control.events import Crash, Ready
@@ -36,7 +35,6 @@ class ProcessConfig:
     seed: int
     lockstep: bool
     control_segment: str
-    data_dir: str | None
     period_s: float
     spin_us: float
     realtime: bool
@@ -69,7 +67,6 @@ def main(config: ProcessConfig, conn: Connection) -> None:
             period_ns=round(config.period_s * 1e9),
             heartbeat_timeout_ns=round(config.heartbeat_timeout_s * 1e9),
             orphan_timeout_ns=round(config.orphan_timeout_s * 1e9),
-            data_dir=Path(config.data_dir) if config.data_dir else None,
         )
         if isinstance(backend.clock, RealClock):
             backend.clock.spin_ns = round(config.spin_us * 1e3)

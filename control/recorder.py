@@ -12,10 +12,16 @@ time in UTC; ``-2``, ``-3``… when the stem is taken):
 - ``.json`` — machine, kind, status, start time, sample time, coefficients,
   joints, sample count, file names and free-form ``meta``.
 
-Each file is written to a temporary file in the same directory, fsynced, then
-hard-linked to its name, which fails if the name exists (errata #14): a crash
-never leaves half a file and no run is ever overwritten, even by a concurrent
-save. The JSON is placed last, so a run listed by ``list_runs`` is complete.
+Each file is written to a temporary file in the same directory (named for the
+saving process, ``.<pid>-<random>.tmp``), fsynced, then hard-linked to its name,
+which fails if the name exists (errata #14): a crash never leaves half a file
+and no run is ever overwritten, even by a concurrent save. The JSON is placed
+last, and only then is the run's move segment unlinked, so at every instant a
+run is either listed complete or still whole in its segment; a saver killed in
+between leaves a TSV or CSV without a JSON, and temporary files, which
+``remove_incomplete`` and ``remove_stale_temps`` clear when the run is saved
+again from its segment (``control/recovery.py``). ``find_run`` tells, by the
+run's id, whether that already happened.
 """
 
 from __future__ import annotations
@@ -23,13 +29,14 @@ from __future__ import annotations
 import contextlib
 import csv
 import errno
+import glob
 import io
 import json
 import math
 import os
 import re
 import uuid
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
@@ -192,7 +199,7 @@ def save_run(run: Run, data_dir: Path) -> RunFiles:
     """
     data_dir = Path(data_dir)
     tsv, table = _tsv(run).encode(), _csv(run).encode()
-    base = f"{_utc(run.start_time):%Y%m%d-%H%M%S}-{_safe(run.machine)}-{_safe(run.kind)}"
+    base = stem_base(run)
     placed: list[Path] = []
     try:
         data_dir.mkdir(parents=True, exist_ok=True)
@@ -207,6 +214,61 @@ def save_run(run: Run, data_dir: Path) -> RunFiles:
         _remove(placed)
         reason = exc.strerror or str(exc)
         raise RecorderError(f"cannot save the {run.kind} run in {data_dir}: {reason}") from exc
+
+
+def stem_base(run: Run) -> str:
+    """A run's stem before any ``-2``: ``YYYYMMDD-HHMMSS-<machine>-<kind>``."""
+    return f"{_utc(run.start_time):%Y%m%d-%H%M%S}-{_safe(run.machine)}-{_safe(run.kind)}"
+
+
+def _stems(data_dir: Path, base: str) -> list[RunFiles]:
+    """The runs (or parts of runs) in ``data_dir`` under ``base`` or ``base-N``."""
+    pattern = re.compile(re.escape(base) + r"(-\d+)?")
+    stems = {p.stem for p in data_dir.glob(f"{glob.escape(base)}*")
+             if p.suffix in _SUFFIXES and pattern.fullmatch(p.stem)}
+    return [RunFiles.at(data_dir, stem) for stem in sorted(stems)]
+
+
+def find_run(data_dir: Path, run: Run) -> RunFiles | None:
+    """The saved copy of ``run`` (same ``run_id`` in its metadata), if one is listed."""
+    run_id = run.meta.get("run_id")
+    if not run_id or not Path(data_dir).is_dir():
+        return None
+    for files in _stems(Path(data_dir), stem_base(run)):
+        with contextlib.suppress(RecorderError, OSError):
+            if _read_json(files.json).get("meta", {}).get("run_id") == run_id:
+                return files
+    return None
+
+
+def remove_incomplete(data_dir: Path, run: Run) -> list[Path]:
+    """Remove the parts of a save of ``run`` that stopped before its JSON (a TSV or a CSV
+    without one); the paths removed."""
+    if not Path(data_dir).is_dir():
+        return []
+    removed = []
+    for files in _stems(Path(data_dir), stem_base(run)):
+        if files.json.exists():
+            continue
+        for part in (files.tsv, files.csv):
+            with contextlib.suppress(FileNotFoundError):
+                part.unlink()
+                removed.append(part)
+    return removed
+
+
+def remove_stale_temps(data_dir: Path, alive: Callable[[int], bool]) -> list[Path]:
+    """Remove temporary files left by savers that died (``alive(pid)`` says which live)."""
+    if not Path(data_dir).is_dir():
+        return []
+    removed = []
+    for tmp in Path(data_dir).glob(".*.tmp"):
+        pid = tmp.name[1:].split("-", 1)[0]
+        if pid.isdigit() and not alive(int(pid)):
+            with contextlib.suppress(FileNotFoundError):
+                tmp.unlink()
+                removed.append(tmp)
+    return removed
 
 
 def load_run(path: Path) -> Run:
@@ -355,7 +417,7 @@ def _place(data: bytes, target: Path) -> bool:
     """Give ``target`` exactly ``data``, complete or not at all; False if ``target`` exists."""
     if target.exists():
         return False
-    tmp = target.parent / f".{uuid.uuid4().hex}.tmp"
+    tmp = target.parent / f".{os.getpid()}-{uuid.uuid4().hex}.tmp"
     try:
         fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
         with os.fdopen(fd, "wb") as f:

@@ -1,13 +1,27 @@
-"""Turning a move segment's record into a ``Run`` for the recorder."""
+"""A move segment as a run: what the client writes into it for whoever saves it, and the
+``Run`` the recorder saves from its record.
+
+Three parties may save a move: the client when the move ends, the controller after its
+loop when its client is gone, and the next client to start when both died
+(``control/recovery.py``). So the segment carries everything a run needs besides its
+record (``segment_meta``): the machine and its joints, the kind, the sample time, where
+runs go, a run id that tells whether it is already saved, and the metadata of the move.
+"""
 
 from __future__ import annotations
 
+import json
+import uuid
 from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
 
-import numpy as np
-
+from control.layout import MoveLayout
 from control.recorder import Run
 from hw.machine import Machine
+
+STANDARD = ("run_id", "machine", "joints", "kind", "sample_time_s", "data_dir", "start_time",
+            "coefficients", "controller_pid")  # kept apart from the run's free-form meta
 
 
 def start_stamp() -> str:
@@ -15,24 +29,55 @@ def start_stamp() -> str:
     return datetime.now(UTC).isoformat(timespec="milliseconds")
 
 
-def run_from_record(machine: Machine, kind: str, status: str, meta: dict, record: np.ndarray,
-                    sample_time_s: float) -> Run:
-    """Build a run from ``record (N, 1 + 3J)`` rows of t, desired, actual, duty per joint."""
-    n = machine.n_joints
-    record = np.asarray(record, dtype=np.float64).reshape(-1, 1 + 3 * n)
-    extra = {k: v for k, v in meta.items() if k not in ("coefficients", "start_time")}
+def segment_meta(machine: Machine, kind: str, sample_time_s: float, data_dir: Path,
+                 controller_pid: int, meta: dict[str, Any]) -> dict[str, Any]:
+    """What a move segment carries so that anyone can save its run (a fresh run id)."""
+    return {
+        "run_id": uuid.uuid4().hex,
+        "machine": machine.name,
+        "joints": [[j.name, j.unit] for j in machine.joints],
+        "kind": kind,
+        "sample_time_s": sample_time_s,
+        "data_dir": str(data_dir),
+        "controller_pid": controller_pid,
+        "start_time": start_stamp(),
+        **meta,
+    }
+
+
+def encode_meta(meta: dict[str, Any]) -> bytes:
+    return json.dumps(meta, ensure_ascii=False, allow_nan=False, default=str).encode()
+
+
+def decode_meta(data: bytes) -> dict[str, Any]:
+    meta = json.loads(data.decode())
+    if not isinstance(meta, dict):
+        raise ValueError("the move segment's metadata is not an object")
+    return meta
+
+
+def run_from_segment(buf: memoryview, layout: MoveLayout, meta: dict[str, Any], status: str,
+                     gaps: tuple[tuple[float, float], ...] = ()) -> Run:
+    """The run recorded so far in a move segment (its stalls, ``gaps`` of (t s, length s),
+    listed in its metadata)."""
+    joints = [(str(name), str(unit)) for name, unit in meta["joints"]]
+    n = len(joints)
+    record = layout.record(buf)[:layout.recorded(buf)].reshape(-1, 1 + 3 * n).copy()
+    extra = {k: v for k, v in meta.items() if k not in STANDARD or k == "run_id"}
+    if gaps:
+        extra["gaps"] = [list(gap) for gap in gaps]
     return Run(
-        machine=machine.name,
-        kind=kind,
+        machine=str(meta["machine"]),
+        kind=str(meta["kind"]),
         status=status,
         start_time=str(meta.get("start_time") or start_stamp()),
-        sample_time_s=sample_time_s,
+        sample_time_s=float(meta["sample_time_s"]),
         coefficients=meta.get("coefficients", {}),
-        joint_names=tuple(j.name for j in machine.joints),
-        joint_units=tuple(j.unit for j in machine.joints),
-        t=record[:, 0].copy(),
-        desired=record[:, 1:1 + n].copy(),
-        actual=record[:, 1 + n:1 + 2 * n].copy(),
-        duty=record[:, 1 + 2 * n:].copy(),
+        joint_names=tuple(name for name, _ in joints),
+        joint_units=tuple(unit for _, unit in joints),
+        t=record[:, 0],
+        desired=record[:, 1:1 + n],
+        actual=record[:, 1 + n:1 + 2 * n],
+        duty=record[:, 1 + 2 * n:],
         meta=extra,
     )

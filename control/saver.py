@@ -16,8 +16,7 @@ from pathlib import Path
 from control import shm
 from control.modes import ActiveMove
 from control.recorder import save_run
-from control.runs import run_from_record
-from hw.machine import Machine
+from control.runs import decode_meta, run_from_segment
 
 
 @dataclass
@@ -27,12 +26,10 @@ class KeptRun:
 
 
 class RunSaver:
-    """Keeps an orphaned move's segment; writes it as a run in ``data_dir`` after the loop."""
+    """Keeps an orphaned move's segment; after the loop, saves its run where its client saved
+    runs (the segment says where, ``control/runs.py``)."""
 
-    def __init__(self, machine: Machine, data_dir: Path | None, dt: float) -> None:
-        self.machine = machine
-        self.data_dir = data_dir
-        self.dt = dt
+    def __init__(self) -> None:
         self.kept: list[KeptRun] = []
 
     def keep(self, move: ActiveMove, status: str) -> None:
@@ -56,15 +53,14 @@ class RunSaver:
         return saved
 
     def save(self, move: ActiveMove, status: str) -> str:
-        """Save ``move`` as recorded; its JSON path, or "" if it could not be saved."""
-        if self.data_dir is None:
-            return ""
-        record = move.layout.record(move.segment.buf)[:move.index].copy()
-        meta = {**move.meta, "gaps": [list(g) for g in move.gaps]} if move.gaps else move.meta
-        run = run_from_record(self.machine, move.kind, status, meta, record, self.dt)
+        """Save ``move`` as recorded; its JSON path, or "" if it could not be saved (then its
+        segment stays for the next client to start: ``control/recovery.py``)."""
+        layout, buf = move.layout, move.segment.buf
         try:
-            return str(save_run(run, self.data_dir).json)
-        except OSError:
+            meta = decode_meta(layout.read_meta(buf))
+            run = run_from_segment(buf, layout, meta, status, tuple(move.gaps))
+            return str(save_run(run, Path(str(meta["data_dir"]))).json)
+        except (OSError, KeyError, TypeError, ValueError):
             return ""
 
 

@@ -5,13 +5,20 @@ attached to it exits, and cleans up nothing after ``kill -9`` of the creator.
 So no segment is ever registered with it (3.13's ``track=False``, done by
 hand) and servodesk owns its cleanup: names carry the creating process's
 pid (``sd_<pid>_<tag>``), the creator unlinks on every exit path, and
-``cleanup_orphans`` removes segments whose creator is dead at the next start.
+``cleanup_orphans`` removes segments whose creator is dead at the next start:
+the user's own only, and never a move segment (its run may be unsaved:
+``control/recovery.py`` saves it first and unlinks it itself).
+
+A segment fits or is refused: before one is created the space left in /dev/shm
+is checked, and its pages are reserved at once (``posix_fallocate``), so no
+later write to it can fault (a bus error, on a full tmpfs, kills the process).
 """
 
 from __future__ import annotations
 
 import _posixshmem
 import contextlib
+import errno
 import os
 import threading
 from collections.abc import Iterator
@@ -26,10 +33,46 @@ def segment_name(tag: str, pid: int | None = None) -> str:
     return f"{PREFIX}{os.getpid() if pid is None else pid}_{tag}"
 
 
-def create(tag: str, size: int) -> shared_memory.SharedMemory:
-    """Create a zero-filled segment named for this process and ``tag``."""
+class NoRoom(OSError):
+    """/dev/shm cannot hold a segment (ENOSPC); the message gives both sizes and the fix."""
+
+    def __init__(self, message: str) -> None:
+        super().__init__(errno.ENOSPC, message)
+
+    def __str__(self) -> str:
+        return str(self.strerror)
+
+
+def create(tag: str, size: int, what: str = "this") -> shared_memory.SharedMemory:
+    """Create a zero-filled segment named for this process and ``tag``, its pages reserved;
+    ``NoRoom`` if /dev/shm has no room for it (``what`` names it in the message)."""
+    size = max(size, 8)
+    free = free_bytes()
+    if size > free:
+        raise _no_room(what, size, free)
     with _untracked():
-        return shared_memory.SharedMemory(segment_name(tag), create=True, size=max(size, 8))
+        segment = shared_memory.SharedMemory(segment_name(tag), create=True, size=size)
+    try:
+        os.posix_fallocate(segment._fd, 0, size)  # type: ignore[attr-defined]
+    except OSError as exc:
+        release(segment, unlink=True)
+        raise _no_room(what, size, free_bytes()) from exc
+    return segment
+
+
+def free_bytes() -> int:
+    """Bytes /dev/shm can still give (unlimited where there is no such directory)."""
+    try:
+        stat = os.statvfs(SHM_DIR)
+    except OSError:
+        return 1 << 62
+    return stat.f_bavail * stat.f_frsize
+
+
+def _no_room(what: str, size: int, free: int) -> NoRoom:
+    return NoRoom(f"{what} needs {size / 1e6:.1f} MB of shared memory and {SHM_DIR} has "
+                  f"{free / 1e6:.1f} MB free: make the move shorter, or give {SHM_DIR} more "
+                  "room (e.g. docker run --shm-size=1g)")
 
 
 def attach(name: str) -> shared_memory.SharedMemory:
@@ -71,16 +114,33 @@ def leftover_segments() -> list[str]:
     return sorted(p.name for p in SHM_DIR.iterdir() if p.name.startswith(PREFIX))
 
 
-def cleanup_orphans() -> list[str]:
-    """Unlink segments whose creating process no longer exists; return their names."""
-    removed = []
+def is_move_segment(name: str) -> bool:
+    return name.split("_", 2)[-1].startswith("mv")
+
+
+def ours(name: str) -> bool:
+    """Whether this user owns segment ``name`` (gone: False)."""
+    try:
+        return (SHM_DIR / name).stat().st_uid == os.getuid()
+    except OSError:
+        return False
+
+
+def cleanup_orphans() -> tuple[list[str], list[str]]:
+    """Unlink this user's segments whose creating process no longer exists, except move
+    segments (``control/recovery.py`` deals with those); (names removed, notices)."""
+    removed, notices = [], []
     for name in leftover_segments():
         pid = owner_pid(name)
-        if pid is not None and not pid_alive(pid):
-            with contextlib.suppress(FileNotFoundError):
-                (SHM_DIR / name).unlink()
-                removed.append(name)
-    return removed
+        if pid is None or pid_alive(pid) or is_move_segment(name):
+            continue
+        if not ours(name):
+            notices.append(f"left {name} alone: it belongs to another user")
+            continue
+        with contextlib.suppress(FileNotFoundError):
+            (SHM_DIR / name).unlink()
+            removed.append(name)
+    return removed, notices
 
 
 _TRACKER_LOCK = threading.Lock()

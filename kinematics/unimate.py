@@ -229,7 +229,8 @@ class Unimate2000B:
         rank by (typically the current reading; default the middle of the
         limits); it also supplies the joint held at a singularity (module
         docstring). Returns ``(k, 6)``, 1 ≤ k ≤ 8, distinct. Raises Unreachable
-        naming the reason, ValueError for a NaN/inf or a wrong shape.
+        naming the reason, ValueError for a NaN/inf, a wrong shape or a position
+        so large that the solution overflows (``ρ² + h²`` past float's largest).
 
         A scalar ``math`` transcription of ``inverse_batch`` (numpy's per-call
         overhead would cost ~10× more for one pose); the tests hold the two to
@@ -238,6 +239,8 @@ class Unimate2000B:
         target = _vector(p, "pose")
         ref = self._reference(near)
         raw, radius, singular = self._branches(target, ref)
+        if not all(math.isfinite(v) for v in (radius, *(v for b in raw for v in b))):
+            raise ValueError(_overflow(target))
         fitted = [q for q in (self._fit(b, ref) for b in raw) if q is not None]
         if not fitted:
             raise Unreachable(self._why(raw, radius, ref if singular else None))
@@ -546,6 +549,14 @@ def distance(q: ArrayLike, near: ArrayLike) -> np.ndarray:
     """Ranking metric of joint vectors ``(..., 6)``, broadcast together:
     Σ|Δθ| (deg) + |Δd3| / MM_PER_DEGREE."""
     return (np.abs(np.asarray(q, dtype=float) - near) * _WEIGHTS).sum(axis=-1)
+
+
+def _overflow(p: Sequence[float]) -> str:
+    """Why a pose has no finite solution: its position, the largest coordinate named."""
+    k = max(range(3), key=lambda i: abs(p[i]))
+    return (f"{'xyz'[k]} {p[k]:g} mm is too large: the inverse kinematics squares the "
+            "distances of the wrist point (eq. 4.17) and overflows; give a position within "
+            "the arm's reach")
 
 
 def _same(q: Sequence[float], u: Sequence[float]) -> bool:

@@ -4,13 +4,16 @@ and the files that are no machine description (the loader, the CLI and the clien
 Under CI, hypothesis replays a fixed set of examples. Locally every run explores
 new examples (that is how the bugs in docs/errata.md and the fault suite were
 found); in CI a run must not fail on an example no one has seen, so ``CI=true``
-selects a derandomized profile.
+selects a derandomized profile. The deep variants of the file-parser properties
+(tests/faults/test_bad_input.py, ``deep_fuzz``: 10,000 examples each locally) and
+of the machine-file property (tests/hw/test_machine_fuzz.py) replay only 200
+there, to keep CI short.
 
 Cost: a test that starts a process (the control subprocess through
-``ControlClient``, the emulator, a CLI, tmux) or the TUI is marked ``slow`` here,
+``ControlClient``, the emulator, a CLI, tmux) or the TUI, or that takes seconds
+without one (a file at its size bound, a deep fuzz), is marked ``slow`` here,
 centrally (``pytest_collection_modifyitems``), so that ``pytest -m "not slow"``
-is the inner loop; so is a test that starts nothing but runs for minutes (an
-exhaustive property). Every other test is watched: one that starts a process
+is the inner loop. Every other test is watched: one that starts a process
 anyway fails at teardown, naming what it started and where to mark it.
 """
 
@@ -56,13 +59,19 @@ SLOW_FIXTURES = {
     "runs": "tests/control/identify/test_sysid.py",    # ControlClient's excitation runs
     "robot": "tests/control/identify/test_tuning.py",  # ControlClient
 }
-# Single tests that start one in their body.
+# Single tests that start one in their body, or that take seconds without one.
 SLOW_TESTS = (
     "tests/control/test_seqlock.py::test_reader_never_sees_a_torn_record",  # spawned writer
     "tests/control/test_shm.py::test_orphan_of_a_killed_process_is_cleaned_up",
-)
-# Single tests that start nothing but run for minutes: exhaustive variants of fast properties.
-LONG_TESTS = (
+    # files at their size bound: 600,001 points parsed, 2-4 s each
+    "tests/control/motion/test_path_files.py::test_a_path_file_at_its_bound_loads",
+    "tests/control/motion/test_cartesian.py::test_a_pose_file_at_its_bound_is_read",
+    # 10,000 hypothesis examples each, about a minute (slow under tests/faults/ already; listed
+    # for their own cost, should the file-parser properties ever leave that folder)
+    "tests/faults/test_bad_input.py::test_tsv_path_files_deeply",
+    "tests/faults/test_bad_input.py::test_csv_path_files_deeply",
+    "tests/faults/test_bad_input.py::test_pose_files_deeply",
+    # 10,000 machine files changed and run on a controller, about a minute
     "tests/hw/test_machine_fuzz.py::"
     "test_ten_thousand_changed_machine_files_load_and_run_or_name_their_key",
 )
@@ -86,7 +95,7 @@ def _starts_processes(item: pytest.Item) -> bool:
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     for item in items:
-        if _starts_processes(item) or item.nodeid.split("[")[0] in LONG_TESTS:
+        if _starts_processes(item):
             item.add_marker(pytest.mark.slow)
 
 

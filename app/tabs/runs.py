@@ -273,5 +273,7 @@ class RunsTab(TabPage):
 
     def on_runs_tab_saved(self, message: Saved) -> None:
         self.unsaved = [r for r in self.unsaved if r is not message.run]
+        if self.connection is not None:  # the copy kept for the next start is not needed now
+            self.connection.release_kept(message.run)
         self.notify(f"saved to {message.where}")
         self.action_reload()

@@ -48,7 +48,9 @@ Pose files (``read_poses``): CSV with a header, columns ``x, y, z`` (mm) and
 optionally ``t`` (s from the start of the move) and ``gamma, beta, alpha``
 (deg). Each row is a via point after the start. Given orientation columns must
 agree with the rule above (they are checked, not used). Malformed lines are
-reported by line number, in the style of ``control/motion/path_files.py``.
+reported by line number, in the style of ``control/motion/path_files.py``, and a
+file is bounded before it is parsed as a path file is: each via point is a sample
+of the path, so at most one per sample of the longest move allowed.
 """
 
 from __future__ import annotations
@@ -61,7 +63,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.interpolate import CubicSpline
 
-from control.motion.file_fields import csv_lines, field_number, read_text_file
+from control.motion.file_fields import csv_lines, field_number, move_file_bound, read_text_file
+from control.motion.path_files import MAX_MOVE_S
 from control.motion.robot_model import unimate_model
 from hw.machine import Machine
 from kinematics import unimate, xyz_fixed
@@ -397,9 +400,12 @@ def _positive(value: float, name: str) -> float:
 # -- pose files ------------------------------------------------------------------------
 
 
-def read_poses(path: str | Path) -> PosePoints:
-    """Read a pose CSV (module docstring); PoseFileError names the file and line."""
-    path, text = read_text_file(path, PoseFileError)
+def read_poses(path: str | Path, machine: Machine) -> PosePoints:
+    """Read a pose CSV for ``machine`` (module docstring), bounded as a path file is;
+    PoseFileError names the file and line."""
+    bound = move_file_bound("a pose file", machine.sample_time_s, MAX_MOVE_S,
+                            f"use fewer via points, on a path of at most {MAX_MOVE_S:g} s")
+    path, text = read_text_file(path, bound, PoseFileError)
     return parse_poses(text, str(path))
 
 

@@ -10,10 +10,12 @@
   columns are used and its actual and duty columns ignored.
 
 Times are seconds, positions mm or degrees. Every malformed line is reported
-with its line number. A file is a ``path`` move, a smooth kind, so the points
-are held to the rules of ``control.motion.acceptance`` (``docs/motion.md``):
-every point inside the joint limits, no joint faster than its ``max_speed``
-from one point to the next.
+with its line number. A file is bounded before it is parsed (``path_file_bound``):
+at most one line per sample of the longest move allowed (``MAX_MOVE_S``) and a
+header, at ``file_fields.BYTES_PER_ROW`` bytes a line; reading stops at the bound.
+A file is a ``path`` move, a smooth kind, so the points are held to the rules of
+``control.motion.acceptance`` (``docs/motion.md``): every point inside the joint
+limits, no joint faster than its ``max_speed`` from one point to the next.
 
 ``resample`` turns the points into a path at the sample time, as
 ``ControlClient.move`` expects: the points joined by straight lines, and each
@@ -37,7 +39,13 @@ from pathlib import Path
 import numpy as np
 
 from control.motion.acceptance import MoveRefused, check_rows, check_smooth, check_speeds
-from control.motion.file_fields import csv_lines, field_number, read_text_file
+from control.motion.file_fields import (
+    FileBound,
+    csv_lines,
+    field_number,
+    move_file_bound,
+    read_text_file,
+)
 from hw.machine import Machine
 
 TIME_NAMES = ("t", "time", "t [s]", "time [s]")
@@ -77,9 +85,18 @@ class PathPoints:
         return _whole(float(self.blends()[0].max(initial=0.0)) / 2, dt)
 
 
+def path_file_bound(machine: Machine) -> FileBound:
+    """The most a path file for ``machine`` may hold: one point per sample of a move of
+    ``MAX_MOVE_S`` (600,002 lines and 307 MB at 1 ms)."""
+    return move_file_bound("a path file", machine.sample_time_s, MAX_MOVE_S,
+                           f"split it into moves of at most {MAX_MOVE_S:g} s, or thin its "
+                           "points")
+
+
 def read_path(path: str | Path, machine: Machine, hold: tuple[float, ...]) -> PathPoints:
-    """Read a path file for ``machine``; joints the file leaves out stay at ``hold``."""
-    path, text = read_text_file(path, PathFileError)
+    """Read a path file for ``machine``, within ``path_file_bound``; joints the file leaves
+    out stay at ``hold``."""
+    path, text = read_text_file(path, path_file_bound(machine), PathFileError)
     if path.suffix.lower() in CSV_SUFFIXES:
         return parse_csv(text, machine, hold, str(path))
     return parse_tsv(text, machine, hold, str(path))

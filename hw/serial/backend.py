@@ -18,6 +18,7 @@ trip is a fault too: the valves were closed behind the controller's back.
 from __future__ import annotations
 
 import contextlib
+import itertools
 import math
 import os
 import select
@@ -52,6 +53,8 @@ from hw.serial.messages import (
 READ_CHUNK = 4096
 MAX_READS = 64
 RESEND_S = 0.1
+RECONNECT_S = 1.0  # how long a reconnect keeps trying, with back-off, before it says why not
+RECONNECT_FIRST_WAIT_S = 0.02
 
 
 class BoardError(ConnectionError):
@@ -170,16 +173,28 @@ class SerialBackend:
         self._disconnect()
 
     def reconnect(self) -> None:
-        """The operator's way back from a lost link or a watchdog trip: reopen from scratch.
+        """The operator's way back from a lost link or a watchdog trip: reopen from scratch,
+        retrying with back-off (20, 40, 80 … ms) for up to ``RECONNECT_S``: a board serving
+        one TCP client may not yet have noticed that the old link closed, and resets the
+        new one.
 
-        On failure the fault says why and the ``BoardError`` propagates.
+        On failure the fault says why, after how many attempts, and the ``BoardError``
+        propagates.
         """
         self.close()
-        try:
-            self.open()
-        except BoardError as exc:
-            self._fault = f"link lost: reconnect failed: {exc}"
-            raise
+        deadline = time.monotonic() + RECONNECT_S
+        wait = RECONNECT_FIRST_WAIT_S
+        for attempt in itertools.count(1):
+            try:
+                self.open()
+                return
+            except BoardError as exc:
+                if time.monotonic() + wait >= deadline:
+                    self._fault = (f"link lost: reconnect failed after {attempt} attempts in "
+                                   f"{RECONNECT_S:g} s: {exc}")
+                    raise BoardError(self._fault) from exc
+            time.sleep(wait)
+            wait *= 2
 
     # -- the tick -----------------------------------------------------------------------------
 

@@ -6,9 +6,11 @@ raw bytes), machine TOML files, coefficient files, the command line's numbers,
 serial frames reaching the I/O board, pose inputs (the End point form's fields,
 the inverse kinematics, pose files) and paths handed to a running controller.
 Each property either gets a clear, one-line error of the parser's own type
-that names its source, or a value that satisfies the parser's promises (inside
-the limits, finite, increasing times…). The examples tried are counted per
-test (``measured.example``) and reported in the terminal summary.
+that names its source (and, for a file, only lines it has), or a value that
+satisfies the parser's promises (inside the limits, finite, increasing
+times…). The examples tried are counted per test (``measured.example``) and
+reported in the terminal summary. The file parsers also have deep variants,
+ten thousand examples each (``deep_fuzz``), listed as slow in tests/conftest.py.
 """
 
 from __future__ import annotations
@@ -21,8 +23,10 @@ import math
 import os
 import re
 import string
+import subprocess
+import sys
 import tomllib
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -35,8 +39,10 @@ from app.coefficient_files import CoefficientFileError, dump_coefficients, parse
 from app.widgets.fields import FieldError, NumberCheck, position_check
 from control import ControlClient
 from control.layout import MAX_TAPS
+from control.motion import file_fields
 from control.motion.acceptance import SAMPLING_TOLERANCE, check_path
-from control.motion.cartesian import PoseFileError, parse_poses
+from control.motion.cartesian import PoseFileError, PosePoints, parse_poses, read_poses
+from control.motion.file_fields import FileBound, read_text_file
 from control.motion.path_files import (
     PathFileError,
     PathPoints,
@@ -126,10 +132,31 @@ HEADER_NAMES = st.sampled_from(["t", "time", "t [s]", "In/Out", "inout", "Rotate
 
 # -- path files ---------------------------------------------------------------------------
 
+LINE_NUMBERS = re.compile(r"\blines? (\d+)(?:(?: and |–)(\d+))?")
+QUOTED = re.compile(r"'[^']*'|\"[^\"]*\"")  # a field or a column as the file has it
 
-def check_points(points: PathPoints) -> None:
-    """What a parsed path file promises: times from 0, increasing; finite; in limits; speeds
-    (the acceptance rules' tolerance); and a resampled path the smooth rules accept."""
+
+def names_its_lines(message: str, source: str, text: str | None) -> None:
+    """A clear message naming ``source`` first, whose every line number (``line 3``, ``lines
+    3 and 4``, ``lines 3–4``) is a line of ``text``, counted as the parsers count them
+    (``str.splitlines``); ``text`` None: the file is not UTF-8, it has no lines."""
+    one_line(message, f"{source}: ")
+    count = len(text.splitlines()) if text is not None else 0
+    for match in LINE_NUMBERS.finditer(QUOTED.sub("", message)):
+        assert all(1 <= int(n) <= count for n in match.groups() if n), (message, count)
+
+
+def from_lines(lines: tuple[int, ...], text: str) -> None:
+    """Parsed points' line numbers: one per point, increasing, each a line of ``text``."""
+    assert len(lines) >= 1 and list(lines) == sorted(set(lines))
+    assert lines[0] >= 1 and lines[-1] <= len(text.splitlines())
+
+
+def check_points(points: PathPoints, text: str) -> None:
+    """What a parsed path file promises: a point per line of ``text`` it names; times from 0,
+    increasing; finite; in limits; speeds (the acceptance rules' tolerance); and a resampled
+    path the smooth rules accept."""
+    from_lines(points.lines, text)
     t, q = points.t, points.q
     assert len(t) >= 1 and t[0] == 0.0 and np.all(np.diff(t) > 0)
     assert np.isfinite(q).all() and np.all(q >= LOWER) and np.all(q <= UPPER)
@@ -139,17 +166,32 @@ def check_points(points: PathPoints) -> None:
     check_path(resample(points, DT), "path", UNIMATE, DT)
 
 
+def expect_path(read: Callable[[], PathPoints], source: str, text: str | None) -> None:
+    """``read()`` raises a PathFileError naming ``source`` and only lines ``text`` has, or
+    returns points that keep every promise (``check_points``)."""
+    try:
+        points = read()
+    except PathFileError as exc:
+        names_its_lines(str(exc), source, text)
+    else:
+        assert text is not None, "a file that is not UTF-8 was read"
+        check_points(points, text)
+
+
+def csv_text(header: list[str], table: tuple[list[list[str]], str]) -> str:
+    """A path CSV: ``header``, then the table's rows cut to its width."""
+    rows, extra = table
+    return extra + ",".join(header) + "\n" + "".join(",".join(r[:len(header)]) + "\n"
+                                                    for r in rows)
+
+
 @fuzz(400)
 @given(text=st.text(max_size=300))
 def test_any_text_as_a_tsv_path_file(measured, text: str) -> None:
-    """Arbitrary text read as a TSV path: PathFileError naming the file, or a valid path."""
+    """Arbitrary text read as a TSV path: PathFileError naming the file and only lines it
+    has, or a valid path."""
     measured.example()
-    try:
-        points = parse_tsv(text, UNIMATE, HOLD, "fuzz.tsv")
-    except PathFileError as exc:
-        one_line(str(exc), "fuzz.tsv: ")
-    else:
-        check_points(points)
+    expect_path(lambda: parse_tsv(text, UNIMATE, HOLD, "fuzz.tsv"), "fuzz.tsv", text)
 
 
 @fuzz(400)
@@ -158,12 +200,13 @@ def test_damaged_tsv_path_files(measured, table: tuple[list[list[str]], str]) ->
     """Plausible TSV paths with damaged fields, short lines, bad times, fast or out-of-limit
     points: PathFileError naming the file and line, or a path that resamples into limits."""
     measured.example()
+    text = tsv_text(*table)
     try:
-        points = parse_tsv(tsv_text(*table), UNIMATE, HOLD, "fuzz.tsv")
+        points = parse_tsv(text, UNIMATE, HOLD, "fuzz.tsv")
     except PathFileError as exc:
-        one_line(str(exc), "fuzz.tsv: ")
+        names_its_lines(str(exc), "fuzz.tsv", text)
     else:
-        check_points(points)
+        check_points(points, text)
         path = resample(points, UNIMATE.sample_time_s)
         assert path.shape[1] == 6 and np.all(path >= LOWER) and np.all(path <= UPPER)
 
@@ -176,15 +219,8 @@ def test_damaged_csv_path_files(measured, header: list[str],
     """CSV paths with any header (unknown joints, duplicates, saved-run columns) and damaged
     rows: PathFileError naming the file and line, or a valid path."""
     measured.example()
-    rows, extra = table
-    text = extra + ",".join(header) + "\n" + "".join(",".join(r[:len(header)]) + "\n"
-                                                     for r in rows)
-    try:
-        points = parse_csv(text, UNIMATE, HOLD, "fuzz.csv")
-    except PathFileError as exc:
-        one_line(str(exc), "fuzz.csv: ")
-    else:
-        check_points(points)
+    text = csv_text(header, table)
+    expect_path(lambda: parse_csv(text, UNIMATE, HOLD, "fuzz.csv"), "fuzz.csv", text)
 
 
 @fuzz(150)
@@ -194,12 +230,57 @@ def test_any_bytes_as_a_path_file(measured, tmp_path_factory, data: bytes,
     """Any bytes in a path file (not UTF-8, NULs, control characters): PathFileError naming
     the file, or a valid path; never a crash."""
     measured.example()
-    path = tmp_path_factory.getbasetemp() / f"bytes{suffix}"
+    path, text = written(tmp_path_factory, f"bytes{suffix}", data)
+    expect_path(lambda: read_path(path, UNIMATE, HOLD), str(path), text)
+
+
+def written(tmp_path_factory: pytest.TempPathFactory, name: str,
+            data: bytes) -> tuple[Path, str | None]:
+    """A file of ``data``, and its text (None when it is not UTF-8)."""
+    path = tmp_path_factory.getbasetemp() / name
     path.write_bytes(data)
     try:
-        check_points(read_path(path, UNIMATE, HOLD))
+        return path, data.decode("utf-8")
+    except UnicodeDecodeError:
+        return path, None
+
+
+LINE_PIECES = st.sampled_from(["a", "1\t2", "é", "\n", "\r", "\r\n", "\x0b", "\x0c", "\x1c",
+                               "\x1d", "\x1e", "\x85", "\u2028", "\u2029"])
+
+
+@st.composite
+def bounded_bytes(draw: st.DrawFn) -> tuple[bytes, int, int]:
+    """Bytes (text of every kind of line end, or any bytes) and a bound of lines and bytes
+    near what they hold, so that one line or byte either way decides."""
+    data = draw(st.one_of(st.lists(LINE_PIECES, max_size=40).map(lambda p: "".join(p).encode()),
+                          st.binary(max_size=60)))
+    lines = len(data.decode("utf-8", "replace").splitlines())
+    return (data, max(0, lines + draw(st.integers(-2, 2))),
+            max(0, len(data) + draw(st.integers(-2, 2))))
+
+
+@fuzz(500)
+@given(case=bounded_bytes(), chunk=st.integers(1, 8))
+def test_any_bytes_within_or_past_a_bound(measured, tmp_path_factory, monkeypatch,
+                                          case: tuple[bytes, int, int], chunk: int) -> None:
+    """Any bytes, read a few at a time, against any bound: refused naming the bound exactly
+    when they pass it (in bytes, or in lines as the parsers count them: every kind of line
+    end, split between two reads or not, counted once), else read whole."""
+    measured.example()
+    data, lines, size = case
+    monkeypatch.setattr(file_fields, "CHUNK_BYTES", chunk)
+    path, text = written(tmp_path_factory, "bound.txt", data)
+    past = len(data) > size or (text is not None and len(text.splitlines()) > lines)
+    bound = f"a fuzzed file may hold at most {lines:,} lines and {size:,} bytes (why): fix"
+    try:
+        _, read = read_text_file(path, FileBound("a fuzzed file", lines, size, "why", "fix"),
+                                 PathFileError)
     except PathFileError as exc:
-        one_line(str(exc), str(path))
+        one_line(str(exc), f"{path}: ")
+        assert str(exc).endswith(bound) if past else text is None
+    else:
+        assert not past and read == text
 
 
 def test_what_csv_itself_cannot_split_is_a_line_numbered_error() -> None:
@@ -414,12 +495,14 @@ CLI_NUMBER = st.one_of(NUMBER_TEXT, st.floats(-3000, 3000).map(repr),
                        st.sampled_from(["-1e3", "-inf", "-nan", "--", "-h", "-x", "1e5000"]))
 
 
+@pytest.mark.filterwarnings("error")
 @fuzz(300)
 @given(command=st.sampled_from(["fk", "ik"]), values=st.lists(CLI_NUMBER, min_size=6,
                                                                 max_size=6))
 def test_fk_and_ik_numbers(measured, command: str, values: list[str]) -> None:
     """``servodesk fk`` / ``ik`` with any six arguments: exit 0 with a result, or exit 2
-    with one line saying which number is wrong (or argparse's usage line); no traceback."""
+    with one line saying which number is wrong (or argparse's usage line); no traceback
+    and no warning (numpy's, of an overflow: a warning fails the test)."""
     measured.example()
     code, out, err = run_cli([command, *values])
     assert "Traceback" not in err
@@ -430,6 +513,61 @@ def test_fk_and_ik_numbers(measured, command: str, values: list[str]) -> None:
         last = err.strip().splitlines()[-1]
         assert last.startswith((f"servodesk {command}: ", "servodesk: error: ",
                                 f"usage: servodesk {command}")), err
+
+
+ROOT = Path(__file__).resolve().parents[2]
+POSE = ["1200", "-440", "1187.45", "0", "-90", "0"]  # fk of In/Out 1000 mm, the rest 0
+
+
+def servodesk(argv: list[str], stdout: int = subprocess.PIPE) -> subprocess.CompletedProcess:
+    """The real ``python -m app ARGV`` in a subprocess, warnings shown as a user sees them."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "PYTHONWARNINGS": "default"}
+    return subprocess.run([sys.executable, "-m", "app", *argv], cwd=ROOT, env=env,
+                          stdout=stdout, stderr=subprocess.PIPE, text=True, timeout=60)
+
+
+@pytest.mark.parametrize("argv", [["fk", "1000", "0", "0", "0", "0", "0", "--json"],
+                                  ["ik", *POSE, "--json"], ["ik", *POSE],
+                                  ["machine", "--json"], ["machine", "rig"]])
+def test_a_reader_that_goes_away_ends_the_command_quietly(argv: list[str]) -> None:
+    """``servodesk ik … --json | head`` where head has already gone: no BrokenPipeError
+    traceback, nothing on stderr, and exit status 141 (128 + SIGPIPE, what the shell shows
+    for a command killed by SIGPIPE: the output was cut short)."""
+    read, write = os.pipe()
+    os.close(read)  # the reader is gone before the command writes a byte
+    try:
+        done = servodesk(argv, stdout=write)
+    finally:
+        os.close(write)
+    assert (done.returncode, done.stderr) == (141, "")
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    (["fk", "1e308", "0", "0", "0", "0", "0"], "In/Out 1e+308 mm is too large: the pose overflows"),
+    (["fk", "--json", "-1.7e308", "0", "0", "0", "0", "0"], "In/Out -1.7e+308 mm is too large"),
+    (["ik", "1e200", "0", "0", "0", "0", "0"], "x 1e+200 mm is too large"),
+    (["ik", "0", "0", "-1e300", "0", "0", "0", "--json"], "z -1e+300 mm is too large"),
+    (["ik", *POSE, "--near", "1000", "1e308", "0", "0", "0", "0"],
+     "--near Rotate 1e+308° is too large: the distance to it overflows"),
+    (["ik", *POSE, "--json", "--near", "1e308", "0", "0", "0", "0", "0"],
+     "--near In/Out 1e+308 mm is too large"),
+])
+def test_numbers_that_overflow_are_an_error_naming_the_input(argv: list[str],
+                                                             message: str) -> None:
+    """Finite numbers so large that a result is not a finite number (the pose, a solution, the
+    distance to --near): exit 2 with one line naming the input; nothing on stdout and no
+    numpy warning."""
+    done = servodesk(argv)
+    assert (done.returncode, done.stdout) == (2, "")
+    one_line(done.stderr.strip(), f"servodesk {argv[0]}: {message}")
+
+
+def test_large_numbers_that_do_not_overflow_still_give_a_result() -> None:
+    """In/Out 1e300 mm is far outside its limits but its pose is finite: fk answers, noting
+    the limits, without a warning."""
+    done = servodesk(["fk", "1e300", "0", "0", "0", "0", "0"])
+    assert done.returncode == 0 and done.stderr == ""
+    assert "note: In/Out outside the joint limits" in done.stdout
 
 
 @fuzz(200)
@@ -617,25 +755,88 @@ def test_inverse_kinematics_of_any_pose(measured,
 
 POSE_HEADER = st.lists(st.sampled_from(["t", "time", "x", "y", "z", "gamma", "beta", "alpha",
                                         "γ", "x [mm]", "w", "", "X"]), max_size=7)
+POSE_ROWS = st.lists(st.lists(NUMBER_TEXT, min_size=0, max_size=7), max_size=6)
+
+
+def pose_text(header: list[str], rows: list[list[str]]) -> str:
+    return ",".join(header) + "\n" + "".join(",".join(r) + "\n" for r in rows)
+
+
+def expect_poses(read: Callable[[], PosePoints], source: str, text: str | None) -> None:
+    """``read()`` raises a PoseFileError naming ``source`` and only lines ``text`` has, or
+    returns via points, one per line it names, finite, with increasing times after 0."""
+    try:
+        points = read()
+    except PoseFileError as exc:
+        names_its_lines(str(exc), source, text)
+        return
+    assert text is not None, "a file that is not UTF-8 was read"
+    from_lines(points.lines, text)
+    assert np.isfinite(points.xyz).all() and len(points.xyz) == len(points.lines)
+    if points.t is not None:
+        assert np.all(np.diff(np.concatenate([[0.0], points.t])) > 0)
 
 
 @fuzz(300)
-@given(header=POSE_HEADER, rows=st.lists(st.lists(NUMBER_TEXT, min_size=0, max_size=7),
-                                         max_size=6))
+@given(header=POSE_HEADER, rows=POSE_ROWS)
 @example(header=[], rows=[["\r", "nan"]])  # found by a random run: csv's "new-line in field"
 def test_pose_files(measured, header: list[str], rows: list[list[str]]) -> None:
     """A pose CSV with any header and any fields: PoseFileError naming the file and line,
     or via points that are finite with increasing times."""
     measured.example()
-    text = ",".join(header) + "\n" + "".join(",".join(r) + "\n" for r in rows)
-    try:
-        points = parse_poses(text, "fuzz.csv")
-    except PoseFileError as exc:
-        one_line(str(exc), "fuzz.csv: ")
-    else:
-        assert np.isfinite(points.xyz).all() and len(points.xyz) >= 1
-        if points.t is not None:
-            assert np.all(np.diff(np.concatenate([[0.0], points.t])) > 0)
+    text = pose_text(header, rows)
+    expect_poses(lambda: parse_poses(text, "fuzz.csv"), "fuzz.csv", text)
+
+
+# -- the file parsers, deeply (slow) ------------------------------------------------------
+
+DEEP_EXAMPLES = 10_000  # per parser, new ones on every local run
+DEEP_IN_CI = 200  # CI replays a fixed set (tests/conftest.py): kept short
+TSV_FILES = st.one_of(st.text(max_size=300), mutated_table("\t").map(lambda t: tsv_text(*t)))
+CSV_FILES = st.one_of(st.text(max_size=300),
+                      st.builds(csv_text, st.lists(HEADER_NAMES, max_size=5), mutated_table(",")))
+POSE_FILES = st.one_of(st.text(max_size=300), st.builds(pose_text, POSE_HEADER, POSE_ROWS))
+
+
+def deep_fuzz() -> settings:
+    """``fuzz`` for the deep variants: ``DEEP_EXAMPLES``, or under CI ``DEEP_IN_CI``."""
+    return fuzz(DEEP_IN_CI if os.environ.get("CI") else DEEP_EXAMPLES)
+
+
+def file_bytes(texts: st.SearchStrategy[str]) -> st.SearchStrategy[bytes]:
+    """A file's bytes: one of ``texts`` in UTF-8, or any bytes at all."""
+    return st.one_of(texts.map(str.encode), st.binary(max_size=300))
+
+
+@deep_fuzz()
+@given(data=file_bytes(TSV_FILES))
+def test_tsv_path_files_deeply(measured, tmp_path_factory, data: bytes) -> None:
+    """Ten thousand TSV path files (any text, damaged tables, any bytes), read as the Moves
+    tab reads them, bounded and parsed: a PathFileError naming the file and only lines it
+    has, or points that keep every promise."""
+    measured.example()
+    path, text = written(tmp_path_factory, "deep.tsv", data)
+    expect_path(lambda: read_path(path, UNIMATE, HOLD), str(path), text)
+
+
+@deep_fuzz()
+@given(data=file_bytes(CSV_FILES))
+def test_csv_path_files_deeply(measured, tmp_path_factory, data: bytes) -> None:
+    """Ten thousand CSV path files (any text, any header over damaged rows, any bytes): a
+    PathFileError naming the file and only lines it has, or points that keep every promise."""
+    measured.example()
+    path, text = written(tmp_path_factory, "deep.csv", data)
+    expect_path(lambda: read_path(path, UNIMATE, HOLD), str(path), text)
+
+
+@deep_fuzz()
+@given(data=file_bytes(POSE_FILES))
+def test_pose_files_deeply(measured, tmp_path_factory, data: bytes) -> None:
+    """Ten thousand pose CSVs (any text, any header over any fields, any bytes): a
+    PoseFileError naming the file and only lines it has, or via points that keep theirs."""
+    measured.example()
+    path, text = written(tmp_path_factory, "deep.csv", data)
+    expect_poses(lambda: read_poses(path, UNIMATE), str(path), text)
 
 
 # -- a running controller given bad paths -------------------------------------------------

@@ -12,6 +12,7 @@ import os
 import signal
 import statistics
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -56,6 +57,36 @@ def test_kill_9_of_the_controller_is_reported_and_the_run_is_on_disk(
     np.testing.assert_allclose(saved.desired, path[:saved.samples], atol=1e-9)
     with pytest.raises(ControllerError, match="controller died"):
         client.jog([10.0] * 6)
+
+
+def test_a_killed_controller_is_not_left_a_zombie(controller, until, measured) -> None:
+    """SIGKILL of an idle controller: the client's monitor thread reaps the process as soon as
+    it notices the death, so the process table holds no zombie while the client stays open
+    (until ``close``, which a TUI only calls on the way out)."""
+    client = controller()
+    pid = client.pid
+    killed = time.monotonic()
+    os.kill(pid, signal.SIGKILL)
+    client.wait_event("died", timeout=5.0)
+    until(lambda: not is_zombie(pid), 5.0,
+          lambda: f"the killed controller {pid} to be reaped (/proc/{pid}/stat: {stat(pid)!r})")
+    measured("reaped_ms", (time.monotonic() - killed) * 1e3, "ms")
+    assert client.dead
+
+
+def stat(pid: int) -> str:
+    """``/proc/PID/stat``, or "" once the process is gone."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text()
+    except FileNotFoundError:
+        return ""
+
+
+def is_zombie(pid: int) -> bool:
+    """Whether ``pid`` is a zombie: exited, its status not yet collected (state ``Z``; the
+    field after the command name in parentheses, which may itself hold spaces)."""
+    text = stat(pid)
+    return bool(text) and text.rsplit(")", 1)[1].split()[0] == "Z"
 
 
 def read_board(url: str, seconds: float) -> list[Report | Status]:

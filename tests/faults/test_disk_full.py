@@ -4,8 +4,9 @@
 the data directory, and a run of a few thousand samples does not fit. Where
 mounting is not allowed the tmpfs case is skipped and the unwritable case (a
 data directory whose parent is a file) still runs. Either way the operator is
-told, the run is kept in memory, nothing half-written is left, and the run can
-be saved elsewhere.
+told, the run is kept in memory and in its move segment, nothing half-written is
+left, and the run can be saved elsewhere; the next start saves it from the segment
+(tests/faults/test_saving.py shows that after a client exits).
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from control import ControlClient, MoveResult
+from control import ControlClient, MoveResult, shm
 from control.motion import moves
 from control.recorder import RecorderError, load_run, save_run
 from hw.machine import load_machine
@@ -47,25 +48,31 @@ def remount(path: Path, size_bytes: int) -> None:
 
 
 def run_a_step(controller: Callable[..., ControlClient], data_dir: Path
-               ) -> tuple[MoveResult, np.ndarray]:
-    """A 3 s step on Rotate saving into ``data_dir``: its result and its path."""
+               ) -> tuple[ControlClient, MoveResult, np.ndarray]:
+    """A 3 s step on Rotate saving into ``data_dir``: the client, its result, its path."""
     client = controller(lockstep=True, data_dir=data_dir)
     start = client.status().position
     path = moves.step(start, ROTATE, start[ROTATE] + 10.0, duration=3.0, machine=UNIMATE)
-    return client.wait(client.move(path, kind="step"), timeout=60), path
+    return client, client.wait(client.move(path, kind="step"), timeout=60), path
 
 
-def assert_kept_and_saved_elsewhere(result: MoveResult, path: np.ndarray, elsewhere: Path,
-                                    reason: str) -> None:
+def assert_kept_and_saved_elsewhere(client: ControlClient, result: MoveResult,
+                                    path: np.ndarray, elsewhere: Path, reason: str) -> None:
     """The operator was told why, the whole run is in memory, and it saves elsewhere."""
     assert result.complete and result.files is None
     assert reason in result.save_error
     assert result.save_error.startswith("run not saved (cannot save the step run in ")
-    assert result.save_error.endswith("it is kept in memory: save it elsewhere from the Runs tab")
+    assert result.save_error.endswith("it is kept in memory (save it elsewhere from the Runs "
+                                      "tab) and in shared memory, where the next start saves it")
     assert result.run.samples == len(path)
     np.testing.assert_allclose(result.run.desired, path, atol=1e-9)
     files = save_run(result.run, elsewhere)
     assert load_run(files.json) == result.run
+    kept = [n for n in shm.leftover_segments()
+            if shm.owner_pid(n) == os.getpid() and shm.is_move_segment(n)]
+    assert len(kept) == 1, "the unsaved run's segment was not kept"
+    client.release_kept(result.run)  # saved elsewhere: the copy for the next start can go
+    assert kept[0] not in shm.leftover_segments()
 
 
 def test_a_full_disk_keeps_the_run_in_memory_and_leaves_nothing_half_written(
@@ -76,8 +83,8 @@ def test_a_full_disk_keeps_the_run_in_memory_and_leaves_nothing_half_written(
     room for the first of the run's three files but not the second, a save fails the same
     way and removes the file it had placed."""
     with tiny_tmpfs(tmp_path / "full", "64k") as full:
-        result, path = run_a_step(controller, full)
-        assert_kept_and_saved_elsewhere(result, path, tmp_path / "elsewhere",
+        client, result, path = run_a_step(controller, full)
+        assert_kept_and_saved_elsewhere(client, result, path, tmp_path / "elsewhere",
                                         "No space left on device")
         assert list(full.iterdir()) == []
 
@@ -95,6 +102,7 @@ def test_an_unusable_data_directory_keeps_the_run_in_memory(controller, tmp_path
     is not a directory, and the run is whole in memory and saves elsewhere."""
     blocker = tmp_path / "not-a-directory"
     blocker.write_text("a file where the data directory's parent should be\n")
-    result, path = run_a_step(controller, blocker / "runs")
-    assert_kept_and_saved_elsewhere(result, path, tmp_path / "elsewhere", "Not a directory")
+    client, result, path = run_a_step(controller, blocker / "runs")
+    assert_kept_and_saved_elsewhere(client, result, path, tmp_path / "elsewhere",
+                                    "Not a directory")
     assert blocker.is_file() and os.path.getsize(blocker) > 0

@@ -9,13 +9,15 @@ tests/control/test_loop.py): it holds, then drives every valve open one way and 
 and no tick may raise, no command break, no plant state turn non-finite.
 
 The CI-sized variant runs with the inner loop (CI replays it derandomized, tests/conftest.py);
-the exhaustive one is slow (tests/conftest.py's LONG_TESTS).
+the exhaustive one tries 10,000 files, about a minute, and is slow (tests/conftest.py's
+SLOW_TESTS); under CI it replays 200, as the file parsers' deep variants do.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import os
 import re
 import socket
 from collections.abc import Callable, Iterator
@@ -48,6 +50,7 @@ EXTREMES = ("0", "-0", "0.0", "-0.0", "1", "-1", "5e-324", "-5e-324", "1e-300", 
             "1e300", "-1e300", "1.7976931348623157e308", "inf", "+inf", "-inf", "nan", "+nan",
             "-nan", "9" * 400, "-" + "9" * 400, "0x" + "f" * 300, "9" * 5000)
 HOLD_TICKS, DRIVE_TICKS = 100, 50  # hold, then each valve open each way
+EXHAUSTIVE = 200 if os.environ.get("CI") else 10_000
 
 
 def number_spans(text: str) -> list[tuple[int, int]]:
@@ -205,7 +208,7 @@ def test_a_changed_machine_file_loads_and_runs_or_names_its_key(case: tuple[str,
     loads_and_runs(*case)
 
 
-@settings(max_examples=10_000, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=EXHAUSTIVE, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(case=mutated())
 def test_ten_thousand_changed_machine_files_load_and_run_or_name_their_key(
         case: tuple[str, str]) -> None:

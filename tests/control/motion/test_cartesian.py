@@ -225,7 +225,7 @@ def test_a_pose_file_drives_the_same_path_as_the_points(tmp_path: Path) -> None:
     file = tmp_path / "pick.csv"
     rows = "\n".join(",".join(f"{v:.10f}" for v in p) for p in TOOL + OFFSETS)
     file.write_text(f"x,y,z\n{rows}\n", encoding="utf-8")
-    from_file = path_from_poses(read_poses(file), START, UNIMATE)
+    from_file = path_from_poses(read_poses(file, UNIMATE), START, UNIMATE)
     direct = cartesian_path(START, TOOL + OFFSETS, UNIMATE)
     np.testing.assert_allclose(from_file.q, direct.q, atol=1e-6)
 
@@ -252,8 +252,26 @@ def test_a_pose_file_path_error_names_the_file(tmp_path: Path) -> None:
     file.write_text("x,y,z\n" + "\n".join(",".join(map(str, p)) for p in rows) + "\n",
                     encoding="utf-8")
     with pytest.raises(PoseFileError, match=rf"^{file}: path point .* Up/Down"):
-        path_from_poses(read_poses(file), START, UNIMATE)
+        path_from_poses(read_poses(file, UNIMATE), START, UNIMATE)
     with pytest.raises(PoseFileError, match="1 via point"):
         path_from_poses(parse_poses("x,y,z\n1,2,3\n"), START, UNIMATE)
     with pytest.raises(PoseFileError, match="cannot read"):
-        read_poses(tmp_path / "missing.csv")
+        read_poses(tmp_path / "missing.csv", UNIMATE)
+
+
+def test_a_pose_file_past_its_bound_is_refused_before_it_is_parsed(tmp_path: Path) -> None:
+    """Each via point is a sample of the path: at most one per sample of the longest move
+    allowed, and a header."""
+    file = tmp_path / "many.csv"
+    file.write_text("x,y,z\n" + "1,2,3\n" * 600_002)
+    with pytest.raises(PoseFileError, match=r"many\.csv: at least 600,003 lines; a pose file may "
+                                            r"hold at most 600,002 lines and 307\.2 MB \(one "
+                                            r"point per 1 ms sample of the longest move allowed, "
+                                            r"600 s, and a header.*\): use fewer via points"):
+        read_poses(file, UNIMATE)
+
+
+def test_a_pose_file_at_its_bound_is_read(tmp_path: Path) -> None:
+    file = tmp_path / "most.csv"
+    file.write_text("x,y,z\n" + "1,2,3\n" * 600_001)
+    assert len(read_poses(file, UNIMATE).xyz) == 600_001

@@ -9,7 +9,6 @@ import pytest
 from control.motion import moves
 from control.motion.plan import MovePlan, approach_ramp, moving_joints, summaries
 from control.recorder import Run
-from control.runs import run_from_record
 from hw.machine import load_machine
 
 UNIMATE = load_machine("unimate2000b")
@@ -19,9 +18,8 @@ HOME = np.array([1500.0, 0.0, 0.0, 0.0, 0.0, 0.0])
 
 
 def run_of(path: np.ndarray, actual: np.ndarray, machine=UNIMATE, kind: str = "step") -> Run:
-    n = len(path)
-    record = np.column_stack([np.arange(n) * DT, path, actual, np.zeros_like(path)])
-    return run_from_record(machine, kind, "complete", {}, record, DT)
+    t = np.arange(len(path)) * DT
+    return Run.from_machine(machine, kind, "complete", {}, t, path, actual, np.zeros_like(path))
 
 
 def test_a_path_that_starts_here_gets_no_approach() -> None:

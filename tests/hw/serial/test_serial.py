@@ -259,7 +259,7 @@ def test_a_killed_emulator_is_a_lost_link_with_the_last_readings_kept(emulator, 
     assert backend.counters.link_lost == 1
     with pytest.raises(BoardError, match="cannot open"):
         backend.reconnect()
-    assert backend.fault.startswith("link lost: reconnect failed: ")
+    assert backend.fault.startswith("link lost: reconnect failed after ")
 
 
 def test_a_silent_board_is_a_lost_link(emulator, connect) -> None:

@@ -1,0 +1,153 @@
+"""Runs left in the move segments of processes that died are saved at the next start:
+complete and listed, marked recovered, once only, with a killed save's leftovers cleared;
+a run that cannot be saved yet stays whole for the start after."""
+
+from __future__ import annotations
+
+import os
+from multiprocessing import shared_memory
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from control import shm
+from control.layout import MoveLayout
+from control.recorder import list_runs, load_run, save_run, stem_base
+from control.recovery import recover_runs
+from control.runs import encode_meta, run_from_segment, segment_meta
+from hw.machine import load_machine
+
+UNIMATE = load_machine("unimate2000b")
+ROWS = 500
+
+
+def dead_pid() -> int:
+    """A pid no process can have: the kernel's pid_max itself."""
+    return int(Path("/proc/sys/kernel/pid_max").read_text())
+
+
+class LeftSegment:
+    """A move segment as a killed client leaves it: metadata, a record, maybe a status."""
+
+    def __init__(self, data_dir: Path, status: str = "complete", recorded: int = ROWS) -> None:
+        self.meta = segment_meta(UNIMATE, "step", UNIMATE.sample_time_s, data_dir, dead_pid(),
+                                 {"backend": "sim", "coefficients": {}})
+        encoded = encode_meta(self.meta)
+        self.layout = MoveLayout(ROWS, 6, len(encoded))
+        self.name = shm.segment_name(f"mv{os.urandom(3).hex()}", pid=dead_pid())
+        with shm._untracked():
+            self.segment = shared_memory.SharedMemory(self.name, create=True,
+                                                      size=self.layout.size)
+        buf = self.segment.buf
+        self.layout.write_header(buf)
+        self.layout.write_meta(buf, encoded)
+        record = self.layout.record(buf)
+        record[:, 0] = np.arange(ROWS) * 1e-3
+        record[:, 1:] = np.linspace(0.0, 1.0, ROWS)[:, None]
+        buf[MoveLayout.RECORDED_OFFSET:MoveLayout.RECORDED_OFFSET + 8] = \
+            recorded.to_bytes(8, "little")
+        if status:
+            self.layout.write_status(buf, status)
+
+    def run(self):
+        return run_from_segment(self.segment.buf, self.layout, self.meta, "complete")
+
+    def gone(self) -> bool:
+        return self.name not in shm.leftover_segments()
+
+    def close(self) -> None:
+        shm.release(self.segment, unlink=True)
+
+
+@pytest.fixture
+def left(tmp_path: Path):
+    made = []
+
+    def make(**options) -> LeftSegment:
+        made.append(LeftSegment(tmp_path / "runs", **options))
+        return made[-1]
+
+    yield make
+    for segment in made:
+        segment.close()
+
+
+def test_a_finished_move_its_client_never_saved_is_saved_and_marked(left, tmp_path) -> None:
+    segment = left()
+    notices = recover_runs(tmp_path / "fallback")
+    (info,) = list_runs(tmp_path / "runs")
+    run = load_run(info.files.json)
+    assert run.status == "recovered: complete" and run.samples == ROWS
+    assert run.meta["recovered"] is True and run.meta["run_id"] == segment.meta["run_id"]
+    assert segment.gone()
+    assert any(str(info.files.json) in n for n in notices)
+    assert recover_runs(tmp_path / "fallback") == [] and len(list_runs(tmp_path / "runs")) == 1
+
+
+def test_a_move_that_never_ended_says_so(left, tmp_path) -> None:
+    left(status="", recorded=200)
+    recover_runs(tmp_path / "fallback")
+    (info,) = list_runs(tmp_path / "runs")
+    assert info.status == "recovered: interrupted: the client and the controller died"
+    assert info.samples == 200
+
+
+def test_a_save_killed_before_its_json_is_redone_and_its_leftovers_cleared(left,
+                                                                          tmp_path) -> None:
+    segment = left()
+    runs = tmp_path / "runs"
+    runs.mkdir(parents=True)
+    base = stem_base(segment.run())
+    (runs / f"{base}.tsv").write_text("half")
+    (runs / f"{base}.csv").write_text("half")
+    (runs / f".{dead_pid()}-0123.tmp").write_text("half")
+    (runs / f".{os.getpid()}-4567.tmp").write_text("a live saver's")
+    recover_runs(tmp_path / "fallback")
+    (info,) = list_runs(runs)
+    assert load_run(info.files.json).samples == ROWS
+    assert not (runs / f".{dead_pid()}-0123.tmp").exists()
+    assert (runs / f".{os.getpid()}-4567.tmp").exists(), "a live process's temp file went"
+    assert not [p for p in runs.iterdir() if p.suffix in (".tsv", ".csv")
+                and not p.with_suffix(".json").exists()]
+
+
+def test_a_save_killed_after_its_json_is_not_saved_twice(left, tmp_path) -> None:
+    segment = left()
+    save_run(segment.run(), tmp_path / "runs")
+    recover_runs(tmp_path / "fallback")
+    (info,) = list_runs(tmp_path / "runs")
+    assert info.status == "complete" and segment.gone()
+
+
+def test_a_run_its_own_directory_cannot_take_goes_to_the_starting_clients(left,
+                                                                        tmp_path) -> None:
+    left()
+    (tmp_path / "runs").write_text("a file where the runs' directory should be")
+    recover_runs(tmp_path / "fallback")
+    (info,) = list_runs(tmp_path / "fallback")
+    assert info.status == "recovered: complete"
+
+
+def test_a_run_that_can_be_saved_nowhere_now_stays_for_the_next_start(left, tmp_path) -> None:
+    segment = left()
+    (tmp_path / "runs").write_text("a file where the runs' directory should be")
+    (tmp_path / "fallback").write_text("and another where the fallback should be")
+    notices = recover_runs(tmp_path / "fallback")
+    assert any("kept for the next start" in n for n in notices), notices
+    assert not segment.gone()
+    (tmp_path / "runs").unlink()
+    recover_runs(tmp_path / "fallback")
+    assert segment.gone() and len(list_runs(tmp_path / "runs")) == 1
+
+
+def test_a_segment_that_is_not_a_move_is_removed_with_a_notice(tmp_path) -> None:
+    name = shm.segment_name("mvjunk", pid=dead_pid())
+    with shm._untracked():
+        junk = shared_memory.SharedMemory(name, create=True, size=4096)
+    try:
+        notices = recover_runs(tmp_path / "fallback")
+        assert any(n.startswith(f"removed {name}: not a move segment") for n in notices)
+        assert name not in shm.leftover_segments()
+    finally:
+        shm.release(junk, unlink=True)
