@@ -13,12 +13,18 @@ from __future__ import annotations
 import math
 import os
 import tempfile
-import tomllib
 from collections.abc import Mapping
 from pathlib import Path
 
 from control.layout import MAX_TAPS
-from hw.machine import Coefficients, Machine, MachineError, parse_coefficient_tables
+from hw.machine import (
+    Coefficients,
+    Machine,
+    MachineError,
+    parse_coefficient_tables,
+    parse_toml,
+    read_text,
+)
 
 SUFFIX = ".toml"
 
@@ -31,22 +37,20 @@ def parse_coefficients(text: str, machine: Machine, filename: str = "<text>"
                        ) -> dict[str, Coefficients]:
     """Every ``[coefficients.NAME]`` set in ``text`` for ``machine``'s joints, in file order."""
     try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise CoefficientFileError(f"{filename}: not valid TOML: {exc}") from None
-    try:
+        doc = parse_toml(text, filename)
         return dict(parse_coefficient_tables(doc, filename, machine.n_joints))
     except MachineError as exc:
         raise CoefficientFileError(str(exc)) from None
 
 
 def load_coefficients(path: str | Path, machine: Machine) -> dict[str, Coefficients]:
-    """Read a coefficient file; CoefficientFileError names the file and key on any problem."""
+    """Read a coefficient file; CoefficientFileError names the file and key on any problem
+    (missing, not a file, unreadable, too large, not UTF-8, not TOML, nested too deep)."""
     path = Path(path).expanduser()
     try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise CoefficientFileError(f"{path}: cannot read: {exc.strerror or exc}") from None
+        text = read_text(path, "coefficient file")
+    except MachineError as exc:
+        raise CoefficientFileError(str(exc)) from None
     return parse_coefficients(text, machine, str(path))
 
 

@@ -253,7 +253,7 @@ def load_machine(spec: str | Path) -> Machine:
         return parse_machine(ref.read_text(encoding="utf-8"), Path(str(ref)))
     path = Path(spec)
     _check_path(path)
-    return parse_machine(_read_text(path), path)
+    return parse_machine(read_text(path, "machine file"), path)
 
 
 def parse_machine(text: str, path: Path) -> Machine:
@@ -263,7 +263,7 @@ def parse_machine(text: str, path: Path) -> Machine:
     it checked too, so a machine that loads is one the simulator can run.
     """
     _check_path(path)
-    machine = _Reader(path.name).machine(_parse_toml(text, path.name), path)
+    machine = _Reader(path.name).machine(parse_toml(text, path.name), path)
     if machine.plant or any(j.plant for j in machine.joints):
         from hw.sim.backend import check_plant  # hw.sim imports this module: import late
 
@@ -279,23 +279,25 @@ def _check_path(path: Path) -> None:
                            f"character {where} is {str(path)[where]!r}: rename the file")
 
 
-def _read_text(path: Path) -> str:
-    """The text of machine file ``path``; MachineError naming it if it has none to give."""
+def read_text(path: Path, kind: str) -> str:
+    """The text of a ``kind`` (a machine file, a coefficient file) at ``path``; MachineError
+    naming it if it has none to give: missing, not a file, unreadable, too large, not UTF-8."""
     try:
         if path.is_dir():
-            raise MachineError(f"{path}: is a directory: give the machine file inside it")
+            raise MachineError(f"{path}: is a directory: give the {kind} inside it")
         if not path.exists():
-            raise MachineError(f"{path}: no such machine file (built-in machines: "
-                               f"{', '.join(builtin_names())})")
+            builtin = (f" (built-in machines: {', '.join(builtin_names())})"
+                       if kind == "machine file" else "")
+            raise MachineError(f"{path}: no such {kind}{builtin}")
         if not path.is_file():
-            raise MachineError(f"{path}: not a regular file: give a machine TOML file")
+            raise MachineError(f"{path}: not a regular file: give a {kind} (TOML)")
         with path.open("rb") as file:
             data = file.read(MAX_FILE_BYTES + 1)
     except OSError as exc:
         raise MachineError(f"{path}: cannot read it: {exc.strerror or exc}") from None
     if len(data) > MAX_FILE_BYTES:
-        raise MachineError(f"{path}: larger than {MAX_FILE_BYTES >> 10} kB, so not a machine "
-                           f"description (the Unimate's is 8 kB)")
+        raise MachineError(f"{path}: larger than {MAX_FILE_BYTES >> 10} kB, so not a {kind} "
+                           f"(the Unimate's machine file is 8 kB)")
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError as exc:
@@ -304,14 +306,16 @@ def _read_text(path: Path) -> str:
                            f"text: save the file as UTF-8") from None
 
 
-def _parse_toml(text: str, filename: str) -> dict[str, Any]:
+def parse_toml(text: str, filename: str) -> dict[str, Any]:
+    """TOML ``text`` of a file of ours; MachineError naming ``filename`` (and the line) if it
+    is not TOML, nests too deep or holds an integer of thousands of digits."""
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise MachineError(f"{filename}: not valid TOML: {exc}") from None
     except RecursionError:
-        raise MachineError(f"{filename}: arrays or tables nested too deeply to be a machine "
-                           f"description") from None
+        raise MachineError(f"{filename}: arrays or tables nested too deeply to be one of "
+                           f"servodesk's files") from None
     except ValueError as exc:  # an integer literal past int's 4300-digit conversion limit
         match = re.search(r"[0-9_]{4300,}", text)
         if match is None:

@@ -109,8 +109,9 @@ def check_speeds(t: np.ndarray, q: np.ndarray, machine: Machine, where: Where,
     fast step arrives at, and ``fix`` says what to do."""
     if len(q) < 2:
         return
-    speed = np.abs(np.diff(q, axis=0)) / np.diff(t)[:, None]
-    ratio = speed / _limits(machine, "max_speed")
+    with np.errstate(over="ignore"):  # a step past a float's range is infinitely fast: refused
+        speed = np.abs(np.diff(q, axis=0)) / np.diff(t)[:, None]
+        ratio = speed / _limits(machine, "max_speed")
     over = np.flatnonzero((ratio > 1.0 + SAMPLING_TOLERANCE).any(axis=1))
     if len(over):
         k = int(over[0])

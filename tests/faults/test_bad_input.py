@@ -35,7 +35,12 @@ from hypothesis import HealthCheck, assume, example, given, settings
 from hypothesis import strategies as st
 
 from app import cli
-from app.coefficient_files import CoefficientFileError, dump_coefficients, parse_coefficients
+from app.coefficient_files import (
+    CoefficientFileError,
+    dump_coefficients,
+    load_coefficients,
+    parse_coefficients,
+)
 from app.widgets.fields import FieldError, NumberCheck, position_check
 from control import ControlClient
 from control.layout import MAX_TAPS
@@ -463,6 +468,26 @@ def test_a_saved_feed_forward_set_loads_back_equal() -> None:
     tuned = dataclasses.replace(UNIMATE.track, name="tuned", kv=(0.5, 0.2, 0.3, 0.1, 0.1, 0.1))
     assert parse_coefficients(dump_coefficients({"tuned": tuned}, UNIMATE), UNIMATE) == {
         "tuned": tuned}
+
+
+@pytest.mark.parametrize(("content", "says"), [
+    (b"[coefficients.x]\nnote = \"\xff\xfe\"\n", "line 2: byte 0xff is not UTF-8"),
+    (b"x = " + b"[" * 5000 + b"]" * 5000 + b"\n", "nested too deeply"),
+    (b"# " + b"a" * (2 << 20) + b"\n", "larger than"),
+    (None, "is a directory"),
+])
+def test_a_coefficient_file_that_is_no_text_of_ours_is_an_error_naming_it(
+        tmp_path: Path, content: bytes | None, says: str) -> None:
+    """Not UTF-8, nested 5,000 deep, over a megabyte, a directory: CoefficientFileError
+    naming the file (the Tuning tab's Load shows it), never a traceback."""
+    path = tmp_path / "gains.toml"
+    if content is None:
+        path.mkdir()
+    else:
+        path.write_bytes(content)
+    with pytest.raises(CoefficientFileError, match=says) as info:
+        load_coefficients(path, UNIMATE)
+    one_line(str(info.value), str(path))
 
 
 @fuzz(200)
