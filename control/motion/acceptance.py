@@ -247,6 +247,7 @@ def _sample_names(dt: float, approach: int) -> Where:
 def _too_fast(machine: Machine, j: int, change: float, interval: float, where: str,
               fix: str) -> str:
     joint = machine.joints[j]
+    change, interval = float(change), float(interval)  # Python floats: past their range is inf
     speed = abs(change) / interval
     return (f"{joint.name} moves {change:+.4g} {joint.unit} in {interval:.4g} s at {where}: "
             f"{speed:.4g} {joint.unit}/s, {speed / joint.max_speed:.3g} times its max_speed "
@@ -259,8 +260,8 @@ def _too_hard(machine: Machine, j: int, rested: np.ndarray, k: int, dt: float, w
     """Row ``k`` of the path (``rested`` is it with a rest row at each end) changes speed
     beyond joint ``j``'s max_accel."""
     joint: Joint = machine.joints[j]
-    before = (rested[k + 1, j] - rested[k, j]) / dt
-    after = (rested[k + 2, j] - rested[k + 1, j]) / dt
+    a, b, c = (float(rested[i, j]) for i in (k, k + 1, k + 2))  # Python floats: no warnings
+    before, after = (b - a) / dt, (c - b) / dt
     accel = abs(after - before) / dt
     u = joint.unit
     if k == 0:
