@@ -223,9 +223,7 @@ class Controller:
         if modes.mode != Mode.HOLD:
             self.end_move("aborted: position jog")
             self.hold_here()
-        j = command.joint
-        modes.hold_target[j] = self.guards.clamp(j, modes.hold_target[j] + command.delta,
-                                                 self.encoders.homed)
+        modes.jog_by(command.joint, command.delta)
 
     def on_coefficients(self, command: cmd.SetCoefficients) -> None:
         values = self.coefficient_readers[command.which].read()

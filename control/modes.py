@@ -23,6 +23,7 @@ from control.commands import STEP_KINDS, StartMove
 from control.encoder_input import EncoderInput
 from control.events import Fault, Initialised, Notice
 from control.guards import Guards
+from control.jog import PositionJog
 from control.law import DifferenceLaw
 from control.layout import Mode, MoveLayout
 from control.outbox import Outbox
@@ -91,6 +92,7 @@ class ModeMachine:
         n = self.n = self.machine.n_joints
         self.coefficients = {"hold": self.machine.hold, "track": self.machine.track}
         self.law = DifferenceLaw(self.machine, self.machine.hold, self.dt)
+        self.jog = PositionJog(self.machine, self.dt)
         self.position = self.encoders.position  # the same list: read once a tick, shared
         self.desired = [0.0] * n
         self.duty = [0.0] * n
@@ -116,8 +118,16 @@ class ModeMachine:
     def hold_at(self, target: list[float]) -> None:
         homed, clamp = self.encoders.homed, self.guards.clamp
         self.hold_target[:] = [clamp(j, target[j], homed) for j in range(self.n)]
+        self.jog.stop_at(self.hold_target)
+        for j in range(self.n):
+            self.velocity[j] = 0.0
         self.mode = Mode.HOLD
         self.law.set_coefficients(self.coefficients["hold"])
+
+    def jog_by(self, j: int, delta: float) -> None:
+        """Position jog (in hold): joint ``j``'s goal moves by ``delta``, inside its limits;
+        the hold target follows at the joint's jog speed (``control/jog.py``)."""
+        self.jog.move_goal(j, self.guards.clamp(j, self.jog.goal[j] + delta, self.encoders.homed))
 
     def hold_here(self) -> None:
         self.hold_at(self.position)
@@ -153,6 +163,9 @@ class ModeMachine:
         if latched:
             self.zero_duty()
         elif mode == Mode.HOLD:
+            if self.jog.moving:
+                self.jog.advance(self.hold_target)
+                self.velocity[:] = self.jog.velocity
             self.closed_loop(self.hold_target, None)
         elif mode == Mode.FOLLOW_TRACK:
             self.follow_track()

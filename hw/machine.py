@@ -26,6 +26,7 @@ JOINT_KINDS = {"prismatic": "mm", "revolute": "deg"}
 ENCODER_KINDS = ("gray", "quadrature")
 KINEMATICS_MODELS = ("unimate2000b",)  # closed-form models control.motion.robot_model solves
 MIN_FERROR_DIVISOR = 10.0  # min_following_error defaults to following_error / 10
+JOG_SPEED_FRACTION = 0.25  # jog_speed defaults to a quarter of max_speed
 MAX_FILE_BYTES = 1 << 20  # the Unimate's description is 8 kB; a file this large is not one
 MAX_TAPS = 8  # taps per kp, w or filter list that the controller's shared memory holds
 MAX_JOINTS = 16  # joints the I/O board's protocol drives (docs/protocol.md, CONFIG)
@@ -104,6 +105,7 @@ class Joint:
     gain_unit: float = 1.0
     plant: Mapping[str, float] = field(default_factory=lambda: MappingProxyType({}))
     min_following_error: float = 0.0  # MIN_FERROR: the limit at standstill (units)
+    jog_speed: float = 0.0  # how fast a position jog moves the hold target (units/s)
 
     @property
     def symbol(self) -> str:
@@ -533,7 +535,8 @@ class _Reader:
             raise self.fail(key, "must be a table")
         self.only(doc, key, {"key", "name", "kind", "unit", "limits", "min_pwm", "polarity",
                              "max_speed", "max_accel", "tolerance", "following_error",
-                             "min_following_error", "encoder", "down_scale", "gain_unit",
+                             "min_following_error", "jog_speed", "encoder", "down_scale",
+                             "gain_unit",
                              "plant"})
         name = self.string(doc, key, "name")
         kind = self.string(doc, key, "kind", choices=tuple(JOINT_KINDS))
@@ -553,16 +556,19 @@ class _Reader:
         encoder = self.encoder_cal(doc, index, keys, ranges.position)
         tolerance = self.tolerance(doc, key, abs(encoder.gradient), upper - lower, unit)
         ferror = self.number(doc, key, "following_error", None, tolerance, upper - lower)
+        max_speed = self.number(doc, key, "max_speed", None, *ranges.speed)
         return Joint(
             key=keys[index], name=name, kind=kind, unit=unit, lower=lower, upper=upper,
             min_pwm_pos=pos, min_pwm_neg=neg, polarity=int(polarity),
-            max_speed=self.number(doc, key, "max_speed", None, *ranges.speed),
+            max_speed=max_speed,
             max_accel=self.number(doc, key, "max_accel", None, *ranges.accel),
             tolerance=tolerance,
             following_error=ferror,
             min_following_error=self.number(
                 doc, key, "min_following_error", max(ferror / MIN_FERROR_DIVISOR, tolerance),
                 tolerance, ferror),
+            jog_speed=self.number(doc, key, "jog_speed", JOG_SPEED_FRACTION * max_speed, 0.0,
+                                  max_speed, strict_low=True),
             encoder=encoder,
             down_scale=self.number(doc, key, "down_scale", 1.0, *DOWN_SCALE),
             gain_unit=self.number(doc, key, "gain_unit", 1.0, *GAIN_UNIT),
