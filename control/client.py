@@ -59,7 +59,8 @@ from control.layout import (
 )
 from control.motion.acceptance import accept
 from control.motion.moves import StepSummary
-from control.motion.plan import MovePlan, summaries
+from control.motion.plan import MovePlan, moving_joints, summaries
+from control.motion.trajectory import via_path
 from control.recorder import Run, RunFiles, coefficients_record, default_data_dir, save_run
 from control.recovery import recover_runs
 from control.runs import encode_meta, run_from_segment, segment_meta
@@ -530,6 +531,20 @@ class ControlClient:
         gets an approach ramp first (``run``). Raises ValueError, nothing sent, if the rules
         refuse it."""
         return self.run(MovePlan.of_path(np.asarray(desired, dtype=np.float64), kind, meta))
+
+    def go_to(self, q: Sequence[float], speed: float = 0.5, meta: dict | None = None
+              ) -> MoveHandle:
+        """A joint-space move from where the joints are to ``q`` (mm, deg): a quintic
+        trajectory at ``speed`` of each joint's max_speed and max_accel (0 < speed ≤ 1).
+        ValueError (nothing sent) for a target outside the limits or a bad speed."""
+        target = self.machine.check_targets(tuple(float(v) for v in q))
+        here = np.array(self.status().position)
+        path = via_path(np.vstack([here, target]), self.machine, dt=self.dt,
+                        speed_fraction=speed).q
+        return self.run(MovePlan("go_to", "go to", path,
+                                 meta={"target": list(target), "speed_fraction": speed,
+                                       **(meta or {})},
+                                 moving=moving_joints(path)))
 
     def run(self, plan: MovePlan) -> MoveHandle:
         """Run a planned move (``control.motion.plan``): its path, with an approach from where

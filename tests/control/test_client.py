@@ -472,3 +472,15 @@ def test_a_position_jog_of_25_degrees_travels_at_jog_speed_and_trips_nothing(
     assert not status.estop and status.fault == "", status.fault
     assert [e.message for e in lockstep.poll_events() if e.kind == "fault"] == []
 
+
+def test_go_to_plans_a_joint_space_move_at_the_speed_asked(lockstep: ControlClient) -> None:
+    here = np.array(lockstep.status().position)
+    goal = here + np.array([100.0, 20.0, 5.0, -20.0, 15.0, 30.0])
+    result = lockstep.wait(lockstep.go_to(goal, speed=0.5), timeout=60)
+    assert result.complete and result.run.kind == "go_to", result.status
+    assert np.abs(result.run.actual[-1] - goal).max() < 2.0
+    speed = np.abs(np.diff(result.run.desired, axis=0)).max(axis=0) / lockstep.dt
+    assert np.all(speed <= 0.5 * np.array([j.max_speed for j in UNIMATE.joints]) * 1.01)
+    with pytest.raises(ValueError, match="Up/Down target 99° is outside"):
+        lockstep.go_to([*goal[:2], 99.0, *goal[3:]])
+
