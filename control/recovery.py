@@ -10,10 +10,20 @@ with the status the controller wrote when the move ended (or that it never
 ended), clears what a killed save left half done, and unlinks the segment. A run
 already saved (its id in a listed run) is only unlinked; a run that can be saved
 nowhere now (disk full) stays in its segment for the next start.
+
+Two clients may start at once (the TUI and a script): each segment is recovered by the
+one holding an exclusive ``flock`` on its file; the other waits for it (up to ``wait_s``),
+so one never clears the half-placed files of the other's save, and when either returns
+the run is saved.
 """
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
+import os
+import time
+from collections.abc import Iterator
 from pathlib import Path
 
 from control import shm
@@ -30,9 +40,10 @@ from control.runs import decode_meta, run_from_segment
 UNENDED = "interrupted: the client and the controller died"
 
 
-def recover_runs(fallback: Path) -> list[str]:
+def recover_runs(fallback: Path, wait_s: float = 10.0) -> list[str]:
     """Save every run left in an orphaned move segment (in ``fallback`` if its own directory
-    cannot take it); one notice per run or problem."""
+    cannot take it); one notice per run or problem. A segment another process is recovering
+    is waited for up to ``wait_s``."""
     notices = []
     for name in shm.leftover_segments():
         owner = shm.owner_pid(name)
@@ -41,10 +52,41 @@ def recover_runs(fallback: Path) -> list[str]:
         if not shm.ours(name):
             notices.append(f"left {name} alone: it belongs to another user")
             continue
-        notice = _recover(name, fallback)
+        with _claimed(name, wait_s) as claimed:
+            if claimed is None:
+                notice = f"left {name} to the process recovering it (over {wait_s:g} s)"
+            else:
+                notice = _recover(name, fallback) if claimed else ""
         if notice:
             notices.append(notice)
     return notices
+
+
+@contextlib.contextmanager
+def _claimed(name: str, wait_s: float) -> Iterator[bool | None]:
+    """Whether this process may recover segment ``name``: it holds the segment file's
+    exclusive lock and the segment is still there (not saved and unlinked by the last
+    holder); None if another process held the lock for all of ``wait_s``."""
+    path = shm.SHM_DIR / name
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:
+        yield False
+        return
+    try:
+        deadline = time.monotonic() + wait_s
+        while True:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                break
+            except BlockingIOError:  # another start is recovering it: wait for its save
+                if time.monotonic() > deadline:
+                    yield None
+                    return
+                time.sleep(0.02)
+        yield path.exists()
+    finally:
+        os.close(fd)  # and with it the lock
 
 
 def _recover(name: str, fallback: Path) -> str:

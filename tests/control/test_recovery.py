@@ -4,6 +4,7 @@ a run that cannot be saved yet stays whole for the start after."""
 
 from __future__ import annotations
 
+import fcntl
 import os
 from multiprocessing import shared_memory
 from pathlib import Path
@@ -151,3 +152,18 @@ def test_a_segment_that_is_not_a_move_is_removed_with_a_notice(tmp_path) -> None
         assert name not in shm.leftover_segments()
     finally:
         shm.release(junk, unlink=True)
+
+
+def test_a_segment_another_start_recovers_is_waited_for_then_left_to_it(left, tmp_path) -> None:
+    segment = left()
+    fd = os.open(shm.SHM_DIR / segment.name, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)  # as a second client starting at the same time holds it
+        (notice,) = recover_runs(tmp_path / "fallback", wait_s=0.1)
+        assert "to the process recovering it" in notice
+        assert not segment.gone() and list_runs(tmp_path / "runs") == []
+    finally:
+        os.close(fd)
+    (notice,) = recover_runs(tmp_path / "fallback")
+    assert "recovered" in notice and segment.gone()
+    assert len(list_runs(tmp_path / "runs")) == 1
