@@ -93,6 +93,10 @@ class ServodeskApp(App[None]):
         Binding("ctrl+g", "hold", "hold", tooltip="abort any move, hold every joint where it is",
                 priority=True),
         Binding("ctrl+l", "dismiss_fault", "dismiss fault", priority=True),
+        Binding("ctrl+f", "feed_hold", "feed hold/resume", priority=True,
+                tooltip="decelerate the move along its path and hold; again to resume"),
+        Binding("ctrl+down", "feed(-1)", "feed −10 %", priority=True, key_display="^↓"),
+        Binding("ctrl+up", "feed(1)", "feed +10 %", priority=True, key_display="^↑"),
         *[Binding(f"f{i + 1}", f"show_tab('{name}')", f"{cls.TITLE} tab", show=False,
                   priority=True) for i, (name, cls) in enumerate(TABS)],
         Binding("ctrl+q", "quit", "quit", priority=True),
@@ -124,6 +128,7 @@ class ServodeskApp(App[None]):
         self._settled: set[str] = set()
         self._early: list[ClientReady | ClientFailed | ControllerEvent] | None = []
         self.fault_kind = ""
+        self.feed_tenths = 10  # the feed override as the operator set it, in tenths
 
     # -- layout --------------------------------------------------------------------------------
 
@@ -421,6 +426,32 @@ class ServodeskApp(App[None]):
             client.hold()
         except ControllerError as exc:
             self.notify(str(exc), severity="error")
+
+    def action_feed_hold(self) -> None:
+        """Feed hold on the running move, or resume a held one (the header says which)."""
+        client = self.client
+        if client is None:
+            return
+        try:
+            if client.status().paused:
+                client.resume()
+            else:
+                client.pause()
+        except ControllerError as exc:
+            self.notify(str(exc), severity="error")
+
+    def action_feed(self, steps: int) -> None:
+        """Feed override up or down by 10 % (0…100 %), for this move and the next."""
+        client = self.client
+        if client is None:
+            return
+        tenths = min(max(self.feed_tenths + steps, 0), 10)  # keys may come faster than status
+        try:
+            client.feed_override(tenths / 10)
+        except ControllerError as exc:
+            self.notify(str(exc), severity="error")
+            return
+        self.feed_tenths = tenths
 
     def action_dismiss_fault(self) -> None:
         self.fault_kind = ""

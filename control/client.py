@@ -36,12 +36,15 @@ from control import process, shm
 from control.commands import (
     Command,
     EmergencyStop,
+    FeedOverride,
     Hold,
     Initialise,
     Inject,
     JogPosition,
     Manual,
+    Pause,
     Reset,
+    Resume,
     SetCoefficients,
     Shutdown,
     StartMove,
@@ -378,7 +381,7 @@ class ControlClient:
         if isinstance(record, MoveDone):
             handle = self._moves.get(record.move_id)
             if handle is not None:
-                self._finish(handle, record.status, record.saved, record.gaps)
+                self._finish(handle, record.status, record.saved, record.timeline)
         elif isinstance(record, Crash):
             event = Event(Fault("crash", -1, f"controller crashed: {record.message}"))
         self.events.put(event)
@@ -386,13 +389,13 @@ class ControlClient:
             self.on_event(event)
 
     def _finish(self, handle: MoveHandle, status: str, saved: str | None,
-                gaps: tuple[tuple[float, float], ...] = ()) -> None:
-        """Turn a finished move's record into a saved run (its stalls, ``gaps`` of (t s,
-        length s), listed in its metadata) and, once it is saved, unlink its segment: a run
+                timeline: dict[str, tuple[tuple[float, float], ...]] | None = None) -> None:
+        """Turn a finished move's record into a saved run (its stalls and feed changes,
+        ``timeline``, listed in its metadata) and, once it is saved, unlink its segment: a run
         that cannot be saved now stays whole there for the next start to recover."""
         if self._moves.pop(handle.move_id, None) is None:
             return
-        run = run_from_segment(handle.segment.buf, handle.layout, handle.meta, status, gaps)
+        run = run_from_segment(handle.segment.buf, handle.layout, handle.meta, status, timeline)
         files, error = None, ""
         if saved:
             files = RunFiles.from_json(Path(saved))
@@ -472,6 +475,20 @@ class ControlClient:
     def jog_position(self, joint: int | str, delta: float) -> None:
         """Closed-loop jog: move the hold target of one joint by ``delta`` (mm or deg)."""
         self._send(JogPosition.of(self.machine, joint, delta))
+
+    def feed_override(self, value: float) -> None:
+        """The path being followed advances at ``value`` (0…1) of its speed, now and for the
+        moves after (LinuxCNC's feed override; the controller ramps to it within the joints'
+        acceleration). ValueError (nothing sent) outside 0…1 or not finite."""
+        self._send(FeedOverride(value))
+
+    def pause(self) -> None:
+        """Feed hold: the move decelerates along its path to a stop and holds there."""
+        self._send(Pause())
+
+    def resume(self) -> None:
+        """End a feed hold: the move goes on from where it stopped, with no jump."""
+        self._send(Resume())
 
     def set_coefficients(self, which: str, coefficients: Coefficients,
                          models: Sequence[DeadbandModel | None] | None = None, *,

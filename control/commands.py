@@ -112,6 +112,34 @@ class Reset(Command):
 
 
 @dataclass(frozen=True)
+class FeedOverride(Command):
+    """The feed override: the path being followed advances at ``value`` (0…1) of its speed."""
+
+    NAME: ClassVar[str] = "feed override"
+    value: float
+
+    def __post_init__(self) -> None:
+        value = finite("feed override", self.value)
+        if not 0.0 <= value <= 1.0:
+            raise CommandError(f"feed override must be in 0…1 (0…100 %), got {value:g}")
+        object.__setattr__(self, "value", value)
+
+
+@dataclass(frozen=True)
+class Pause(Command):
+    """Feed hold: decelerate along the path to a stop and hold there (``Resume`` goes on)."""
+
+    NAME: ClassVar[str] = "feed hold"
+
+
+@dataclass(frozen=True)
+class Resume(Command):
+    """End a feed hold: the path goes on from where it stopped, with no jump."""
+
+    NAME: ClassVar[str] = "resume"
+
+
+@dataclass(frozen=True)
 class Initialise(Command):
     """Rig: drive the ram to the bottom stop and zero the encoder (section 3.5)."""
 

@@ -62,6 +62,12 @@ class MoveDone(ControllerEvent):
     recorded: int
     saved: str = ""
     gaps: tuple[tuple[float, float], ...] = ()  # (t s, length s): controller stalls in the run
+    feed: tuple[tuple[float, float], ...] = ()  # (t s, override): the feed override as set
+    pauses: tuple[tuple[float, float], ...] = ()  # (t s, length s): feed holds
+
+    @property
+    def timeline(self) -> dict[str, tuple[tuple[float, float], ...]]:
+        return {"gaps": self.gaps, "feed": self.feed, "pauses": self.pauses}
 
     @property
     def message(self) -> str:

@@ -90,6 +90,7 @@ class Controller:
             cmd.Initialise: self.on_initialise, cmd.Manual: self.on_manual,
             cmd.JogPosition: self.on_jog_position, cmd.SetCoefficients: self.on_coefficients,
             cmd.StartMove: self.on_move, cmd.Inject: self.on_inject,
+            cmd.FeedOverride: self.on_feed, cmd.Pause: self.on_feed, cmd.Resume: self.on_feed,
         })
 
     # -- the loop ---------------------------------------------------------------
@@ -183,27 +184,18 @@ class Controller:
             self.outbox.put(Refused(command.NAME,
                                     "E-stop input still pressed: release it, then reset"))
             return
-        if self.backend.fault and not self.reconnect():
-            return
+        if self.backend.fault:
+            try:  # blocks while the board answers: latched, with no link, nothing else to do
+                self.backend.reconnect()
+            except OSError as exc:
+                self.outbox.put(Refused(command.NAME, f"reconnecting failed: {exc}"))
+                return
+            self.outbox.put(Notice("link re-established"))
         self.guards.release()
         self.modes.law.reset()
         self.encoders.resync(self.backend)
         self.hold_here()
         self.outbox.put(EStop(False, "reset by operator"))
-
-    def reconnect(self) -> bool:
-        """Reopen a faulted link on reset, valves closed; it blocks while the board answers
-        (latched, with no link, the loop has nothing else to do)."""
-        try:
-            self.backend.reconnect()
-        except OSError as exc:
-            self.outbox.put(Refused("reset", f"reconnecting failed: {exc}"))
-            return False
-        if self.backend.fault:
-            self.outbox.put(Refused("reset", self.backend.fault))
-            return False
-        self.outbox.put(Notice("link re-established"))
-        return True
 
     def on_manual(self, command: cmd.Manual) -> None:
         if self.refused(command):
@@ -246,6 +238,12 @@ class Controller:
         self.end_move("superseded by a new move")
         self.modes.start_move(ActiveMove.attach(command, self.clock.now_ns()))
         self.rearm()
+
+    def on_feed(self, command: cmd.FeedOverride | cmd.Pause | cmd.Resume) -> None:
+        if isinstance(command, cmd.Pause) and self.modes.move is None:
+            self.outbox.put(Refused(command.NAME, "no move is running"))
+            return
+        self.modes.feed_command(command, self.clock.now_ns())
 
     def on_inject(self, command: cmd.Inject) -> None:
         """Drive a simulator-only input (``press_estop``) from a test; refused on real hardware."""
@@ -361,6 +359,9 @@ class Controller:
             self.outbox.put(Notice("client is back; holding position"))
         elif orphaned:
             self.running = False
+        if self.modes.held_too_long(now):
+            self.abort(Fault("feed_hold", -1, "feed hold: the move was held longer than "
+                             f"{self.machine.supervision.max_pause_s:g} s; ended, holding"))
         overloaded = self.latency.overloaded(now)
         if overloaded:
             self.abort(Fault("overrun", -1, f"overrun: {overloaded:.0%} of the last second's "
@@ -391,7 +392,8 @@ class Controller:
             total = sum(length for _, length in move.gaps)
             status += f", with a {total:.1f} s controller stall"
         move.layout.write_status(move.segment.buf, status)  # for whoever saves the run
-        self.outbox.put(MoveDone(move.move_id, status, move.index, gaps=tuple(move.gaps)))
+        self.modes.feed.end_move((self.clock.now_ns() - move.start_ns) / 1e9)
+        self.outbox.put(MoveDone(move.move_id, status, move.index, **move.timeline()))
         if self.orphaned:
             self.saver.keep(move, status)
         else:

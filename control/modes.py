@@ -16,12 +16,14 @@ open-loop duty is limited to the initialise duty (section 3.5).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 from control import shm
-from control.commands import STEP_KINDS, StartMove
+from control.commands import STEP_KINDS, FeedOverride, Pause, Resume, StartMove
 from control.encoder_input import EncoderInput
 from control.events import Fault, Initialised, Notice
+from control.feed import FeedRate
 from control.guards import Guards
 from control.jog import PositionJog
 from control.law import DifferenceLaw
@@ -45,10 +47,13 @@ class ActiveMove:
     recorded: memoryview  # uint64 progress counter
     tracking: bool
     smooth: bool  # its rows may not jump (commands.STEP_KINDS may)
-    index: int = 0
+    index: int = 0  # rows recorded: the next row of the path to record
+    phase: float = 0.0  # where on the path it is, in rows (feed override: control/feed.py)
     start_ns: int = 0
-    last_row_ns: int = 0
+    last_tick_ns: int = 0
     gaps: list[tuple[float, float]] = field(default_factory=list)  # (t s, length s) stalls
+    feed: list[tuple[float, float]] = field(default_factory=list)  # (t s, override) as set
+    pauses: list[tuple[float, float]] = field(default_factory=list)  # (t s, length s) holds
 
     @classmethod
     def attach(cls, command: StartMove, now: int) -> ActiveMove:
@@ -58,7 +63,11 @@ class ActiveMove:
         return cls(move_id=command.move_id, kind=command.kind,
                    segment=seg, layout=MoveLayout.read_header(seg.buf), cells=seg.buf.cast("d"),
                    recorded=recorded, tracking=command.tracking,
-                   smooth=command.kind not in STEP_KINDS, start_ns=now, last_row_ns=now)
+                   smooth=command.kind not in STEP_KINDS, start_ns=now, last_tick_ns=now)
+
+    def timeline(self) -> dict[str, tuple[tuple[float, float], ...]]:
+        """Its stalls and feed changes, as the run lists them."""
+        return {"gaps": tuple(self.gaps), "feed": tuple(self.feed), "pauses": tuple(self.pauses)}
 
 
 @dataclass(frozen=True)
@@ -93,6 +102,8 @@ class ModeMachine:
         self.coefficients = {"hold": self.machine.hold, "track": self.machine.track}
         self.law = DifferenceLaw(self.machine, self.machine.hold, self.dt)
         self.jog = PositionJog(self.machine, self.dt)
+        self.feed = FeedRate(self.machine, self.dt)
+        self.path_velocity = [0.0] * self.machine.n_joints
         self.position = self.encoders.position  # the same list: read once a tick, shared
         self.desired = [0.0] * n
         self.duty = [0.0] * n
@@ -110,6 +121,7 @@ class ModeMachine:
         self.first_row_step = [v + 2 * j.tolerance for v, j in zip(self.row_step, joints,
                                                                    strict=True)]
         self.stall_ns = round(self.machine.supervision.stall_s * 1e9)
+        self.max_pause_s = self.machine.supervision.max_pause_s
         self.fault = ""  # a row that cannot be trusted: the controller aborts into hold
         self.fault_joint = -1
 
@@ -132,6 +144,23 @@ class ModeMachine:
     def hold_here(self) -> None:
         self.hold_at(self.position)
 
+    def feed_command(self, command: FeedOverride | Pause | Resume, now: int) -> None:
+        """The operator's feed override, feed hold or resume (``control/feed.py``)."""
+        t = (now - self.move.start_ns) / 1e9 if self.move is not None else 0.0
+        match command:
+            case FeedOverride(value=value):
+                self.feed.set_override(value, t)
+            case Pause():
+                self.feed.pause(t)
+            case Resume():
+                self.feed.resume(t)
+
+    def held_too_long(self, now: int) -> bool:
+        """A feed hold on the move for longer than ``max_pause_s``."""
+        move, feed = self.move, self.feed
+        return (move is not None and feed.paused
+                and (now - move.start_ns) / 1e9 - feed.paused_at > self.max_pause_s)
+
     def start_manual(self) -> None:
         self.mode = Mode.MANUAL_ACTUATE
 
@@ -143,6 +172,7 @@ class ModeMachine:
 
     def start_move(self, move: ActiveMove) -> None:
         self.move = move
+        self.feed.start_move(move.feed, move.pauses)
         self.mode = Mode.TRACKING_ACTUATE if move.tracking else Mode.FOLLOW_TRACK
         self.law.set_coefficients(self.coefficients["track"])
 
@@ -190,8 +220,11 @@ class ModeMachine:
 
     def follow_track(self) -> None:
         move = self.move
+        if not (self.feed.steady and move.phase == move.index):
+            self.follow_scaled(move)
+            return
         n, k, last, cells = self.n, move.index, move.layout.samples - 1, move.cells
-        row = move.layout.desired_offset // 8 + k * n
+        row = move.layout.desired_offset // 8 + k * n  # a row a tick, as the thesis's
         if not self.row_trusted(move, cells, row):
             return
         before = row - n if k > 0 else row  # central difference, one-sided at the ends
@@ -204,12 +237,37 @@ class ModeMachine:
         self.transmission.actuators_from_joints(velocity, self.actuator_velocity)
         self.closed_loop(desired, self.actuator_velocity)
 
-    def row_trusted(self, move: ActiveMove, cells: memoryview, row: int) -> bool:
-        """Whether this tick's desired row is finite, in the limits and (smooth kinds) no
-        jump from the last; if not, ``fault`` says why and nothing moves."""
+    def follow_scaled(self, move: ActiveMove) -> None:
+        """The path at the feed's rate: the desired position interpolated at the move's
+        phase, the desired velocity the path's times the rate (control/feed.py)."""
+        n, last, cells = self.n, move.layout.samples - 1, move.cells
+        k = min(int(move.phase), last)
+        frac = move.phase - k if k < last else 0.0
+        row = move.layout.desired_offset // 8 + k * n
+        ahead = row + n if k < last else row
+        if not (self.row_trusted(move, cells, row)
+                and self.row_trusted(move, cells, ahead, cells[row:row + n])):
+            return
+        path_velocity, desired, velocity = self.path_velocity, self.desired, self.velocity
+        for j in range(n):
+            a, b = cells[row + j], cells[ahead + j]
+            path_velocity[j] = (b - a) / self.dt
+            desired[j] = a + frac * (b - a)
+        self.feed.advance(path_velocity)
+        rate = self.feed.rate
+        for j in range(n):
+            velocity[j] = rate * path_velocity[j]
+        self.transmission.actuators_from_joints(velocity, self.actuator_velocity)
+        self.closed_loop(desired, self.actuator_velocity)
+
+    def row_trusted(self, move: ActiveMove, cells: memoryview, row: int,
+                    previous: Sequence[float] | None = None) -> bool:
+        """Whether a desired row is finite, in the limits and (smooth kinds) no jump from
+        ``previous`` (the last tick's desired); if not, ``fault`` says why and nothing moves."""
         lower, upper = self.lower, self.upper
-        first = move.index == 0
-        previous = self.position if first else self.desired
+        first = previous is None and move.index == 0
+        if previous is None:
+            previous = self.position if first else self.desired
         allowed = self.first_row_step if first else self.row_step
         for j in range(self.n):
             x = cells[row + j]
@@ -262,22 +320,29 @@ class ModeMachine:
             run.reference_q, run.reference_ns = self.position[0], now
 
     def record(self, now: int) -> bool:
-        """Append this tick to the move's record (after the guards: the duty the valves get);
-        True after its last sample. A gap longer than ``stall_s`` is listed in ``gaps``."""
+        """Append a row to the move's record once the move reaches the next row of its path
+        (every tick at full feed; the duty is what the valves get, after the guards), then
+        advance the phase by the feed's rate; True after its last row. A gap longer than
+        ``stall_s`` between two ticks of the move is a controller stall, listed in ``gaps``."""
         move = self.move
         layout = move.layout
+        rate = 1.0 if move.tracking else self.feed.rate
         t = (now - move.start_ns) / 1e9
-        if now - move.last_row_ns > self.stall_ns and move.index:
-            gap = (now - move.last_row_ns) / 1e9
+        if now - move.last_tick_ns > self.stall_ns and move.index:
+            gap = (now - move.last_tick_ns) / 1e9
             move.gaps.append((round(t - gap, 4), round(gap, 4)))
             self.outbox.put(Notice(f"controller stalled {gap:.3f} s during move "
                                    f"{move.move_id} at t = {t - gap:.2f} s: the run lists the "
                                    "gap"))
-        move.last_row_ns = now
-        layout.row.pack_into(move.segment.buf, layout.record_offset + move.index * layout.row.size,
-                             t, *self.desired, *self.position, *self.duty)
-        move.index += 1
-        move.recorded[0] = move.index
+        move.last_tick_ns = now
+        if move.phase >= move.index:
+            layout.row.pack_into(move.segment.buf,
+                                 layout.record_offset + move.index * layout.row.size,
+                                 t, *self.desired, *self.position, *self.duty)
+            move.index += 1
+            move.recorded[0] = move.index
+        move.phase = min(move.phase + rate, layout.samples - 1.0) if move.index < \
+            layout.samples else move.phase
         return move.index >= layout.samples
 
     def zero_duty(self) -> None:

@@ -17,7 +17,7 @@ from control.modes import ModeMachine
 from control.seqlock import SeqlockWriter
 from hw.backend import Backend
 
-ESTOP_LATCHED, ESTOP_INPUT, HOMED, UI_LOST, LINK_FAULT, REALTIME, MOVING, FAULT = (
+ESTOP_LATCHED, ESTOP_INPUT, HOMED, UI_LOST, LINK_FAULT, REALTIME, MOVING, FAULT, PAUSED = (
     int(f) for f in Flag)  # in Flag's order; plain ints, as enum ORs cost µs
 
 
@@ -38,12 +38,15 @@ class Publisher:
                  | (LINK_FAULT if backend.fault else 0)
                  | (REALTIME if realtime else 0)
                  | (MOVING if move is not None else 0)
-                 | (FAULT if guards.reason else 0))
+                 | (FAULT if guards.reason else 0)
+                 | (PAUSED if move is not None and modes.feed.paused else 0))
+        feed = modes.feed
         self.writer.write(*self.encode(
             tick, now - self.started_ns, time.monotonic_ns(), modes.mode, flags,
             move.move_id if move else 0, move.index if move else 0,
-            move.layout.samples if move else 0, latency, modes.position, modes.desired,
-            modes.duty, valve, encoders.raw, encoders.glitches, backend.counters, guards.reason))
+            move.layout.samples if move else 0, latency, (feed.override, feed.rate),
+            modes.position, modes.desired, modes.duty, valve, encoders.raw, encoders.glitches,
+            backend.counters, guards.reason))
 
     def release(self) -> None:
         self.writer.release()

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import uuid
+from collections.abc import Mapping, Sequence
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -57,15 +58,16 @@ def decode_meta(data: bytes) -> dict[str, Any]:
 
 
 def run_from_segment(buf: memoryview, layout: MoveLayout, meta: dict[str, Any], status: str,
-                     gaps: tuple[tuple[float, float], ...] = ()) -> Run:
-    """The run recorded so far in a move segment (its stalls, ``gaps`` of (t s, length s),
-    listed in its metadata)."""
+                     timeline: Mapping[str, Sequence[tuple[float, float]]] | None = None) -> Run:
+    """The run recorded so far in a move segment; ``timeline`` (the controller's ``gaps``,
+    ``feed`` and ``pauses``: ``ActiveMove.timeline``) goes into its metadata."""
     joints = [(str(name), str(unit)) for name, unit in meta["joints"]]
     n = len(joints)
     record = layout.record(buf)[:layout.recorded(buf)].reshape(-1, 1 + 3 * n).copy()
     extra = {k: v for k, v in meta.items() if k not in STANDARD or k == "run_id"}
-    if gaps:
-        extra["gaps"] = [list(gap) for gap in gaps]
+    for key, entries in (timeline or {}).items():
+        if entries:
+            extra[key] = [list(entry) for entry in entries]
     return Run(
         machine=str(meta["machine"]),
         kind=str(meta["kind"]),

@@ -58,7 +58,7 @@ class RunSaver:
         layout, buf = move.layout, move.segment.buf
         try:
             meta = decode_meta(layout.read_meta(buf))
-            run = run_from_segment(buf, layout, meta, status, tuple(move.gaps))
+            run = run_from_segment(buf, layout, meta, status, move.timeline())
             return str(save_run(run, Path(str(meta["data_dir"]))).json)
         except (OSError, KeyError, TypeError, ValueError):
             return ""

@@ -163,6 +163,7 @@ class Supervision:
     ``glitch_limit``: this many rejected readings in a row are a feedback fault.
     ``overrun_fraction``: more than this fraction of ticks late over a second holds.
     ``stall_s``: a gap this long in a move's record is a stall, listed in the run.
+    ``max_pause_s``: a move held (feed hold) longer than this is ended, and the robot holds.
     """
 
     window_s: float = 0.2
@@ -172,6 +173,7 @@ class Supervision:
     glitch_limit: int = 5
     overrun_fraction: float = 0.2
     stall_s: float = 0.05
+    max_pause_s: float = 600.0
 
 
 @dataclass(frozen=True)
@@ -511,7 +513,7 @@ class _Reader:
         key = "supervisor"
         self.only(table, key, {"window_ms", "closing_fraction", "open_margin_pct",
                                "range_margin_counts", "glitch_limit", "overrun_fraction",
-                               "stall_ms"})
+                               "stall_ms", "max_pause_s"})
         d = Supervision()
         return Supervision(
             window_s=self.number(table, key, "window_ms", d.window_s * 1e3, low=10,
@@ -527,6 +529,8 @@ class _Reader:
                                          low=0, high=1, strict_low=True),
             stall_s=self.number(table, key, "stall_ms", d.stall_s * 1e3, low=2,
                                 high=10_000) / 1e3,
+            max_pause_s=self.number(table, key, "max_pause_s", d.max_pause_s, low=1,
+                                    high=86_400),
         )
 
     def joint(self, doc: Any, index: int, keys: list[str]) -> Joint:

@@ -48,6 +48,7 @@ SLOW_PATHS = (
     "tests/faults/",                   # real controllers and emulators, faults injected
     "tests/app/test_smoke_tmux.py",    # the app in a tmux session
     "tests/control/test_client.py",    # the control subprocess, for real
+    "tests/control/test_feed.py",      # feed override and hold on the control subprocess
     "tests/control/test_process.py",   # the control subprocess's imports
 )
 # Fixtures that start one, with the file that defines them (they are visible in its folder

@@ -168,6 +168,10 @@ class StatusHeader(Horizontal):
         if status.move_total:
             pct = 100.0 * status.move_done / status.move_total
             text.append(f"  move {status.move_id} {pct:3.0f} %", "cyan")
+        if status.paused:
+            text.append("  FEED HOLD", "bold yellow")
+        if status.feed_override != 1.0:
+            text.append(f"  feed {status.feed_override:.0%}", "bold yellow")
         if not status.homed:
             text.append("   NOT INITIALISED", "bold yellow")
         return text

@@ -1,0 +1,142 @@
+"""Feed override and feed hold, in the controller: the path's time is scaled, so a move at
+50 % takes twice as long on the same path, and a hold decelerates along the path and
+resumes with no step."""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from control import ControlClient, Mode, shm
+from control.motion import moves
+from control.recorder import Run, load_run
+from hw.machine import load_machine
+
+UNIMATE = load_machine("unimate2000b")
+DT = UNIMATE.sample_time_s
+ROTATE = 1
+
+
+def wait_until(predicate: Callable[[], bool], what: str, timeout: float = 60.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        assert time.monotonic() < deadline, f"timed out waiting for {what}"
+        time.sleep(0.002)
+
+
+@pytest.fixture
+def lockstep(tmp_path: Path) -> Iterator[ControlClient]:
+    client = ControlClient("unimate2000b", lockstep=True, data_dir=tmp_path,
+                           heartbeat_timeout_s=3.0)
+    yield client
+    client.close()
+    assert [n for n in shm.leftover_segments() if shm.owner_pid(n) == os.getpid()] == []
+
+
+def ramp_on_rotate(client: ControlClient, change: float = 40.0) -> np.ndarray:
+    start = np.array(client.status().position)
+    end = start.copy()
+    end[ROTATE] += change
+    return moves.ramp(start, end, ramp_time=2.0, machine=UNIMATE)
+
+
+def per_tick_change(run: Run) -> np.ndarray:
+    """The desired position's largest change per controller tick between recorded rows."""
+    ticks = np.maximum(np.round(np.diff(run.t) / run.sample_time_s), 1.0)
+    return np.abs(np.diff(run.desired[:, ROTATE])) / ticks
+
+
+def tracking_rms(run: Run) -> float:
+    error = run.desired[:, ROTATE] - run.actual[:, ROTATE]
+    return float(np.sqrt(np.mean(error ** 2)))
+
+
+def test_a_path_at_half_feed_takes_twice_as_long_on_the_same_path(
+        lockstep: ControlClient) -> None:
+    path = ramp_on_rotate(lockstep)
+    full = lockstep.wait(lockstep.move(path, kind="ramp"), timeout=60)
+    back = lockstep.wait(lockstep.go_to(path[0]), timeout=60)
+    assert full.complete and back.complete
+    lockstep.feed_override(0.5)
+    wait_until(lambda: lockstep.status().feed_override == 0.5, "the override")
+    half = lockstep.wait(lockstep.move(path, kind="ramp"), timeout=60)
+    assert half.complete, half.status
+    duration_full, duration_half = full.run.t[-1], half.run.t[-1]
+    assert duration_half == pytest.approx(2 * duration_full, rel=0.01)
+    # it followed the same path, one row every other tick, and no worse
+    np.testing.assert_allclose(half.run.desired, path, atol=1e-9)
+    assert tracking_rms(half.run) <= tracking_rms(full.run) * 1.05
+    assert per_tick_change(half.run).max() <= per_tick_change(full.run).max() / 2 * 1.001
+    assert load_run(half.files.json).meta["feed"] == [[0.0, 0.5]]  # the run on disk says so
+    assert lockstep.status().feed_override == 0.5  # it stays for the moves after
+
+
+def test_pause_decelerates_along_the_path_and_resume_has_no_step(
+        lockstep: ControlClient) -> None:
+    path = ramp_on_rotate(lockstep, change=60.0)
+    handle = lockstep.move(path, kind="ramp")
+    wait_until(lambda: lockstep.status().move_done > len(path) // 2, "the middle of the ramp")
+    lockstep.pause()
+    wait_until(lambda: lockstep.status().feed_rate == 0.0, "the feed hold")
+    status = lockstep.status()
+    assert status.paused and status.moving and status.mode == Mode.FOLLOW_TRACK
+    held_at, held_from = status.move_done, status.time_s
+    # held longer than the supervisor's window: still following, nothing tripped
+    wait_until(lambda: lockstep.status().time_s > held_from + 1.0, "a second of hold")
+    status = lockstep.status()
+    assert status.move_done == held_at and not status.estop and status.moving
+    lockstep.resume()
+    result = lockstep.wait(handle, timeout=60)
+    assert result.complete, result.status
+    moving = per_tick_change(result.run)
+    steady = np.abs(np.diff(path[:, ROTATE])).max()
+    assert moving.max() <= steady * 1.001, "the desired position stepped"
+    (paused_at, length), = result.run.meta["pauses"]
+    assert length >= 1.0 and 0 < paused_at < result.run.t[-1]
+    np.testing.assert_allclose(result.run.desired[-1], path[-1], atol=1e-9)
+
+
+def test_an_estop_during_a_feed_hold_ends_the_move(lockstep: ControlClient) -> None:
+    path = ramp_on_rotate(lockstep)
+    handle = lockstep.move(path, kind="ramp")
+    wait_until(lambda: lockstep.status().move_done > 100, "the ramp under way")
+    lockstep.pause()
+    wait_until(lambda: lockstep.status().paused, "the feed hold")
+    lockstep.estop()
+    result = lockstep.wait(handle, timeout=60)
+    assert not result.complete and "E-stop" in result.status
+    assert lockstep.status().estop and not lockstep.status().paused
+
+
+def test_a_hold_past_max_pause_ends_the_move_holding(tmp_path: Path) -> None:
+    text = (Path(__file__).parents[2] / "hw/machines/unimate2000b.toml").read_text()
+    machine = tmp_path / "short_pause.toml"
+    machine.write_text(text + "\n[supervisor]\nmax_pause_s = 1\n")
+    with ControlClient(machine, lockstep=True, data_dir=tmp_path,
+                       heartbeat_timeout_s=3.0) as client:
+        path = ramp_on_rotate(client)
+        handle = client.move(path, kind="ramp")
+        wait_until(lambda: client.status().move_done > 100, "the ramp under way")
+        client.pause()
+        result = client.wait(handle, timeout=60)
+        assert not result.complete and "held longer than 1 s" in result.status
+        assert client.status().mode == Mode.HOLD and not client.status().estop
+
+
+def test_pause_without_a_move_is_refused(lockstep: ControlClient) -> None:
+    lockstep.pause()
+    event = lockstep.wait_event("refused", timeout=10)
+    assert "no move is running" in event.message
+
+
+@pytest.mark.parametrize("value", [-0.1, 1.5, float("nan")])
+def test_an_override_outside_0_to_1_is_refused_and_nothing_sent(
+        lockstep: ControlClient, value: float) -> None:
+    with pytest.raises(ValueError, match="feed override"):
+        lockstep.feed_override(value)
+    assert lockstep.status().feed_override == 1.0
