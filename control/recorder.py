@@ -4,13 +4,19 @@ A run is three files with one stem, ``YYYYMMDD-HHMMSS-<machine>-<kind>`` (start
 time in UTC; ``-2``, ``-3``… when the stem is taken):
 
 - ``.tsv`` — the thesis's layout (option.c SaveData): sample number, then
-  desired, actual and duty of every joint, tab-separated, no header. The
-  listing's ``%.1f`` is too coarse for the rig's 0.1 mm, so every number is
-  written with the shortest text that reads back to the same float.
+  desired, actual and duty of every joint, tab-separated, no header.
 - ``.csv`` — a time column in seconds and the same columns, under a header
   that names joints and units: ``t [s],Ram desired [mm],Ram actual [mm],Ram duty [%]``.
 - ``.json`` — machine, kind, status, start time, sample time, coefficients,
-  joints, sample count, file names and free-form ``meta``.
+  joints (with each one's encoder resolution), sample count, the decimals the
+  numbers were written with, file names and free-form ``meta`` (a move's result
+  metrics among them, ``control/motion/plan.py``).
+
+Numbers are written at the precision that matters (``decimals``), trailing zeros
+dropped: time to the µs, duty to 0.01 %, a position to a tenth of its joint's
+encoder count (the rig's 0.1 mm to 0.01 mm; the listing's ``%.1f`` was too
+coarse for it), or, for a run that does not know its encoders, with the shortest
+text that reads back to the same float. ``as_written`` is a run as it reads back.
 
 Each file is written to a temporary file in the same directory (named for the
 saving process, ``.<pid>-<random>.tmp``), fsynced, then hard-linked to its name,
@@ -37,7 +43,7 @@ import os
 import re
 import uuid
 from collections.abc import Callable, Mapping
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -48,7 +54,9 @@ import platformdirs
 from hw.machine import Coefficients, Machine
 
 FORMAT = "servodesk-run"
-VERSION = 1
+VERSION = 2  # 2: numbers at their precision (``decimals``), joints' encoder resolution
+TIME_DECIMALS = 6  # µs
+DUTY_DECIMALS = 2  # 0.01 %
 MAX_SUFFIX = 10_000  # stems tried before giving up: far beyond same-second saves
 _NO_HARD_LINKS = {errno.EPERM, errno.EOPNOTSUPP, errno.ENOTSUP, errno.ENOSYS, errno.EINVAL}
 _SUFFIXES = (".json", ".csv", ".tsv")
@@ -70,6 +78,9 @@ class Run:
     ``coefficients`` and ``meta`` are kept as JSON-compatible copies (a
     ``Coefficients`` set, numpy scalars, arrays and paths converted). Equality
     compares every field, arrays by value (NaN equal to NaN).
+    ``joint_resolution`` is each joint's encoder count in its unit (the machine
+    file's ``encoder.gradient``, its size), which sets the decimals positions are
+    saved with; empty when unknown (then every digit is saved).
     """
 
     machine: str
@@ -85,11 +96,13 @@ class Run:
     actual: np.ndarray
     duty: np.ndarray
     meta: Mapping[str, Any] = field(default_factory=dict)
+    joint_resolution: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
         put = object.__setattr__
         put(self, "joint_names", tuple(map(str, self.joint_names)))
         put(self, "joint_units", tuple(map(str, self.joint_units)))
+        put(self, "joint_resolution", tuple(map(float, self.joint_resolution)))
         put(self, "start_time", _utc(self.start_time).isoformat())
         coefficients = self.coefficients
         if isinstance(coefficients, Coefficients):
@@ -108,6 +121,11 @@ class Run:
         n, j = len(self.t), len(self.joint_names)
         if len(self.joint_units) != j:
             raise ValueError(f"{j} joint names but {len(self.joint_units)} units")
+        if self.joint_resolution and (
+                len(self.joint_resolution) != j
+                or not all(math.isfinite(r) and r > 0 for r in self.joint_resolution)):
+            raise ValueError(f"joint_resolution must be {j} positive numbers (each joint's "
+                             f"encoder count), got {self.joint_resolution}")
         if self.t.ndim != 1:
             raise ValueError(f"t must be (N,) seconds, got shape {self.t.shape}")
         for name in ("desired", "actual", "duty"):
@@ -125,11 +143,20 @@ class Run:
         start = datetime.now(UTC) if start_time is None else start_time
         return cls(machine.name, kind, status, _utc(start).isoformat(), machine.sample_time_s,
                    coefficients, tuple(j.name for j in machine.joints),
-                   tuple(j.unit for j in machine.joints), t, desired, actual, duty, meta or {})
+                   tuple(j.unit for j in machine.joints), t, desired, actual, duty, meta or {},
+                   resolution(machine))
 
     @property
     def samples(self) -> int:
         return len(self.t)
+
+    def decimals(self) -> tuple[int | None, ...]:
+        """Decimals each joint's positions are saved with: a tenth of its encoder count
+        (None: every digit, for a run that does not know its encoders)."""
+        if not self.joint_resolution:
+            return (None,) * len(self.joint_names)
+        return tuple(max(0, math.ceil(-math.log10(r / 10) - 1e-9))
+                     for r in self.joint_resolution)
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, Run):
@@ -183,6 +210,12 @@ class RunInfo:
 def default_data_dir() -> Path:
     """The user's run directory: ``<user data dir>/servodesk/runs``."""
     return Path(platformdirs.user_data_dir("servodesk", appauthor=False)) / "runs"
+
+
+def resolution(machine: Machine) -> tuple[float, ...]:
+    """Each joint's encoder count in its unit (mm, deg): the size of its calibration
+    gradient, rtshare.h's metric_gradient."""
+    return tuple(abs(j.encoder.gradient) for j in machine.joints)
 
 
 def coefficients_record(c: Coefficients) -> dict[str, Any]:
@@ -279,17 +312,32 @@ def load_run(path: Path) -> Run:
         joints = doc["joints"]
         names = tuple(j["name"] for j in joints)
         table = _read_table(files.csv, 1 + 3 * len(names), int(doc["samples"]))
-        by_joint = table[:, 1:].reshape(len(table), len(names), 3)
-        return Run(
-            machine=doc["machine"], kind=doc["kind"], status=doc["status"],
-            start_time=doc["start_time"], sample_time_s=float(doc["sample_time_s"]),
-            coefficients=doc["coefficients"], joint_names=names,
-            joint_units=tuple(j["unit"] for j in joints), t=table[:, 0],
-            desired=by_joint[:, :, 0], actual=by_joint[:, :, 1], duty=by_joint[:, :, 2],
-            meta=doc.get("meta", {}),
-        )
+        resolutions = tuple(j["resolution"] for j in joints if "resolution" in j)  # version 2
+        return _run_of(doc, table, resolutions)
     except (KeyError, TypeError, ValueError) as exc:
         raise RecorderError(f"{files.json}: damaged run ({type(exc).__name__}: {exc})") from exc
+
+
+def as_written(run: Run) -> Run:
+    """``run`` as ``load_run`` reads it back: its numbers at the precision they are saved
+    with (what a saved run is compared with)."""
+    table = _parse_table(_csv(run).splitlines()[1:], 1 + 3 * len(run.joint_names))
+    by_joint = table[:, 1:].reshape(len(table), len(run.joint_names), 3)
+    return replace(run, t=table[:, 0], desired=by_joint[:, :, 0], actual=by_joint[:, :, 1],
+                   duty=by_joint[:, :, 2])
+
+
+def _run_of(doc: Mapping[str, Any], table: np.ndarray, resolutions: tuple[float, ...]) -> Run:
+    joints = doc["joints"]
+    by_joint = table[:, 1:].reshape(len(table), len(joints), 3)
+    return Run(
+        machine=doc["machine"], kind=doc["kind"], status=doc["status"],
+        start_time=doc["start_time"], sample_time_s=float(doc["sample_time_s"]),
+        coefficients=doc["coefficients"], joint_names=tuple(j["name"] for j in joints),
+        joint_units=tuple(j["unit"] for j in joints), t=table[:, 0],
+        desired=by_joint[:, :, 0], actual=by_joint[:, :, 1], duty=by_joint[:, :, 2],
+        meta=doc.get("meta", {}), joint_resolution=resolutions,
+    )
 
 
 def list_runs(data_dir: Path) -> list[RunInfo]:
@@ -351,18 +399,23 @@ def _read_table(path: Path, columns: int, rows: int) -> np.ndarray:
         lines = path.read_text(encoding="utf-8").splitlines()[1:]
     except OSError as exc:
         raise RecorderError(f"{path}: cannot read ({exc.strerror or exc})") from exc
-    table = (np.loadtxt(lines, delimiter=",", ndmin=2, dtype=np.float64) if lines
-             else np.empty((0, columns)))
+    table = _parse_table(lines, columns)
     if table.shape != (rows, columns):
         raise ValueError(f"{path.name} holds {table.shape[0]}×{table.shape[1]} numbers, "
                          f"the metadata says {rows}×{columns}")
     return table
 
 
+def _parse_table(lines: list[str], columns: int) -> np.ndarray:
+    return (np.loadtxt(lines, delimiter=",", ndmin=2, dtype=np.float64) if lines
+            else np.empty((0, columns)))
+
+
 def _tsv(run: Run) -> str:
     """option.c SaveData: ``k``, then desired, actual, duty per joint, tab-separated."""
-    return "".join(f"{k}\t" + "\t".join(map(repr, row)) + "\n"
-                   for k, row in enumerate(_interleaved(run).tolist()))
+    columns = _interleaved(run)
+    rows = np.concatenate([np.arange(run.samples, dtype=np.float64)[:, None], columns], axis=1)
+    return _table(rows, "\t", ("d", *_formats(run)))
 
 
 def _csv(run: Run) -> str:
@@ -372,9 +425,35 @@ def _csv(run: Run) -> str:
         header += [f"{name} desired [{unit}]", f"{name} actual [{unit}]", f"{name} duty [%]"]
     out = io.StringIO()
     csv.writer(out, lineterminator="\n").writerow(header)
-    for t, row in zip(run.t.tolist(), _interleaved(run).tolist(), strict=True):
-        out.write(repr(t) + "," + ",".join(map(repr, row)) + "\n")
-    return out.getvalue()
+    rows = np.concatenate([run.t[:, None], _interleaved(run)], axis=1)
+    return out.getvalue() + _table(rows, ",", (f".{TIME_DECIMALS}f", *_formats(run)))
+
+
+def _formats(run: Run) -> list[str]:
+    """The %-format of each joint column, in ``_interleaved``'s order: desired and actual at
+    the joint's decimals (``r``: every digit), duty to ``DUTY_DECIMALS``."""
+    out = []
+    for d in run.decimals():
+        position = "r" if d is None else f".{d}f"
+        out += [position, position, f".{DUTY_DECIMALS}f"]
+    return out
+
+
+# trailing zeros of a fraction, and a fraction of zeros with its point: 1.500 → 1.5, 2.000 → 2
+_TRAILING = re.compile(r"(\.\d*?)0+(?=[,\t\n])")
+_BARE_POINT = re.compile(r"\.(?=[,\t\n])")
+_NEGATIVE_ZERO = re.compile(r"(?<=[,\t])-0(?=[,\t\n])")
+
+
+def _table(rows: np.ndarray, sep: str, formats: tuple[str, ...] | list[str]) -> str:
+    """``rows (N, C)`` as text lines, column ``c`` in ``formats[c]`` (a %-format, or ``r``
+    for the shortest text that reads back to the same float), trailing zeros dropped."""
+    if not len(rows):
+        return ""
+    line = sep.join("%r" if f == "r" else f"%{f}" for f in formats) + "\n"
+    text = "".join(line % tuple(row) for row in rows.tolist())
+    text = _BARE_POINT.sub("", _TRAILING.sub(r"\1", text))
+    return _NEGATIVE_ZERO.sub("0", text)
 
 
 def _json(run: Run, files: RunFiles) -> bytes:
@@ -387,14 +466,23 @@ def _json(run: Run, files: RunFiles) -> bytes:
         "start_time": run.start_time,
         "sample_time_s": run.sample_time_s,
         "samples": run.samples,
-        "joints": [{"name": n, "unit": u}
-                   for n, u in zip(run.joint_names, run.joint_units, strict=True)],
+        "joints": _joints(run),
+        "decimals": {"t": TIME_DECIMALS, "duty": DUTY_DECIMALS,
+                     "position": list(run.decimals())},
         "coefficients": run.coefficients,
         "meta": run.meta,
         "files": {"tsv": files.tsv.name, "csv": files.csv.name, "json": files.json.name},
         "tsv_columns": "sample, then desired, actual, duty of each joint (option.c SaveData)",
     }
     return (json.dumps(doc, indent=2, ensure_ascii=False) + "\n").encode()
+
+
+def _joints(run: Run) -> list[dict[str, Any]]:
+    joints: list[dict[str, Any]] = [
+        {"name": n, "unit": u} for n, u in zip(run.joint_names, run.joint_units, strict=True)]
+    for joint, r in zip(joints, run.joint_resolution, strict=False):
+        joint["resolution"] = r
+    return joints
 
 
 def _interleaved(run: Run) -> np.ndarray:

@@ -26,7 +26,7 @@ from control.identify.sysid import DeadbandModel
 from control.layout import ControlLayout
 from control.motion import moves
 from control.motion.acceptance import check_path
-from control.recorder import load_run
+from control.recorder import as_written, load_run
 from control.seqlock import SeqlockReader
 from hw.machine import load_machine
 
@@ -94,7 +94,8 @@ def test_follow_track_completes_and_the_run_is_saved(lockstep: ControlClient,
     saved = load_run(result.files.json)
     assert saved.kind == "sine" and saved.machine == "unimate2000b"
     assert len(saved.t) == len(path)
-    np.testing.assert_allclose(saved.desired, path, atol=1e-6)
+    assert saved == as_written(result.run)
+    np.testing.assert_allclose(result.run.desired, path, atol=1e-9)
     assert saved.coefficients["track"]["kp"] == [list(k) for k in UNIMATE.track.kp]
     tsv_rows = result.files.tsv.read_text().strip().splitlines()
     assert len(tsv_rows) == len(path) and len(tsv_rows[0].split("\t")) == 1 + 3 * 6

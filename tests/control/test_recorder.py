@@ -1,4 +1,5 @@
-"""Saved runs: round trip, the thesis's TSV columns, never overwritten, clear failures."""
+"""Saved runs: round trip at the written precision, the thesis's TSV columns, never
+overwritten, clear failures."""
 
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ from control.recorder import (
     RecorderError,
     Run,
     RunFiles,
+    as_written,
     default_data_dir,
     list_runs,
     load_run,
@@ -43,38 +45,93 @@ def visible(directory: Path) -> list[str]:
     return sorted(p.name for p in directory.iterdir())
 
 
-def test_round_trip_is_exact(tmp_path: Path) -> None:
+def test_round_trip_is_exact_at_the_written_precision(tmp_path: Path) -> None:
     run = make_run()
     files = save_run(run, tmp_path)
     assert files.stem == "20240301-093015-unimate2000b-step"
     assert visible(tmp_path) == [f"{files.stem}.{ext}" for ext in ("csv", "json", "tsv")]
     back = load_run(files.json)
-    assert back == run
-    assert load_run(files.csv) == run and load_run(tmp_path / files.stem) == run
+    assert back == as_written(run)
+    assert load_run(files.csv) == back and load_run(tmp_path / files.stem) == back
     assert back.meta == {"target": 10.5, "joint": 2}
     assert back.coefficients["kp"][2] == [31.0]  # Unimate track set, Up/Down
+    assert back.joint_resolution == tuple(abs(j.encoder.gradient) for j in UNIMATE.joints)
+    half_unit = 0.5 * 10.0 ** -np.array(back.decimals())  # (J,) a tenth of a count, halved
+    assert back.decimals() == (2, 3, 3, 3, 3, 3)
+    assert np.all(np.abs(back.actual - run.actual) <= half_unit + 1e-9)
+    assert np.all(np.abs(back.desired - run.desired) <= half_unit + 1e-9)
+    assert np.abs(back.duty - run.duty).max() <= 0.005 + 1e-9
+    assert np.abs(back.t - run.t).max() <= 0.5e-6
 
 
-def test_rig_precision_survives(tmp_path: Path) -> None:
+def test_numbers_are_written_at_the_precision_that_matters(tmp_path: Path) -> None:
+    n = 3
+    t = np.array([0.0, 0.0010004, 1.25])
+    desired = np.tile([1508.4405000000002, 0.0056, 6.4968, -0.00488, 2.49876, 100.0], (n, 1))
+    duty = np.tile([0.0, -17.206093, 26.1, -0.001, 100.0, 0.0], (n, 1))
+    run = Run.from_machine(UNIMATE, "step", "complete", UNIMATE.track, t, desired, desired,
+                           duty, start_time="2024-03-01T09:30:15+00:00")
+    files = save_run(run, tmp_path)
+    row = files.csv.read_text().splitlines()[2].split(",")
+    assert row[0] == "0.001"  # to the µs, trailing zeros dropped
+    assert row[1:4] == ["1508.44", "1508.44", "0"]  # In/Out: 0.26 mm counts, to 0.01 mm
+    assert row[4:7] == ["0.006", "0.006", "-17.21"]  # Rotate 0.03° counts to 0.001°; 0.01 %
+    assert row[10:13] == ["-0.005", "-0.005", "0"]  # −0.001 % is written as 0, not −0
+    assert row[16:19] == ["100", "100", "0"]
+    assert files.tsv.read_text().splitlines()[2].split("\t") == ["2", *row[1:]]
+    doc = json.loads(files.json.read_text())
+    assert doc["version"] == 2
+    assert doc["decimals"] == {"t": 6, "duty": 2, "position": [2, 3, 3, 3, 3, 3]}
+    assert doc["joints"][0] == {"name": "In/Out", "unit": "mm", "resolution": 0.2617}
+
+
+def test_a_run_that_does_not_know_its_encoders_keeps_every_digit_of_its_positions(
+        tmp_path: Path) -> None:
+    made = make_run()
+    run = Run(made.machine, made.kind, made.status, made.start_time, made.sample_time_s,
+              made.coefficients, made.joint_names, made.joint_units, made.t, made.desired,
+              made.actual, made.duty, made.meta)
+    back = load_run(save_run(run, tmp_path).json)
+    assert run.decimals() == (None,) * 6 and back == as_written(run)
+    assert back.actual.tolist() == run.actual.tolist()
+    assert back.desired.tolist() == run.desired.tolist()
+
+
+def test_a_version_1_run_still_loads(tmp_path: Path) -> None:
+    files = save_run(make_run(), tmp_path)
+    doc = json.loads(files.json.read_text())
+    doc["version"] = 1
+    del doc["decimals"]
+    for joint in doc["joints"]:
+        del joint["resolution"]
+    files.json.write_text(json.dumps(doc))
+    back = load_run(files.json)
+    assert back.joint_resolution == () and back.samples == 50
+
+
+def test_rig_counts_survive(tmp_path: Path) -> None:
     run = make_run(RIG)
-    fine = run.actual + 0.1 * np.arange(run.samples)[:, None]  # 0.1 mm encoder steps
-    run = Run.from_machine(RIG, "ramp", "complete", RIG.track, run.t, run.desired, fine,
-                           run.duty, start_time=run.start_time)
-    assert load_run(save_run(run, tmp_path).json).actual.tolist() == fine.tolist()
+    counts = np.round(run.actual / 0.1) + np.arange(run.samples)[:, None]  # 0.1 mm counts
+    run = Run.from_machine(RIG, "ramp", "complete", RIG.track, run.t, run.desired,
+                           0.1 * counts, run.duty, start_time=run.start_time)
+    back = load_run(save_run(run, tmp_path).json)
+    assert np.round(back.actual / 0.1).tolist() == counts.tolist()
+    assert np.abs(back.actual - run.actual).max() < 1e-9  # 0.1 mm written to 0.01 mm
 
 
 def test_tsv_has_the_columns_of_option_c_savedata(tmp_path: Path) -> None:
     run = make_run()
     rows = save_run(run, tmp_path).tsv.read_text().splitlines()
+    written = as_written(run)
     assert len(rows) == run.samples
     for k in (0, 17, run.samples - 1):
         cells = rows[k].split("\t")
         assert len(cells) == 1 + 3 * UNIMATE.n_joints  # sample, then (desired, actual, PWM) × 6
         assert cells[0] == str(k)
         values = np.array(cells[1:], dtype=float).reshape(UNIMATE.n_joints, 3)
-        assert values[:, 0].tolist() == run.desired[k].tolist()
-        assert values[:, 1].tolist() == run.actual[k].tolist()
-        assert values[:, 2].tolist() == run.duty[k].tolist()
+        assert values[:, 0].tolist() == written.desired[k].tolist()
+        assert values[:, 1].tolist() == written.actual[k].tolist()
+        assert values[:, 2].tolist() == written.duty[k].tolist()
 
 
 def test_csv_header_names_joints_and_units(tmp_path: Path) -> None:
@@ -91,7 +148,7 @@ def test_json_carries_the_metadata(tmp_path: Path) -> None:
     assert doc["status"] == "estop"
     assert doc["sample_time_s"] == 0.001 and doc["samples"] == 50
     assert doc["start_time"] == "2024-03-01T09:30:15.250000+00:00"
-    assert doc["joints"][2] == {"name": "Up/Down", "unit": "deg"}
+    assert doc["joints"][2] == {"name": "Up/Down", "unit": "deg", "resolution": 0.01432}
     assert doc["coefficients"]["name"] == "track"
     assert doc["files"] == {"tsv": f"{files.stem}.tsv", "csv": f"{files.stem}.csv",
                             "json": f"{files.stem}.json"}
@@ -174,7 +231,7 @@ def test_without_hard_links_it_still_never_overwrites(tmp_path: Path,
     monkeypatch.setattr(recorder.os, "link", no_link)
     first, second = save_run(make_run(), tmp_path), save_run(make_run(), tmp_path)
     assert second.stem == f"{first.stem}-2"
-    assert load_run(first.json) == make_run() == load_run(second.json)
+    assert load_run(first.json) == as_written(make_run()) == load_run(second.json)
     assert len(visible(tmp_path)) == 6
 
 

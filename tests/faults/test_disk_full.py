@@ -22,7 +22,7 @@ import pytest
 
 from control import ControlClient, MoveResult, shm
 from control.motion import moves
-from control.recorder import RecorderError, load_run, save_run
+from control.recorder import RecorderError, as_written, load_run, save_run
 from hw.machine import load_machine
 
 UNIMATE = load_machine("unimate2000b")
@@ -67,7 +67,7 @@ def assert_kept_and_saved_elsewhere(client: ControlClient, result: MoveResult,
     assert result.run.samples == len(path)
     np.testing.assert_allclose(result.run.desired, path, atol=1e-9)
     files = save_run(result.run, elsewhere)
-    assert load_run(files.json) == result.run
+    assert load_run(files.json) == as_written(result.run)
     kept = [n for n in shm.leftover_segments()
             if shm.owner_pid(n) == os.getpid() and shm.is_move_segment(n)]
     assert len(kept) == 1, "the unsaved run's segment was not kept"

@@ -16,7 +16,7 @@ import numpy as np
 
 from control import ControlClient
 from control.motion import moves
-from control.recorder import Run, load_run
+from control.recorder import Run, as_written, load_run
 from hw.machine import load_machine
 from hw.transmission import Transmission
 
@@ -35,7 +35,7 @@ def run_sine(controller: Callable[..., ControlClient], glitch_scale: float
     glitches = client.status().glitches
     client.close()  # one controller per client process at a time: the segment carries our pid
     assert result.complete, result.status
-    assert load_run(result.files.json) == result.run
+    assert load_run(result.files.json) == as_written(result.run)
     return result.run, glitches
 
 

@@ -14,7 +14,7 @@ import numpy as np
 
 from control import Mode
 from control.motion import moves
-from control.recorder import load_run
+from control.recorder import as_written, load_run
 from hw.machine import load_machine
 
 UNIMATE = load_machine("unimate2000b")
@@ -80,8 +80,8 @@ def test_a_following_error_aborts_the_move_and_holds_where_the_joint_is(controll
     fault = client.wait_event("fault", 5.0, lambda e: e.payload["kind"] == "following_error")
     assert fault.payload["joint"] == INOUT
     saved = load_run(result.files.json)
-    assert saved == result.run and 0 < saved.samples < len(path)
-    np.testing.assert_allclose(saved.desired, path[:saved.samples], atol=1e-9)
+    assert saved == as_written(result.run) and 0 < saved.samples < len(path)
+    np.testing.assert_allclose(result.run.desired, path[:saved.samples], atol=1e-9)
     moving = np.flatnonzero(saved.desired[:, INOUT] != start[INOUT])[0]
     trip_ms = measured("jammed_valve_trip_ms", (saved.samples - moving) * client.dt * 1e3, "ms")
     assert trip_ms <= 250
