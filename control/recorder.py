@@ -13,10 +13,15 @@ time in UTC; ``-2``, ``-3``… when the stem is taken):
   metrics among them, ``control/motion/plan.py``).
 
 Numbers are written at the precision that matters (``decimals``), trailing zeros
-dropped: time to the µs, duty to 0.01 %, a position to a tenth of its joint's
-encoder count (the rig's 0.1 mm to 0.01 mm; the listing's ``%.1f`` was too
-coarse for it), or, for a run that does not know its encoders, with the shortest
-text that reads back to the same float. ``as_written`` is a run as it reads back.
+dropped: time to the µs, duty to 0.01 %, an actual position (an encoder reading)
+to a tenth of its joint's encoder count (the rig's 0.1 mm to 0.01 mm; the
+listing's ``%.1f`` was too coarse for it). The desired positions are written in
+full, with the shortest text that reads back to the same float: a saved run's CSV
+plays again as a path file, whose rules judge accelerations from second
+differences at the sample time, where rounding a position to 10⁻⁶ already adds
+hundreds of units/s² (a path at its max_accel would be refused). A run that does
+not know its encoders writes its actual positions in full too. ``as_written`` is a
+run as it reads back.
 
 Each file is written to a temporary file in the same directory (named for the
 saving process, ``.<pid>-<random>.tmp``), fsynced, then hard-linked to its name,
@@ -79,8 +84,8 @@ class Run:
     ``Coefficients`` set, numpy scalars, arrays and paths converted). Equality
     compares every field, arrays by value (NaN equal to NaN).
     ``joint_resolution`` is each joint's encoder count in its unit (the machine
-    file's ``encoder.gradient``, its size), which sets the decimals positions are
-    saved with; empty when unknown (then every digit is saved).
+    file's ``encoder.gradient``, its size), which sets the decimals actual positions
+    are saved with; empty when unknown (then every digit is saved).
     """
 
     machine: str
@@ -151,8 +156,8 @@ class Run:
         return len(self.t)
 
     def decimals(self) -> tuple[int | None, ...]:
-        """Decimals each joint's positions are saved with: a tenth of its encoder count
-        (None: every digit, for a run that does not know its encoders)."""
+        """Decimals each joint's actual positions are saved with: a tenth of its encoder
+        count (None: every digit, for a run that does not know its encoders)."""
         if not self.joint_resolution:
             return (None,) * len(self.joint_names)
         return tuple(max(0, math.ceil(-math.log10(r / 10) - 1e-9))
@@ -430,12 +435,11 @@ def _csv(run: Run) -> str:
 
 
 def _formats(run: Run) -> list[str]:
-    """The %-format of each joint column, in ``_interleaved``'s order: desired and actual at
-    the joint's decimals (``r``: every digit), duty to ``DUTY_DECIMALS``."""
+    """The %-format of each joint column, in ``_interleaved``'s order: desired in full
+    (``r``), actual at the joint's decimals, duty to ``DUTY_DECIMALS``."""
     out = []
     for d in run.decimals():
-        position = "r" if d is None else f".{d}f"
-        out += [position, position, f".{DUTY_DECIMALS}f"]
+        out += ["r", "r" if d is None else f".{d}f", f".{DUTY_DECIMALS}f"]
     return out
 
 
@@ -467,8 +471,8 @@ def _json(run: Run, files: RunFiles) -> bytes:
         "sample_time_s": run.sample_time_s,
         "samples": run.samples,
         "joints": _joints(run),
-        "decimals": {"t": TIME_DECIMALS, "duty": DUTY_DECIMALS,
-                     "position": list(run.decimals())},
+        "decimals": {"t": TIME_DECIMALS, "desired": None, "actual": list(run.decimals()),
+                     "duty": DUTY_DECIMALS},
         "coefficients": run.coefficients,
         "meta": run.meta,
         "files": {"tsv": files.tsv.name, "csv": files.csv.name, "json": files.json.name},

@@ -13,6 +13,8 @@ import numpy as np
 import pytest
 
 from control import recorder
+from control.motion import moves
+from control.motion.path_files import read_path
 from control.recorder import (
     RecorderError,
     Run,
@@ -59,7 +61,7 @@ def test_round_trip_is_exact_at_the_written_precision(tmp_path: Path) -> None:
     half_unit = 0.5 * 10.0 ** -np.array(back.decimals())  # (J,) a tenth of a count, halved
     assert back.decimals() == (2, 3, 3, 3, 3, 3)
     assert np.all(np.abs(back.actual - run.actual) <= half_unit + 1e-9)
-    assert np.all(np.abs(back.desired - run.desired) <= half_unit + 1e-9)
+    assert back.desired.tolist() == run.desired.tolist()  # in full: it plays again as a path
     assert np.abs(back.duty - run.duty).max() <= 0.005 + 1e-9
     assert np.abs(back.t - run.t).max() <= 0.5e-6
 
@@ -74,14 +76,16 @@ def test_numbers_are_written_at_the_precision_that_matters(tmp_path: Path) -> No
     files = save_run(run, tmp_path)
     row = files.csv.read_text().splitlines()[2].split(",")
     assert row[0] == "0.001"  # to the µs, trailing zeros dropped
-    assert row[1:4] == ["1508.44", "1508.44", "0"]  # In/Out: 0.26 mm counts, to 0.01 mm
-    assert row[4:7] == ["0.006", "0.006", "-17.21"]  # Rotate 0.03° counts to 0.001°; 0.01 %
-    assert row[10:13] == ["-0.005", "-0.005", "0"]  # −0.001 % is written as 0, not −0
+    # desired in full, actual to a tenth of a count: In/Out's 0.26 mm to 0.01 mm
+    assert row[1:4] == ["1508.4405000000002", "1508.44", "0"]
+    assert row[4:7] == ["0.0056", "0.006", "-17.21"]  # Rotate's 0.03° to 0.001°; duty 0.01 %
+    assert row[10:13] == ["-0.00488", "-0.005", "0"]  # −0.001 % is written as 0, not −0
     assert row[16:19] == ["100", "100", "0"]
     assert files.tsv.read_text().splitlines()[2].split("\t") == ["2", *row[1:]]
     doc = json.loads(files.json.read_text())
     assert doc["version"] == 2
-    assert doc["decimals"] == {"t": 6, "duty": 2, "position": [2, 3, 3, 3, 3, 3]}
+    assert doc["decimals"] == {"t": 6, "desired": None, "actual": [2, 3, 3, 3, 3, 3],
+                               "duty": 2}
     assert doc["joints"][0] == {"name": "In/Out", "unit": "mm", "resolution": 0.2617}
 
 
@@ -284,3 +288,17 @@ def test_empty_run_round_trips(tmp_path: Path) -> None:
 def test_default_data_dir_is_under_the_user_data_dir() -> None:
     path = default_data_dir()
     assert path.name == "runs" and "servodesk" in path.parts
+
+
+def test_a_saved_runs_csv_plays_again_as_a_path_even_at_max_accel(tmp_path: Path) -> None:
+    """The desired path is saved in full: the path rules judge accelerations at the sample
+    time, where rounding even to 10⁻⁶ would refuse a ramp that keeps max_accel exactly."""
+    here = np.array([1508.4405000000002, 0.0055000000000120, 6.4968, -0.00488, 2.49876, 0.1])
+    end = here + np.array([300.0, 40.0, 15.0, 30.0, 20.0, 10.0])
+    path = moves.ramp(here, end, moves.min_ramp_time(here, end, UNIMATE), machine=UNIMATE)
+    t = np.arange(len(path)) * UNIMATE.sample_time_s
+    noisy = path + np.random.default_rng(3).normal(0.0, 0.05, path.shape)
+    run = Run.from_machine(UNIMATE, "ramp", "complete", UNIMATE.track, t, path, noisy,
+                           np.zeros_like(path))
+    points = read_path(save_run(run, tmp_path).csv, UNIMATE, tuple(here))
+    assert points.q.tolist() == path.tolist()

@@ -147,9 +147,7 @@ def the_interrupted_run(runs: Path, rows_before: int, path: np.ndarray) -> Path:
     run = load_run(info.files.json)
     assert run.status == "interrupted: client silent"
     assert rows_before <= run.samples < len(path)
-    # the controller saved it: positions to a tenth of each joint's encoder count
-    np.testing.assert_allclose(run.desired, path[:run.samples],
-                               atol=0.5 * 10.0 ** -min(run.decimals()))
+    np.testing.assert_allclose(run.desired, path[:run.samples], atol=1e-9)
     return info.files.json
 
 
