@@ -24,7 +24,7 @@ import tempfile
 import threading
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -61,8 +61,7 @@ from control.layout import (
     Status,
 )
 from control.motion.acceptance import accept
-from control.motion.moves import StepSummary
-from control.motion.plan import MovePlan, moving_joints, summaries
+from control.motion.plan import MovePlan, Summary, moving_joints, result_records, summaries
 from control.motion.trajectory import via_path
 from control.recorder import Run, RunFiles, coefficients_record, default_data_dir, save_run
 from control.recovery import recover_runs
@@ -110,7 +109,8 @@ class Event:
 
 @dataclass(frozen=True)
 class MoveResult:
-    """A finished move: its status, its run, where the run was saved, and the plan it ran."""
+    """A finished move: its status, its run, where the run was saved, the plan it ran, and
+    how it went (``results``, computed once when it ended; saved in the run's metadata)."""
 
     move_id: int
     status: str
@@ -119,18 +119,17 @@ class MoveResult:
     save_error: str = ""
     plan: MovePlan | None = None
     machine: Machine | None = None
+    results: tuple[tuple[str, Summary], ...] = ()
 
     @property
     def complete(self) -> bool:
         """Every row was followed (a stall in it is listed in the run and its status)."""
         return self.status == "complete" or self.status.startswith("complete, ")
 
-    def summaries(self) -> list[tuple[str, StepSummary]]:
-        """``(label, summary)`` per joint that moved, the approach left out
-        (``control.motion.plan.summaries``)."""
-        if self.plan is None or self.machine is None:
-            return []
-        return summaries(self.plan, self.run, self.machine)
+    def summaries(self) -> list[tuple[str, Summary]]:
+        """``(label, summary)`` per joint that moved, the approach left out, by the move's
+        kind (``control.motion.plan.summaries``)."""
+        return list(self.results)
 
 
 @dataclass
@@ -396,22 +395,32 @@ class ControlClient:
         if self._moves.pop(handle.move_id, None) is None:
             return
         run = run_from_segment(handle.segment.buf, handle.layout, handle.meta, status, timeline)
+        results, problem = self._results(handle.plan, run)
         files, error = None, ""
-        if saved:
+        if saved:  # by the controller, its client gone: without the metrics
             files = RunFiles.from_json(Path(saved))
         elif run.samples:
+            run = replace(run, meta={**run.meta, **problem, "results": result_records(results)})
             try:
                 files = save_run(run, self.data_dir)
             except OSError as exc:
                 error = (f"run not saved ({exc}); it is kept in memory (save it elsewhere from "
                          "the Runs tab) and in shared memory, where the next start saves it")
         handle.result = MoveResult(handle.move_id, status, run, files, error, handle.plan,
-                                   self.machine)
+                                   self.machine, tuple(results))
         kept = files is None and bool(run.samples)
         if kept:
             self._kept[str(handle.meta["run_id"])] = handle.segment.name
         shm.release(handle.segment, unlink=not kept)
         handle.done.set()
+
+    def _results(self, plan: MovePlan, run: Run) -> tuple[list[tuple[str, Summary]], dict]:
+        """The move's metrics (``control.motion.plan.summaries``), and what went wrong if they
+        could not be computed: a run is saved whatever its metrics do."""
+        try:
+            return summaries(plan, run, self.machine), {}
+        except Exception as exc:  # never lose a run over its summary
+            return [], {"results_error": f"{type(exc).__name__}: {exc}"}
 
     def release_kept(self, run: Run) -> None:
         """``run``, which could not be saved, has been saved elsewhere: let go of the copy

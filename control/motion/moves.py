@@ -1,4 +1,6 @@
-"""Desired paths for the thesis's inputs, and the summary of a finished move.
+"""Desired paths for the thesis's inputs, and the summaries of a finished move by its kind:
+a step response (``summary``), the tracking error of a smooth path
+(``tracking_summary``) and the response to a sine (``sine_summary``).
 
 Every path is ``(N, J)`` joint positions (mm, deg) at the sample time ``dt``
 (s), sample ``k`` at ``t = k·dt``, from ``t = 0`` to ``t = duration``
@@ -28,6 +30,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from numbers import Real
+from typing import ClassVar
 
 import numpy as np
 
@@ -48,6 +51,8 @@ class StepSummary:
     say why, and which samples were ignored.
     """
 
+    METRIC: ClassVar[str] = "step"
+
     joint: str
     unit: str
     initial: float  # desired at t = 0
@@ -61,6 +66,46 @@ class StepSummary:
     max_abs_error: float
     rms_error: float
     tolerance: float
+    notes: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class TrackingSummary:
+    """How one joint followed a smooth path (ramp, path file, via points, Cartesian, end
+    point): its tracking error, desired − actual, in the joint's unit, over the run given
+    (the path and the hold after it). ``None`` and NaN where no sample was valid."""
+
+    METRIC: ClassVar[str] = "tracking"
+
+    joint: str
+    unit: str
+    travel: float  # the span of the desired position
+    rms_error: float
+    max_abs_error: float
+    max_error_time_s: float | None  # when |error| was largest, from the start of the run
+    final_error: float  # mean error over the last 10 % of the run
+    notes: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class SineSummary:
+    """How one joint followed a sine: the fundamentals of desired and actual at the sine's
+    frequency, fitted by least squares (``a + b·cos ωt + c·sin ωt``) over the whole periods
+    of the swinging part of the run (the half periods if less than one was recorded).
+    ``phase_lag_deg > 0``: the actual lags the desired. ``None`` when nothing could be
+    fitted (``notes`` say why)."""
+
+    METRIC: ClassVar[str] = "sine"
+
+    joint: str
+    unit: str
+    period_s: float | None
+    amplitude: float  # of the desired fundamental: half the swing
+    amplitude_ratio: float | None  # actual / desired fundamental
+    phase_lag_deg: float | None
+    periods: float  # how many periods the fit spans
+    rms_error: float
+    max_abs_error: float
     notes: tuple[str, ...] = ()
 
 
@@ -211,6 +256,38 @@ def summary(t: np.ndarray, desired: np.ndarray, actual: np.ndarray, joints: Sequ
     is the settle band, by default each joint's ``tolerance``. Samples where
     actual (or desired) is NaN are ignored, with a note.
     """
+    t, desired, actual = _response(t, desired, actual, joints)
+    n_joints = len(joints)
+    bands = ([j.tolerance for j in joints] if tolerance is None
+             else _vector(np.broadcast_to(tolerance, (n_joints,)), "tolerance", n=n_joints))
+    return [_joint_summary(t, desired[:, j], actual[:, j], joint, float(bands[j]))
+            for j, joint in enumerate(joints)]
+
+
+def tracking_summary(t: np.ndarray, desired: np.ndarray, actual: np.ndarray,
+                     joints: Sequence[Joint]) -> list[TrackingSummary]:
+    """Per joint: the tracking error's RMS and maximum (and when), and its mean at the end.
+
+    ``t (N,)`` s, ``desired`` and ``actual`` ``(N, J)``; samples where either is NaN are
+    ignored, with a note."""
+    t, desired, actual = _response(t, desired, actual, joints)
+    return [_tracking(t, desired[:, j], actual[:, j], joint) for j, joint in enumerate(joints)]
+
+
+def sine_summary(t: np.ndarray, desired: np.ndarray, actual: np.ndarray,
+                 joints: Sequence[Joint], period: float | None = None) -> list[SineSummary]:
+    """Per joint: amplitude ratio and phase lag of the actual's fundamental to the desired's.
+
+    ``period`` (s) is the sine's; without it, it is estimated from the desired's crossings
+    of its mid-range (every half period)."""
+    t, desired, actual = _response(t, desired, actual, joints)
+    return [_sine(t, desired[:, j], actual[:, j], joint, period)
+            for j, joint in enumerate(joints)]
+
+
+def _response(t: np.ndarray, desired: np.ndarray, actual: np.ndarray, joints: Sequence[Joint]
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The arrays of a response as float64, their shapes checked."""
     t = np.asarray(t, dtype=np.float64)
     desired = np.asarray(desired, dtype=np.float64)
     actual = np.asarray(actual, dtype=np.float64)
@@ -218,10 +295,87 @@ def summary(t: np.ndarray, desired: np.ndarray, actual: np.ndarray, joints: Sequ
     if t.ndim != 1 or desired.shape != (len(t), n_joints) or actual.shape != desired.shape:
         raise ValueError(f"expected t (N,), desired and actual (N, {n_joints}); got "
                          f"{t.shape}, {desired.shape}, {actual.shape}")
-    bands = ([j.tolerance for j in joints] if tolerance is None
-             else _vector(np.broadcast_to(tolerance, (n_joints,)), "tolerance", n=n_joints))
-    return [_joint_summary(t, desired[:, j], actual[:, j], joint, float(bands[j]))
-            for j, joint in enumerate(joints)]
+    return t, desired, actual
+
+
+def _valid(t: np.ndarray, d: np.ndarray, y: np.ndarray, notes: list[str]) -> np.ndarray:
+    valid = np.isfinite(d) & np.isfinite(y)
+    if valid.any() and not valid.all():
+        notes.append(f"{int((~valid).sum())} of {len(t)} samples with NaN ignored")
+    return valid
+
+
+def _tracking(t: np.ndarray, d: np.ndarray, y: np.ndarray, joint: Joint) -> TrackingSummary:
+    notes: list[str] = []
+    valid = _valid(t, d, y, notes)
+    if not valid.any():
+        nan = math.nan
+        return TrackingSummary(joint.name, joint.unit, nan, nan, nan, None, nan,
+                               ("no valid samples",))
+    e = (d - y)[valid]
+    worst = int(np.argmax(np.abs(e)))
+    tail = e[-max(1, math.ceil(STEADY_FRACTION * len(e))):]
+    return TrackingSummary(
+        joint=joint.name, unit=joint.unit, travel=float(np.ptp(d[valid])),
+        rms_error=float(np.sqrt(np.mean(e**2))), max_abs_error=float(abs(e[worst])),
+        max_error_time_s=float(t[valid][worst] - t[0]), final_error=float(np.mean(tail)),
+        notes=tuple(notes))
+
+
+def _sine(t: np.ndarray, d: np.ndarray, y: np.ndarray, joint: Joint,
+          period: float | None) -> SineSummary:
+    notes: list[str] = []
+    valid = _valid(t, d, y, notes)
+    tt, dd, yy = t[valid], d[valid], y[valid]
+    e = dd - yy
+    errors = ((float(np.sqrt(np.mean(e**2))), float(np.max(np.abs(e)))) if len(e)
+              else (math.nan, math.nan))
+    fit = _fundamentals(tt, dd, yy, period, notes)
+    if fit is None:
+        return SineSummary(joint.name, joint.unit, period, float(np.ptp(dd)) / 2 if len(dd)
+                           else math.nan, None, None, 0.0, *errors, notes=tuple(notes))
+    period, periods, wanted, got = fit
+    lag = math.degrees(float(np.angle(wanted) - np.angle(got)))
+    lag = (lag + 180.0) % 360.0 - 180.0  # in (−180, 180]: the lag, not a whole turn more
+    return SineSummary(joint.name, joint.unit, period, float(abs(wanted)),
+                       float(abs(got) / abs(wanted)) if abs(wanted) > 0 else None, lag,
+                       periods, *errors, notes=tuple(notes))
+
+
+def _fundamentals(t: np.ndarray, d: np.ndarray, y: np.ndarray, period: float | None,
+                  notes: list[str]) -> tuple[float, float, complex, complex] | None:
+    """The period, the periods fitted and the complex amplitudes (``b − ic`` of
+    ``b·cos ωt + c·sin ωt``) of desired and actual over the swinging part of the run."""
+    moving = np.flatnonzero(np.diff(d) != 0)
+    if len(moving) == 0:
+        notes.append("the desired position does not swing: nothing to fit")
+        return None
+    first, last = int(moving[0]), int(moving[-1]) + 1  # the samples the swing spans
+    swing = float(t[last] - t[first])
+    if period is None:
+        period = _period_of(t[first:last + 1], d[first:last + 1])
+    if not period or period <= 0 or swing < period / 2 * (1 - 1e-9):
+        notes.append("less than half a period recorded: not fitted")
+        return None
+    periods = math.floor(swing / period + 1e-9) or 0.5  # whole periods, or the half
+    window = (t >= t[first]) & (t <= t[first] + periods * period + 1e-9)
+    tau = t[window] - t[first]
+    w = 2 * math.pi / period
+    basis = np.column_stack([np.ones_like(tau), np.cos(w * tau), np.sin(w * tau)])
+    (_, bd, cd), (_, by, cy) = np.linalg.lstsq(
+        basis, np.column_stack([d[window], y[window]]), rcond=None)[0].T
+    return period, float(periods), complex(bd, -cd), complex(by, -cy)
+
+
+def _period_of(t: np.ndarray, d: np.ndarray) -> float:
+    """A swing's period from its crossings of the middle of its range (two a period); twice
+    its length when it never crosses back (half a period)."""
+    middle = (float(d.max()) + float(d.min())) / 2
+    side = np.sign(d - middle)
+    crossings = t[1:][(side[1:] != side[:-1]) & (side[1:] != 0)]
+    if len(crossings) < 2:
+        return 2.0 * float(t[-1] - t[0])
+    return 2.0 * float(np.mean(np.diff(crossings)))
 
 
 def _joint_summary(t: np.ndarray, d: np.ndarray, y: np.ndarray, joint: Joint,

@@ -1,5 +1,7 @@
 """A move as planned, before it is sent: its path or duty profile, the approach in front of
-it, and how its result is summarised afterwards.
+it, and how its result is summarised afterwards, by its kind: a step's response, a smooth
+path's tracking error, a sine's amplitude ratio and phase lag (``summaries``), for the
+joints the move moved; the same metrics are saved with the run (``result_records``).
 
 The thesis's ``move()`` first drove the robot to a move's start position; here a
 path that begins away from where the joints are (beyond a joint's tolerance:
@@ -14,10 +16,13 @@ the same move.
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass, field, replace
+import math
+from dataclasses import asdict, dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
+from control.commands import STEP_KINDS
 from control.motion import moves
 from control.motion.acceptance import starts_here
 from control.recorder import Run
@@ -26,6 +31,8 @@ from hw.machine import Machine
 APPROACH_SPEED = 0.5  # approach ramps keep this fraction of each joint's max_speed, max_accel
 APPROACH_MIN_S = 0.2
 APPROACH_SETTLE_S = 0.5
+
+Summary = moves.StepSummary | moves.TrackingSummary | moves.SineSummary
 
 
 @dataclass(frozen=True)
@@ -87,26 +94,62 @@ def moving_joints(path: np.ndarray) -> tuple[int, ...]:
         return tuple(int(j) for j in np.flatnonzero(np.ptp(path, axis=0) > 0))
 
 
-def summaries(plan: MovePlan, run: Run, machine: Machine
-              ) -> list[tuple[str, moves.StepSummary]]:
-    """``(label, summary)`` per joint that moved, the approach left out; a rig sequence
-    (function.c MultiStep, ``steps`` in its meta) gets one row per step."""
+def summaries(plan: MovePlan, run: Run, machine: Machine) -> list[tuple[str, Summary]]:
+    """``(label, summary)`` per joint the move moved, the approach left out, by the plan's
+    kind: a step's response (step, multi-step), a sine's fundamentals (sine, at the period
+    in its meta), else the tracking error of a smooth path. A joint moved when its desired
+    position spans more than its ``tolerance`` (the settle band: a smaller step has no
+    response to judge). A rig sequence (function.c MultiStep, ``steps`` in its meta) gets
+    one row per step."""
     first = min(plan.approach, max(0, run.samples - 1))
     if run.samples - first < 2 or plan.path is None:
         return []
     joints = machine.joints
-    if "steps" not in plan.meta:
-        rows = moves.summary(run.t[first:], run.desired[first:], run.actual[first:], joints)
-        order = [*plan.moving, *(j for j in range(len(joints)) if j not in plan.moving)]
-        return [(rows[j].joint, rows[j]) for j in order
-                if j in plan.moving or rows[j].step != 0]
-    d = run.desired[first:, 0]  # each step of the sequence is a step response of its own
+    t, desired, actual = run.t[first:], run.desired[first:], run.actual[first:]
+    if "steps" in plan.meta:
+        return _sequence(t, desired, actual, machine)
+    if plan.kind in STEP_KINDS:
+        rows: list[Summary] = list(moves.summary(t, desired, actual, joints))
+    elif plan.kind == "sine":
+        rows = list(moves.sine_summary(t, desired, actual, joints, plan.meta.get("period")))
+    else:
+        rows = list(moves.tracking_summary(t, desired, actual, joints))
+    return [(rows[j].joint, rows[j]) for j in moved(plan, desired, machine)]
+
+
+def moved(plan: MovePlan, desired: np.ndarray, machine: Machine) -> list[int]:
+    """The joints whose ``desired (N, J)`` spans more than their tolerance, the plan's
+    ``moving`` first."""
+    span = np.ptp(desired, axis=0)  # NaN (no desired) is not a move
+    order = [*plan.moving, *(j for j in range(machine.n_joints) if j not in plan.moving)]
+    return [j for j in order if span[j] > machine.joints[j].tolerance]
+
+
+def _sequence(t: np.ndarray, desired: np.ndarray, actual: np.ndarray, machine: Machine
+              ) -> list[tuple[str, Summary]]:
+    """Each step of a rig sequence as a step response of its own."""
+    d = desired[:, 0]
     starts = [0, *(np.flatnonzero(np.diff(d) != 0) + 1).tolist(), len(d)]
-    rows = []
+    rows: list[tuple[str, Summary]] = []
+    tolerance = machine.joints[0].tolerance
     for a, b in itertools.pairwise(starts):
-        a0 = max(first, first + a - 1)  # one sample before the change: the step's start
-        s = moves.summary(run.t[a0:first + b], run.desired[a0:first + b],
-                          run.actual[a0:first + b], joints)[0]
-        if s.step != 0:
+        a0 = max(0, a - 1)  # one sample before the change: the step's start
+        s = moves.summary(t[a0:b], desired[a0:b], actual[a0:b], machine.joints)[0]
+        if abs(s.step) > tolerance:
             rows.append((f"{s.joint} step {len(rows) + 1}", s))
     return rows
+
+
+def result_records(rows: list[tuple[str, Summary]]) -> list[dict[str, Any]]:
+    """The summaries as JSON records, for a run's metadata: ``label``, ``metric`` (step,
+    tracking or sine) and every field of the summary; a number that is not finite is null."""
+    return [{"label": label, "metric": s.METRIC,
+             **{k: _finite(v) for k, v in asdict(s).items()}} for label, s in rows]
+
+
+def _finite(value: object) -> object:
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, tuple):
+        return list(value)
+    return value

@@ -118,6 +118,10 @@ def test_a_path_that_starts_away_gets_an_approach_and_the_tuis_summary(
     rows = result.summaries()
     assert [label for label, _ in rows] == ["Up/Down"]  # Rotate moved only in the approach
     assert rows[0][1].step == pytest.approx(5.0)
+    (saved,) = load_run(result.files.json).meta["results"]  # the same metrics, in the JSON
+    assert saved["label"] == "Up/Down" and saved["metric"] == "step"
+    assert saved["step"] == pytest.approx(5.0)
+    assert saved["settling_time_s"] == rows[0][1].settling_time_s
 
 
 def test_a_jump_is_refused_as_a_path_and_runs_as_a_step(lockstep: ControlClient) -> None:

@@ -1,13 +1,23 @@
 """Move plans: the approach in front of a path that starts elsewhere, and the summaries that
-leave it out (what the TUI and a script calling ``ControlClient.run`` both get)."""
+leave it out, by the move's kind, for the joints it moved (what the TUI and a script calling
+``ControlClient.run`` both get, and what the run's JSON holds)."""
 
 from __future__ import annotations
+
+import json
 
 import numpy as np
 import pytest
 
 from control.motion import moves
-from control.motion.plan import MovePlan, approach_ramp, moving_joints, summaries
+from control.motion.moves import SineSummary, StepSummary, TrackingSummary
+from control.motion.plan import (
+    MovePlan,
+    approach_ramp,
+    moving_joints,
+    result_records,
+    summaries,
+)
 from control.recorder import Run
 from hw.machine import load_machine
 
@@ -72,3 +82,73 @@ def test_a_rig_sequence_is_summarised_step_by_step() -> None:
     rows = summaries(plan, run_of(path, path, RIG, "multi_step"), RIG)
     assert [label for label, _ in rows] == ["Ram step 1", "Ram step 2"]
     assert [s.step for _, s in rows] == pytest.approx([400.0, -400.0])
+
+
+def test_a_joint_whose_target_is_within_its_tolerance_did_not_move() -> None:
+    """Multi-step targets typed to two decimals put the other joints a few thousandths away:
+    no overshoot of thousands of per cent for a joint that held (issue 13)."""
+    targets = HOME + np.array([0.004, -0.003, 8.0, 0.002, 0.0, 0.0])
+    path = moves.multi_step(HOME, targets, 3.0, dt=DT, machine=UNIMATE)
+    plan = MovePlan("multi_step", "multi-step", path, moving=moving_joints(path))
+    assert plan.moving == (0, 1, 2, 3)
+    actual = path + 0.2 * np.sin(np.arange(len(path)) * DT * 7)[:, None]  # holding noise
+    rows = summaries(plan, run_of(path, actual, kind="multi_step"), UNIMATE)
+    assert [label for label, _ in rows] == ["Up/Down"]
+    assert isinstance(rows[0][1], StepSummary) and rows[0][1].overshoot_pct < 5
+
+
+def test_a_smooth_path_is_summarised_by_its_tracking_error() -> None:
+    end = HOME + np.array([100.0, 0.0, 0.0, 10.0, 0.0, 0.0])
+    path = moves.ramp(HOME, end, 2.0, dt=DT, machine=UNIMATE)
+    lag = 30  # samples: the actual 30 ms behind
+    actual = np.concatenate([np.repeat(path[:1], lag, axis=0), path[:-lag]])
+    for kind in ("ramp", "path", "via_points", "cartesian", "end_point"):
+        plan = MovePlan(kind, kind, path, moving=moving_joints(path))
+        rows = summaries(plan, run_of(path, actual, kind=kind), UNIMATE)
+        assert [label for label, _ in rows] == ["In/Out", "Bend"]
+        inout = rows[0][1]
+        assert isinstance(inout, TrackingSummary) and inout.travel == pytest.approx(100.0)
+        error = path[:, 0] - actual[:, 0]
+        assert inout.max_abs_error == pytest.approx(np.abs(error).max())
+        assert inout.rms_error == pytest.approx(np.sqrt(np.mean(error**2)))
+        assert inout.final_error == pytest.approx(0.0)  # it catches up in the hold
+        assert inout.max_error_time_s == pytest.approx(np.argmax(np.abs(error)) * DT)
+
+
+def test_a_sine_is_summarised_by_amplitude_ratio_and_phase_lag() -> None:
+    end = HOME.copy()
+    end[1] = 20.0
+    path = moves.sine(HOME, end, 2.0, 5.0, dt=DT, machine=UNIMATE)
+    lag = 50  # samples at 1 ms behind a 2 s period: 9°
+    actual = np.concatenate([np.repeat(path[:1], lag, axis=0), path[:-lag]])
+    actual[:, 1] = 10.0 + 0.8 * (actual[:, 1] - 10.0)
+    run = run_of(path, actual, kind="sine")
+    for meta in ({"period": 2.0}, {}):  # the form's period, or estimated from the desired
+        plan = MovePlan("sine", "sine", path, meta=meta, moving=(1,))
+        ((label, s),) = summaries(plan, run, UNIMATE)
+        assert label == "Rotate" and isinstance(s, SineSummary)
+        assert s.period_s == pytest.approx(2.0, rel=1e-3) and s.periods == 2.0
+        assert s.amplitude == pytest.approx(10.0, rel=1e-3)
+        assert s.amplitude_ratio == pytest.approx(0.8, abs=2e-3)
+        assert s.phase_lag_deg == pytest.approx(9.0, abs=0.1)
+
+
+def test_a_sine_stopped_in_its_first_half_period_is_not_fitted() -> None:
+    end = HOME.copy()
+    end[1] = 20.0
+    path = moves.sine(HOME, end, 2.0, 5.0, dt=DT, machine=UNIMATE)[:700]  # aborted at 0.7 s
+    plan = MovePlan("sine", "sine", path, meta={"period": 2.0}, moving=(1,))
+    ((_, s),) = summaries(plan, run_of(path, path, kind="sine"), UNIMATE)
+    assert s.amplitude_ratio is None and "less than half a period" in s.notes[0]
+
+
+def test_results_are_json_records() -> None:
+    path = moves.step(HOME, 2, 10.0, 2.0, dt=DT, machine=UNIMATE)
+    plan = MovePlan("step", "step", path, moving=(2,))
+    actual = path.copy()
+    actual[:, 2] = np.nan  # nothing recorded: NaN metrics are written as null
+    (record,) = result_records(summaries(plan, run_of(path, actual), UNIMATE))
+    assert record["label"] == "Up/Down" and record["metric"] == "step"
+    assert record["step"] is None and record["overshoot"] is None
+    assert record["notes"] == ["no valid samples"]
+    json.dumps(record, allow_nan=False)
