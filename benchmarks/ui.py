@@ -43,7 +43,7 @@ from textual.screen import Screen
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # ahead of benchmarks/hw.py
 
 from app.plotting.braille import Trace, render
-from app.plotting.run_plot import decimate
+from app.plotting.figure import decimate
 from app.tabs.latency import Lateness
 from app.tabs.scope import ScopeTab
 from app.tui import ServodeskApp

@@ -1,2 +1,3 @@
-"""Drawing for the tabs: the braille raster of the live Scope, and plotext plots of runs and
-previewed paths (the thesis's ``plotsix.m`` and ``plotdata.m``)."""
+"""Drawing for the tabs: the braille raster of the live Scope, and figures of runs and
+previewed paths (the thesis's ``plotsix.m`` and ``plotdata.m``) drawn in the terminal and
+exported as SVG from the same data."""

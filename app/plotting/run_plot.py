@@ -1,52 +1,32 @@
-"""Plotext drawings of runs and paths: the thesis's ``plotsix.m`` and ``plotdata.m`` in a
-terminal, and the preview of a desired path. Every series is decimated to a min/max
-envelope of about two points per column first, which keeps plotext fast (it costs
-120–160 ms a frame for six joints × 2,000 raw points, 45–65 ms decimated).
-
-The functions draw on a ``textual_plotext`` ``Plot`` (a plotext figure), so the
-same drawing appears in a widget and is exported to a file.
+"""Figures of runs and paths: the thesis's ``plotsix.m`` and ``plotdata.m``, and the preview
+of a desired path, as ``Figure`` records (``app.plotting.figure``) that the terminal draws
+(``app.widgets.figure_plot``) and ``export`` writes as an SVG drawn from the same data
+(``app.plotting.svg``).
 """
 
 from __future__ import annotations
 
-import io
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
-from rich.console import Console
-from rich.text import Text
-from textual_plotext.plot import Plot
 
+from app.plotting.figure import (
+    ACTUAL,
+    APPROACH,
+    DESIRED,
+    DUTY,
+    ERROR,
+    VELOCITY,
+    Figure,
+    Line,
+    Panel,
+)
+from app.plotting.svg import figure_svg
 from control.recorder import Run
 
-DESIRED_COLOR = "red"  # plotsix.m: desired 'r-'
-ACTUAL_COLOR = "blue+"  # plotsix.m: actual 'b'
-DUTY_COLOR = "green+"
-ERROR_COLOR = "magenta+"
-VELOCITY_COLOR = "cyan+"
 SMOOTH_S = 0.02  # velocity estimate: moving average over 20 ms before differencing
-
-
-def decimate(t: np.ndarray, y: np.ndarray, points: int) -> tuple[np.ndarray, np.ndarray]:
-    """At most ``points`` samples of ``y(t)`` keeping each bucket's min and max (peaks stay)."""
-    n = len(t)
-    buckets = max(1, points // 2)
-    if n <= points:
-        return t, y
-    size = n // buckets
-    cut = size * buckets
-    tb = t[:cut].reshape(buckets, size)
-    yb = y[:cut].reshape(buckets, size)
-    finite = np.isfinite(yb)
-    lo_i = np.argmin(np.where(finite, yb, np.inf), axis=1)
-    hi_i = np.argmax(np.where(finite, yb, -np.inf), axis=1)
-    first = np.minimum(lo_i, hi_i)
-    second = np.maximum(lo_i, hi_i)
-    rows = np.arange(buckets)
-    tt = np.stack([tb[rows, first], tb[rows, second]], axis=1).ravel()
-    yy = np.stack([yb[rows, first], yb[rows, second]], axis=1).ravel()
-    return tt, yy
+JOINT_COLORS = ("#e8453c", "#3d8bfd", "#2fae5f", "#e0a526", "#c94fd6", "#16b3c9")
 
 
 def velocity(t: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -70,84 +50,66 @@ def steady_velocity(t: np.ndarray, q: np.ndarray) -> float:
     return float((q[-1] - q[mid]) / span) if span > 0 else 0.0
 
 
-def _line(sub: object, t: np.ndarray, y: np.ndarray, points: int, **style: object) -> None:
-    tt, yy = decimate(t, y, points)
-    keep = np.isfinite(yy)
-    if keep.any():
-        sub.plot(tt[keep].tolist(), yy[keep].tolist(), marker="braille", **style)  # type: ignore[attr-defined]
-
-
-def draw_overview(plt: Plot, run: Run, joints: Sequence[int], width: int) -> None:
+def overview(run: Run, joints: Sequence[int], title: str = "") -> Figure:
     """plotsix.m: for each joint, desired and actual position beside its duty."""
-    plt.clear_figure()
-    rows = max(1, len(joints))
-    plt.subplots(rows, 2)
-    points = max(40, width)  # about two points per column of a half-width subplot
-    for r, j in enumerate(joints, start=1):
+    panels = []
+    for j in joints:
         name, unit = run.joint_names[j], run.joint_units[j]
-        left = plt.subplot(r, 1)
-        _line(left, run.t, run.desired[:, j], points, color=DESIRED_COLOR, label="desired")
-        _line(left, run.t, run.actual[:, j], points, color=ACTUAL_COLOR, label="actual")
-        left.title(f"{name} ({unit})")
-        right = plt.subplot(r, 2)
-        _line(right, run.t, run.duty[:, j], points, color=DUTY_COLOR)
-        right.title(f"{name} duty (%)")
-        if r == rows:
-            left.xlabel("time (s)")
-            right.xlabel("time (s)")
+        panels.append(Panel(name, (Line(run.t, run.desired[:, j], DESIRED, "desired"),
+                                   Line(run.t, run.actual[:, j], ACTUAL, "actual")), unit))
+        panels.append(Panel(f"{name} duty", (Line(run.t, run.duty[:, j], DUTY),), "%",
+                            zero_line=True))
+    return Figure(title or f"{run.kind} run: position and duty", tuple(panels), columns=2)
 
 
-def draw_joint(plt: Plot, run: Run, j: int, width: int) -> None:
-    """plotdata.m for one joint: error, desired vs actual, duty, and the estimated velocity."""
-    plt.clear_figure()
-    plt.subplots(2, 2)
-    points = max(40, width)
+def joint_figure(run: Run, j: int, title: str = "") -> Figure:
+    """plotdata.m for one joint: response, error, duty and the estimated velocity."""
     name, unit = run.joint_names[j], run.joint_units[j]
     t, d, q, u = run.t, run.desired[:, j], run.actual[:, j], run.duty[:, j]
-    position = plt.subplot(1, 1)
-    _line(position, t, d, points, color=DESIRED_COLOR, label="desired")
-    _line(position, t, q, points, color=ACTUAL_COLOR, label="actual")
-    position.title(f"{name}: output/response ({unit})")
-    error = plt.subplot(1, 2)
-    _line(error, t, d - q, points, color=ERROR_COLOR)
-    error.hline(0.0, "red")
-    error.title(f"{name}: error, desired − actual ({unit})")
-    duty = plt.subplot(2, 1)
-    _line(duty, t, u, points, color=DUTY_COLOR)
-    duty.title(f"{name}: duty (%)")
-    duty.xlabel("time (s)")
-    speed = plt.subplot(2, 2)
-    _line(speed, t, velocity(t, q), points, color=VELOCITY_COLOR)
-    speed.title(f"{name}: velocity ({unit}/s), second half {steady_velocity(t, q):+.4g}")
-    speed.xlabel("time (s)")
+    panels = (
+        Panel(f"{name} output/response", (Line(t, d, DESIRED, "desired"),
+                                          Line(t, q, ACTUAL, "actual")), unit),
+        Panel(f"{name} error, desired − actual", (Line(t, d - q, ERROR),), unit,
+              zero_line=True),
+        Panel(f"{name} duty", (Line(t, u, DUTY),), "%", zero_line=True),
+        Panel(f"{name} velocity, second half {steady_velocity(t, q):+.4g}",
+              (Line(t, velocity(t, q), VELOCITY),), f"{unit}/s", zero_line=True),
+    )
+    return Figure(title or f"{run.kind} run: {name}", panels, columns=2)
 
 
-def draw_path(plt: Plot, t: np.ndarray, path: np.ndarray, names: Sequence[str],
-              units: Sequence[str], joints: Sequence[int], width: int, title: str) -> None:
-    """The desired path of the joints that move, one subplot each."""
-    plt.clear_figure()
-    shown = list(joints) or [0]
-    plt.subplots(len(shown), 1)
-    for r, j in enumerate(shown, start=1):
-        sub = plt.subplot(r, 1)
-        _line(sub, t, path[:, j], 2 * width, color=DESIRED_COLOR)
-        sub.title(f"{title} · {names[j]} ({units[j]})" if r == 1 else f"{names[j]} ({units[j]})")
-        if r == len(shown):
-            sub.xlabel("time (s)")
+def path_figure(t: np.ndarray, path: np.ndarray, names: Sequence[str], units: Sequence[str],
+                joints: Sequence[int], approach: int, title: str) -> Figure:
+    """The desired path of the joints that move, one panel each; the approach ramp in front
+    (its first ``approach`` samples) in grey."""
+    panels = []
+    for j in list(joints) or [0]:
+        lines = [Line(t[approach:], path[approach:, j], DESIRED, "move" if approach else "")]
+        if approach:
+            lines.insert(0, Line(t[:approach + 1], path[:approach + 1, j], APPROACH,
+                                 "approach"))
+        panels.append(Panel(names[j], tuple(lines), units[j]))
+    return Figure(title, tuple(panels))
 
 
-def export(path: Path, draw: Callable[[Plot, int], None], width: int = 160,
-           height: int = 48) -> list[Path]:
-    """Draw at ``width × height`` and write ``path.txt`` (plain) and ``path.svg`` (colour)."""
-    plt = Plot()
-    draw(plt, width)
-    plt.plotsize(width, height)
-    plt.theme("pro")
-    built = plt.build()
+def path_compact(t: np.ndarray, path: np.ndarray, names: Sequence[str],
+                 joints: Sequence[int], approach: int, title: str) -> Figure:
+    """Every moving joint in one panel, as % of its largest move from where it starts: the
+    shape and timing of a path with more joints than the panels can hold."""
+    lines = []
+    for k, j in enumerate(list(joints) or [0]):
+        change = path[:, j] - path[0, j]
+        largest = float(np.max(np.abs(change)))
+        share = 100.0 * change / largest if largest > 0 else change
+        lines.append(Line(t, share, JOINT_COLORS[k % len(JOINT_COLORS)], names[j]))
+    after = f", the approach the first {t[approach]:.2f} s" if approach else ""
+    panel = Panel(f"% of each joint's largest move{after}", tuple(lines))
+    return Figure(title, (panel,))
+
+
+def export(path: Path, figure: Figure) -> list[Path]:
+    """Write the figure as ``path.svg``, drawn from its data; the files written."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    txt, svg = path.with_suffix(".txt"), path.with_suffix(".svg")
-    txt.write_text(plt.uncolorize(built) + "\n", encoding="utf-8")
-    console = Console(record=True, width=width, file=io.StringIO())
-    console.print(Text.from_ansi(built))
-    svg.write_text(console.export_svg(title=path.stem), encoding="utf-8")
-    return [txt, svg]
+    svg = path.with_suffix(".svg")
+    svg.write_text(figure_svg(figure), encoding="utf-8")
+    return [svg]

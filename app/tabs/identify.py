@@ -27,13 +27,13 @@ from textual.app import ComposeResult
 from textual.containers import Horizontal, Vertical
 from textual.message import Message
 from textual.widgets import Button, DataTable, Label, Select, Static, Switch
-from textual_plotext import PlotextPlot
 
 from app.desk import Desk
 from app.messages import RunsChanged
-from app.plotting.run_plot import ACTUAL_COLOR, DESIRED_COLOR, DUTY_COLOR, decimate
+from app.plotting.figure import ACTUAL, DESIRED, PROPOSED, Figure, Line, Panel
 from app.tabs.tab import TabPage
 from app.widgets.fields import FieldError, JointField, NumberCheck, NumberField, seconds_check
+from app.widgets.figure_plot import FigurePlot
 from app.widgets.live_text import LiveText
 from control.client import ControlClient, MoveHandle
 from control.recorder import Run
@@ -183,7 +183,7 @@ class IdentifyTab(TabPage):
                 yield Static("fit %: own = on the run it was fitted to, new = on a fresh PRBS "
                              "it never saw; v velocity, q position. Kp / Ki, Ms, PM: the "
                              "proposed P.I. set and its margins.", classes="form-help")
-                yield PlotextPlot(id="identify-plot")
+                yield FigurePlot(id="identify-plot")
 
     def on_mount(self) -> None:
         self.query_one("#identify-model", DataTable).add_columns(
@@ -386,22 +386,16 @@ class IdentifyTab(TabPage):
                 f"{design.margins.ms:.2f}, {design.margins.phase_margin_deg:.0f}°")
 
     def _plot(self, outcome: Outcome) -> None:
-        plot = self.query_one("#identify-plot", PlotextPlot)
-        plt = plot.plt
-        plt.clear_figure()
         spec = self.machine.joints[outcome.identification.joint]
         ff = self.query_one("#identify-ff", Switch).value
         proposed = outcome.proposed_ff if ff else outcome.proposed
-        points = 2 * max(20, plot.size.width)
-        for y, color, label in ((outcome.desired, DESIRED_COLOR, "desired"),
-                                (outcome.current, ACTUAL_COLOR, "current track set"),
-                                (proposed, DUTY_COLOR,
-                                 "proposed" + (" + feed-forward" if ff else ""))):
-            tt, yy = decimate(outcome.t, y, points)
-            plt.plot(tt.tolist(), yy.tolist(), marker="braille", color=color, label=label)
-        plt.title(f"predicted step response · {spec.name} ({spec.symbol})")
-        plt.xlabel("time (s)")
-        plot.refresh()
+        lines = (Line(outcome.t, outcome.desired, DESIRED, "desired"),
+                 Line(outcome.t, outcome.current, ACTUAL, "current track set"),
+                 Line(outcome.t, proposed, PROPOSED,
+                      "proposed" + (" + feed-forward" if ff else "")))
+        panel = Panel(f"predicted step response · {spec.name}", lines, spec.symbol)
+        self.query_one("#identify-plot", FigurePlot).show(
+            Figure(f"predicted step response · {spec.name}", (panel,)))
 
     def apply(self, which: str) -> None:
         outcome = self.outcome

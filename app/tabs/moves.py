@@ -38,11 +38,10 @@ from textual.widgets import (
     Static,
 )
 from textual.widgets.option_list import Option
-from textual_plotext import PlotextPlot
 
 from app.desk import Desk
 from app.messages import RunsChanged
-from app.plotting.run_plot import draw_path
+from app.plotting.run_plot import path_figure
 from app.tabs.end_point_form import EndPointForm
 from app.tabs.move_forms import (
     InitialiseForm,
@@ -58,6 +57,7 @@ from app.tabs.move_forms import (
 from app.tabs.path_forms import PathFileForm, ViaPointsForm
 from app.tabs.tab import TabPage
 from app.widgets.fields import FieldError, NumberField
+from app.widgets.figure_plot import FigurePlot
 from app.widgets.live_text import LiveText
 from control.client import ControlClient, MoveHandle, MoveResult
 from control.layout import Status
@@ -129,7 +129,7 @@ class MovesTab(TabPage):
                     yield kind(self.machine, self.model)
             with Vertical(id="moves-right"):
                 yield Static(id="move-preview-title")
-                yield PlotextPlot(id="move-preview")
+                yield FigurePlot(id="move-preview")
                 yield ProgressBar(total=100, show_eta=False, id="move-progress")
                 yield LiveText(id="move-state")
                 yield DataTable(id="move-result", cursor_type="none", zebra_stripes=True)
@@ -221,31 +221,28 @@ class MovesTab(TabPage):
 
     def preview(self) -> None:
         title = self.query_one("#move-preview-title", Static)
-        plot = self.query_one("#move-preview", PlotextPlot)
+        plot = self.query_one("#move-preview", FigurePlot)
         try:
             plan = self.make_plan()
         except (FieldError, ValueError) as exc:
             title.update(Text(str(exc), "yellow"))
-            plot.plt.clear_figure()
-            plot.refresh()
+            plot.show(None)
             return
         dt = self.machine.sample_time_s
         if plan.path is not None:
             t = np.arange(plan.samples) * dt
             names = [j.name for j in self.machine.joints]
             units = [j.symbol for j in self.machine.joints]
-            draw_path(plot.plt, t, plan.path, names, units, plan.moving,
-                      max(20, plot.size.width), plan.title)
+            plot.show(path_figure(t, plan.path, names, units, plan.moving, plan.approach,
+                                  plan.title))
             summary = f"{plan.title}: {plan.samples} samples, {t[-1]:.2f} s"
         elif plan.profile is not None:
             t = np.arange(plan.samples) * dt
-            draw_path(plot.plt, t, plan.profile, ["duty"], ["%"], [0],
-                      max(20, plot.size.width), plan.title)
+            plot.show(path_figure(t, plan.profile, ["duty"], ["%"], [0], 0, plan.title))
             summary = f"{plan.title}: open loop, {plan.samples} samples"
         else:
-            plot.plt.clear_figure()
+            plot.show(None)
             summary = "initialise: drives down to the bottom stop, then zeroes the encoder"
-        plot.refresh()
         note = f" · {plan.note}" if plan.note else ""
         approach = (f" · includes a {plan.approach * dt:.2f} s approach to the start"
                     if plan.approach else "")

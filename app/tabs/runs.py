@@ -1,10 +1,11 @@
 """Runs: every saved move, newest first, and its plots as the thesis drew them in MATLAB.
 
 ``plotsix.m`` (desired and actual position beside the duty, per joint; arm
-joints 1–3 then wrist joints 4–6) and ``plotdata.m`` (one joint's error,
-response, duty and estimated velocity). A plot is exported as text and SVG
-next to the runs. Runs the recorder could not save are kept in memory and
-listed first, so they can be saved elsewhere.
+joints 1–3 then wrist joints 4–6, fewer at a time on a small screen) and
+``plotdata.m`` (one joint's error, response, duty and estimated velocity). A plot
+is exported as an SVG drawn from the run's data, under ``plots/`` next to the
+runs. Runs the recorder could not save are kept in memory and listed first, so
+they can be saved elsewhere.
 """
 
 from __future__ import annotations
@@ -21,11 +22,12 @@ from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
 from textual.message import Message
 from textual.widgets import Button, DataTable, Input, Static
-from textual_plotext import PlotextPlot
 
 from app.desk import Desk
-from app.plotting.run_plot import draw_joint, draw_overview, export, steady_velocity
+from app.plotting.figure import Figure
+from app.plotting.run_plot import export, joint_figure, overview, steady_velocity
 from app.tabs.tab import TabPage
+from app.widgets.figure_plot import FigurePlot, panel_size
 from control.recorder import RecorderError, Run, RunInfo, list_runs, load_run, save_run
 
 
@@ -87,7 +89,7 @@ class RunsTab(TabPage):
                     yield Button("Save unsaved", id="runs-save-button")
             with Vertical(id="runs-right"):
                 yield Static(id="runs-bar")
-                yield PlotextPlot(id="runs-plot")
+                yield FigurePlot(id="runs-plot")
 
     def on_mount(self) -> None:
         self.query_one("#runs-table", DataTable).add_columns("started", "kind", "status",
@@ -174,11 +176,20 @@ class RunsTab(TabPage):
     # -- the plot -------------------------------------------------------------------------
 
     def views(self) -> list[str]:
+        """The plots of the open run: plotsix of as many joints as the plot has room for
+        (the thesis's three), then plotdata of each joint."""
         if self.run is None:
             return []
         n = len(self.run.joint_names)
-        groups = [f"plotsix {a + 1}–{min(n, a + 3)}" for a in range(0, n, 3)] if n > 1 else []
+        group = self.joints_per_view()
+        groups = ([f"plotsix {a + 1}" + (f"–{min(n, a + group)}" if group > 1 else "")
+                   for a in range(0, n, group)] if n > 1 else [])
         return groups + [f"plotdata {name}" for name in self.run.joint_names]
+
+    def joints_per_view(self) -> int:
+        """How many joints a plotsix view shows: three, or as many as the plot can hold."""
+        height = self.query_one("#runs-plot", FigurePlot).size.height
+        return max(1, min(3, height // panel_size().height))
 
     def on_runs_tab_opened(self, message: Opened) -> None:
         self._opened(message.run, message.name)
@@ -209,10 +220,10 @@ class RunsTab(TabPage):
         run = self.run
         if run is None:
             return
-        plot = self.query_one("#runs-plot", PlotextPlot)
-        self._draw_on(plot.plt, plot.size.width)
-        plot.refresh()
-        view = self.views()[self.view]
+        views = self.views()
+        self.view = min(self.view, len(views) - 1)
+        self.query_one("#runs-plot", FigurePlot).show(self.figure())
+        view = views[self.view]
         extra = ""
         if view.startswith("plotdata"):
             j = run.joint_names.index(view.split(" ", 1)[1])
@@ -221,17 +232,21 @@ class RunsTab(TabPage):
         self.query_one("#runs-bar", Static).update(Text.assemble(
             (view, "bold"), extra, ("   v next plot · x export", "dim")))
 
-    def _draw_on(self, plt: object, width: int) -> None:
+    def on_resize(self) -> None:
+        if self.run is not None:
+            self.draw()  # a plotsix view holds as many joints as fit
+
+    def figure(self) -> Figure:
+        """The figure of the current view."""
         run = self.run
         assert run is not None
         view = self.views()[self.view]
+        title = f"{self.run_name} · {run.status}"
         if view.startswith("plotsix"):
-            first = int(view.split(" ")[1].split("–")[0]) - 1
-            joints = list(range(first, min(len(run.joint_names), first + 3)))
-            draw_overview(plt, run, joints, max(20, width // 2))  # type: ignore[arg-type]
-        else:
-            j = run.joint_names.index(view.split(" ", 1)[1])
-            draw_joint(plt, run, j, max(20, width // 2))  # type: ignore[arg-type]
+            joints = [int(k) for k in view.split(" ")[1].split("–")]
+            return overview(run, range(joints[0] - 1, joints[-1]), f"{title} · {view}")
+        j = run.joint_names.index(view.split(" ", 1)[1])
+        return joint_figure(run, j, f"{title} · {view}")
 
     def action_export(self) -> None:
         if self.run is None:
@@ -239,12 +254,12 @@ class RunsTab(TabPage):
             return
         view = self.views()[self.view].replace(" ", "-").replace("–", "-").replace("/", "")
         stem = self.run_name.replace(" ", "-")
-        self._export(self.desk.data_dir / "plots" / f"{stem}-{view}")
+        self._export(self.desk.data_dir / "plots" / f"{stem}-{view}", self.figure())
 
     @work(thread=True, group="runs-export")
-    def _export(self, path: Path) -> None:
+    def _export(self, path: Path, figure: Figure) -> None:
         try:
-            written = export(path, lambda plt, width: self._draw_on(plt, width))
+            written = export(path, figure)
         except OSError as exc:
             self.notify(f"cannot export to {path}: {exc}; check the data directory is writable",
                         severity="error")

@@ -7,6 +7,7 @@ path file is played, and a malformed one is reported with its line."""
 from __future__ import annotations
 
 import asyncio
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
@@ -75,7 +76,9 @@ def test_step_runs_on_the_simulator_and_appears_in_runs(tui, data_dir: Path) -> 
             await pilot.press("v")  # plotsix 4-6
             await pilot.press("x")
             await tui.until(lambda: list((data_dir / "plots").glob("*.svg")), what="export")
-            assert list((data_dir / "plots").glob("*.txt"))
+            (svg,) = (data_dir / "plots").glob("*.svg")  # the plot on screen, from its data
+            lines = ET.parse(svg).getroot().findall(".//{http://www.w3.org/2000/svg}polyline")
+            assert len(lines) == len(runs.figure().panels) // 2 * 3  # desired, actual; duty
 
     asyncio.run(scenario())
 

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from app.plotting.run_plot import decimate, steady_velocity
+from app.plotting.figure import decimate
+from app.plotting.run_plot import steady_velocity
 
 
 def test_decimation_keeps_every_peak() -> None:
