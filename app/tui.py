@@ -86,6 +86,10 @@ class ServodeskApp(App[None]):
     CSS_PATH: ClassVar = ["servodesk.tcss", "widgets/fields.tcss",
                           *[f"tabs/{name}.tcss" for name, _ in TABS]]
     TITLE = "servodesk"
+    # the screen's classes the stylesheets lay the tabs out by: 80×24 is -narrow -short,
+    # 120×36 -medium -tall, 160×48 -wide -tall (tests/app/test_tui_sizes.py)
+    HORIZONTAL_BREAKPOINTS: ClassVar = [(0, "-narrow"), (110, "-medium"), (150, "-wide")]
+    VERTICAL_BREAKPOINTS: ClassVar = [(0, "-short"), (30, "-tall")]
     BINDINGS: ClassVar = [
         Binding("escape,ctrl+e", "estop", "E-STOP", priority=True, key_display="Esc/^E"),
         Binding("ctrl+r", "reset", "release E-stop…", priority=True),

@@ -1,5 +1,7 @@
 """The Moves tab's end point form: an end-effector pose (section 4.3), every inverse solution
-inside the limits listed nearest first, and a joint-space ramp to the one picked."""
+inside the limits listed nearest first, and a joint-space ramp to the one picked. The pose
+starts as the current one, refreshed from the live position whenever the form is shown,
+except a coordinate the operator typed."""
 
 from __future__ import annotations
 
@@ -35,10 +37,11 @@ class EndPointForm(MoveForm):
 
     def fields(self) -> ComposeResult:
         for name, unit, key in POSE_FIELDS:
-            yield NumberField(name, NumberCheck(name, unit), id=f"pose-{key}")
-        yield NumberField("ramp time (blank: auto)", seconds_check("ramp time", optional=True),
-                          id="ramp_time")
-        yield Button("Pose from the current position", id="pose-current")
+            yield NumberField(name, NumberCheck(name, unit), placeholder="required",
+                              id=f"pose-{key}")
+        yield NumberField("ramp time", seconds_check("ramp time", optional=True),
+                          placeholder="auto", id="ramp_time")
+        yield Button("Pose from the current position", id="pose-current", compact=True)
         yield Static("", id="ik-state")
         yield DataTable(id="ik-solutions", cursor_type="row", zebra_stripes=True)
 
@@ -49,17 +52,19 @@ class EndPointForm(MoveForm):
     def fill(self, current: np.ndarray) -> None:
         pose = self.model.pose(current)
         for (_, _, key), value in zip(POSE_FIELDS, pose, strict=True):
-            f = self.field(f"pose-{key}")
-            f.input.placeholder = f"{value:.3f}"
-            if not f.text:
-                f.text = f"{value:.3f}"
+            self.filled(self.field(f"pose-{key}"), f"{value:.3f}")
 
     @on(Button.Pressed, "#pose-current")
     def _pose_current(self, event: Button.Pressed) -> None:
         event.stop()
-        pose = self.model.pose(self.here)
-        for (_, _, key), value in zip(POSE_FIELDS, pose, strict=True):
-            self.field(f"pose-{key}").text = f"{value:.3f}"
+        if not self.here:
+            self.notify("the controller has not reported where the joints are yet",
+                        severity="warning")
+            return
+        for f in self.query(NumberField):
+            if f.id and f.id.startswith("pose-"):
+                f.text = ""  # every coordinate from the position again
+        self.fill(np.array(self.here))
 
     def pose(self) -> np.ndarray:
         return np.array([self.field(f"pose-{key}").value() for _, _, key in POSE_FIELDS])

@@ -6,6 +6,13 @@ Here the joint-space moves: single step, multi-step (all six joints; on the rig,
 sequence of positions and dwell times of function.c MultiStep), ramp, sine, and the rig's
 set pulse (open loop) and initialise. The end point form is in ``end_point_form``, the path
 file and via points forms in ``path_forms``.
+
+Nothing a form shows may be stale. A field left blank means "where the joint is" at the
+moment the move is planned, and its placeholder says so with the live position
+(``here``); a required field's placeholder says "required", never a number that looks
+typed. A value a form fills in from the position (the end point's pose, the multi-step's
+"targets from the current position") is refreshed from the live position whenever the
+form is shown (``fill``), unless the operator has typed over it since.
 """
 
 from __future__ import annotations
@@ -17,6 +24,7 @@ from textual import on
 from textual.app import ComposeResult
 from textual.containers import Horizontal, VerticalScroll
 from textual.message import Message
+from textual.reactive import reactive
 from textual.widgets import Button, Input, Select, Static
 
 from app.widgets.fields import (
@@ -45,13 +53,15 @@ def mid_range(machine: Machine) -> np.ndarray:
 class MoveForm(VerticalScroll):
     """One kind of move: fields, and ``plan`` from them and the current position.
 
-    ``here`` is where the joints are, set by the tab as the controller reports it (the
-    middle of every joint's range until then); a form reads it, never the tab.
+    ``here`` is where the joints are, set by the tab as the controller reports it (empty
+    until then); a form reads it, never the tab. Placeholders follow it (``show_here``).
     """
 
     KIND: ClassVar[str] = ""
     LABEL: ClassVar[str] = ""
     HELP: ClassVar[str] = ""
+
+    here: reactive[tuple[float, ...]] = reactive((), init=False)
 
     class PreviewWanted(Message):
         """The form's plan may have changed (not by a typed field): preview it again."""
@@ -60,7 +70,7 @@ class MoveForm(VerticalScroll):
         super().__init__(id=f"form-{self.KIND}", classes="move-form")
         self.machine = machine
         self.model = model
-        self.here = mid_range(machine)
+        self._filled: dict[str, str] = {}  # field id: the text ``fill`` last put there
 
     def compose(self) -> ComposeResult:
         yield Static(self.help_text(), classes="form-help")
@@ -76,7 +86,29 @@ class MoveForm(VerticalScroll):
         raise NotImplementedError
 
     def fill(self, current: np.ndarray) -> None:
-        """Show the current position as the defaults (placeholders)."""
+        """The form is shown: refresh what it filled in from the position (``filled``)."""
+
+    def watch_here(self) -> None:
+        if self.is_mounted:
+            self.show_here()
+
+    def on_mount(self) -> None:
+        self.show_here()
+
+    def show_here(self) -> None:
+        """Put the live position in the placeholders of the fields that default to it."""
+
+    def here_text(self, j: int) -> str:
+        """The placeholder of a field whose blank means "where joint ``j`` is"."""
+        return f"here {self.here[j]:.2f}" if self.here else "here"
+
+    def filled(self, field: NumberField, text: str, *, blank_too: bool = True) -> None:
+        """Put ``text`` (from the position) in ``field``, unless the operator typed there
+        since it was last filled (a blank one too, with ``blank_too``)."""
+        current = field.text
+        if current == self._filled.get(field.id or "") or (blank_too and not current):
+            field.text = text
+            self._filled[field.id or ""] = text
 
     def field(self, id: str) -> NumberField:
         return self.query_one(f"#{id}", NumberField)
@@ -92,15 +124,20 @@ class MoveForm(VerticalScroll):
         return start
 
     def joint_fields(self, what: tuple[str, ...]) -> ComposeResult:
-        """A joint chooser (unless there is one joint) and position fields for it."""
+        """A joint chooser (unless there is one joint) and position fields for it: ``start``
+        may be left blank (where the joint is), the others are required."""
         m = self.machine
         if m.n_joints > 1:
             yield JointField("joint", m.joints)
         j0 = m.joints[0]
         for name in what:
             optional = name == "start"
-            label = "start (blank: here)" if optional else name
-            yield NumberField(label, position_check(j0, m, name, optional=optional), id=name)
+            yield NumberField(name, position_check(j0, m, name, optional=optional),
+                              placeholder="here" if optional else "required", id=name)
+
+    def show_start(self) -> None:
+        """The ``start`` field's placeholder: the live position of the chosen joint."""
+        self.field("start").input.placeholder = self.here_text(self.joint())
 
     @on(Select.Changed)
     def _joint_changed(self, event: Select.Changed) -> None:
@@ -109,7 +146,7 @@ class MoveForm(VerticalScroll):
             for f in self.query(NumberField):
                 if f.id in ("start", "target", "end"):
                     set_position_limits(f, joint, self.machine, f.id)
-            self.fill(self.here)
+            self.show_here()
 
 
 class StepForm(MoveForm):
@@ -120,14 +157,11 @@ class StepForm(MoveForm):
 
     def fields(self) -> ComposeResult:
         yield from self.joint_fields(("start", "target"))
-        yield NumberField("duration (blank: auto)", seconds_check("duration", optional=True),
-                          id="duration")
+        yield NumberField("duration", seconds_check("duration", optional=True),
+                          placeholder="auto", id="duration")
 
-    def fill(self, current: np.ndarray) -> None:
-        q = current[self.joint()]
-        self.field("start").input.placeholder = f"{q:.2f}"
-        if not self.field("target").text:
-            self.field("target").input.placeholder = f"{q:.2f}"
+    def show_here(self) -> None:
+        self.show_start()
 
     def plan(self, current: np.ndarray, dt: float) -> MovePlan:
         j = self.joint()
@@ -144,29 +178,41 @@ class StepForm(MoveForm):
 class MultiStepForm(MoveForm):
     KIND = "multi_step"
     LABEL = "Multi-step"
-    HELP = "Every joint steps to its own target at once (option.c MultiStepInput)."
+    HELP = ("Every joint steps to its own target at once (option.c MultiStepInput); a joint "
+            "left blank stays where it is.")
 
     def fields(self) -> ComposeResult:
         for j, joint in enumerate(self.machine.joints):
-            yield NumberField(joint.name, position_check(joint, self.machine, "target"),
-                              id=f"target{j}")
-        yield NumberField("duration (blank: auto)", seconds_check("duration", optional=True),
-                          id="duration")
-        yield Button("Targets from the current position", id="from-current")
+            yield NumberField(joint.name, position_check(joint, self.machine, "target",
+                                                         optional=True),
+                              placeholder="here", id=f"target{j}")
+        yield NumberField("duration", seconds_check("duration", optional=True),
+                          placeholder="auto", id="duration")
+        yield Button("Targets from the current position", id="from-current", compact=True)
+
+    def show_here(self) -> None:
+        for j in range(self.machine.n_joints):
+            self.field(f"target{j}").input.placeholder = self.here_text(j)
 
     def fill(self, current: np.ndarray) -> None:
         for j in range(self.machine.n_joints):
-            f = self.field(f"target{j}")
-            f.input.placeholder = f"{current[j]:.2f}"
+            self.filled(self.field(f"target{j}"), f"{current[j]:.2f}", blank_too=False)
 
     @on(Button.Pressed, "#from-current")
     def _from_current(self, event: Button.Pressed) -> None:
         event.stop()
+        if not self.here:
+            self.notify("the controller has not reported where the joints are yet",
+                        severity="warning")
+            return
         for j in range(self.machine.n_joints):
-            self.field(f"target{j}").text = f"{self.here[j]:.2f}"
+            field = self.field(f"target{j}")
+            field.text = ""  # what the button puts there is the position's, refreshed
+            self.filled(field, f"{self.here[j]:.2f}")
 
     def plan(self, current: np.ndarray, dt: float) -> MovePlan:
-        targets = [self.field(f"target{j}").value() for j in range(self.machine.n_joints)]
+        typed = [self.field(f"target{j}").value() for j in range(self.machine.n_joints)]
+        targets = [current[j] if t is None else t for j, t in enumerate(typed)]
         duration = self.field("duration").value()
         path = moves.multi_step(current, targets, duration, dt=dt, machine=self.machine)
         return MovePlan("multi_step", "multi-step", path,
@@ -220,8 +266,8 @@ class SequenceForm(MoveForm):
 class StartEndForm(MoveForm):
     """A one-joint move between a start (blank: where the joint is) and an end field."""
 
-    def fill(self, current: np.ndarray) -> None:
-        self.field("start").input.placeholder = f"{current[self.joint()]:.2f}"
+    def show_here(self) -> None:
+        self.show_start()
 
     def ends(self, current: np.ndarray) -> tuple[int, np.ndarray, np.ndarray]:
         """The joint, and the start and end joint vectors (the others stay where they are)."""
@@ -240,8 +286,8 @@ class RampForm(StartEndForm):
     def fields(self) -> ComposeResult:
         yield from self.joint_fields(("start", "end"))
         yield NumberField("ramp time", seconds_check("ramp time"), "2", id="ramp_time")
-        yield NumberField("total (blank: auto)", seconds_check("total duration", optional=True),
-                          id="total")
+        yield NumberField("total", seconds_check("total duration", optional=True),
+                          placeholder=f"auto: ramp + {moves.SETTLE_TAIL_S:g} s", id="total")
 
     def plan(self, current: np.ndarray, dt: float) -> MovePlan:
         j, start, end = self.ends(current)

@@ -9,15 +9,18 @@ from a file, via points. The forms are in ``move_forms``, ``end_point_form`` and
 ``path_forms``; the tab hands each one where the joints are (``MoveForm.here``).
 
 Each field is validated as it is typed; the desired path is previewed before
-Run (ctrl+s). A move that starts elsewhere than where the joints are gets an
-approach ramp first (the thesis's move() to the start position), left out of
-the result summary. The wait for the end runs in a worker; the summary
-(overshoot, settling time, steady-state error per joint) appears when it ends.
+Run (ctrl+s), with the start the move will use and the approach ramp in front of it
+when it starts elsewhere than where the joints are (the thesis's move() to the start
+position; grey in the plot, left out of the result). The forms take where the joints
+are from the controller's status when they are shown and as it changes (``MoveForm``:
+nothing they show is stale). The wait for the end runs in a worker; the result appears when
+it ends, by the move's kind (``move_results``): a step's response, a smooth path's
+tracking error, a sine's amplitude ratio and phase lag, for each joint that moved; a move
+that stopped early shows where.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -41,7 +44,8 @@ from textual.widgets.option_list import Option
 
 from app.desk import Desk
 from app.messages import RunsChanged
-from app.plotting.run_plot import path_figure
+from app.plotting.run_plot import path_compact, path_figure
+from app.tabs import move_results
 from app.tabs.end_point_form import EndPointForm
 from app.tabs.move_forms import (
     InitialiseForm,
@@ -61,8 +65,7 @@ from app.widgets.figure_plot import FigurePlot
 from app.widgets.live_text import LiveText
 from control.client import ControlClient, MoveHandle, MoveResult
 from control.layout import Status
-from control.motion import moves
-from control.motion.plan import MovePlan
+from control.motion.plan import MovePlan, Summary, moving_joints
 from control.motion.robot_model import has_unimate_model
 from control.recorder import Run
 from hw.machine import Machine
@@ -102,7 +105,7 @@ class MovesTab(TabPage):
 
         result: MoveResult
         plan: MovePlan
-        summaries: list[tuple[str, moves.StepSummary]]
+        summaries: list[tuple[str, Summary]]
 
     def __init__(self, desk: Desk, *, id: str | None = None) -> None:
         super().__init__(desk, id=id)
@@ -111,33 +114,33 @@ class MovesTab(TabPage):
         self.initialising = False
         self.last_result: MoveResult | None = None
         self._preview_timer: Timer | None = None
-        self._filled = False
         self.forms: list[MoveForm] = []
 
     def compose(self) -> ComposeResult:
         kinds = forms_for(self.machine)
-        with Horizontal():
+        with Horizontal(id="moves-top"):
             with Vertical(id="moves-left"):
                 yield OptionList(*[Option(k.LABEL, id=k.__name__) for k in kinds],
                                  id="move-kinds")
-                yield Static(id="move-error")
                 with Horizontal(id="move-buttons"):
-                    yield Button("Run ^S", id="move-run", variant="success")
-                    yield Button("Abort ^G", id="move-abort", variant="error")
+                    yield Button("Run ^S", id="move-run", variant="success", compact=True)
+                    yield Button("Abort ^G", id="move-abort", variant="error", compact=True)
             with ContentSwitcher(id="move-forms", initial=f"form-{kinds[0].KIND}"):
                 for kind in kinds:
                     yield kind(self.machine, self.model)
             with Vertical(id="moves-right"):
                 yield Static(id="move-preview-title")
                 yield FigurePlot(id="move-preview")
+        with Vertical(id="moves-bottom"):
+            yield Static(id="move-error")
+            with Horizontal(id="move-run-state"):
                 yield ProgressBar(total=100, show_eta=False, id="move-progress")
                 yield LiveText(id="move-state")
-                yield DataTable(id="move-result", cursor_type="none", zebra_stripes=True)
+            yield DataTable(id="move-result", cursor_type="none", zebra_stripes=True)
 
     def on_mount(self) -> None:
         self.forms = list(self.query(MoveForm))
-        self.query_one("#move-result", DataTable).add_columns(
-            "joint", "step", "overshoot", "rise s", "settle s", "steady error", "max |e|")
+        self._result_table([])
         self._state(Text("no move yet", "dim"))
 
     # -- plumbing ---------------------------------------------------------------------------
@@ -159,29 +162,29 @@ class MovesTab(TabPage):
         self.query_one("#move-kinds", OptionList).focus()
 
     def shown(self) -> None:
-        super().shown()
-        self._fill_forms()
+        super().shown()  # refresh_live: the forms' ``here``
+        self._fill_form()
         self.schedule_preview()
 
     def client_ready(self, client: ControlClient) -> None:
         super().client_ready(client)
         if self.visible_now:
-            self._fill_forms()
+            self.refresh_live()
+            self._fill_form()
 
-    def _fill_forms(self) -> None:
-        if self._filled or self.status() is None:
-            return
-        self._filled = True
-        current = self.current()
-        for form in self.forms:
-            form.fill(current)
+    def _fill_form(self) -> None:
+        """The form shown takes where the joints are now, and what it fills in from it."""
+        status = self.status()
+        if status is not None:
+            self.form.here = tuple(status.position)
+            self.form.fill(np.array(status.position))
 
     def on_option_list_option_highlighted(self, event: OptionList.OptionHighlighted) -> None:
         event.stop()
         kind = next(k for k in forms_for(self.machine) if k.__name__ == event.option.id)
         self.query_one("#move-forms", ContentSwitcher).current = f"form-{kind.KIND}"
         self.query_one("#move-error", Static).update("")
-        self.form.fill(self.current())
+        self._fill_form()
         self.schedule_preview()
 
     def on_option_list_option_selected(self, event: OptionList.OptionSelected) -> None:
@@ -222,6 +225,7 @@ class MovesTab(TabPage):
     def preview(self) -> None:
         title = self.query_one("#move-preview-title", Static)
         plot = self.query_one("#move-preview", FigurePlot)
+        current = self.current()
         try:
             plan = self.make_plan()
         except (FieldError, ValueError) as exc:
@@ -229,24 +233,26 @@ class MovesTab(TabPage):
             plot.show(None)
             return
         dt = self.machine.sample_time_s
+        names = [j.name for j in self.machine.joints]
         if plan.path is not None:
             t = np.arange(plan.samples) * dt
-            names = [j.name for j in self.machine.joints]
             units = [j.symbol for j in self.machine.joints]
-            plot.show(path_figure(t, plan.path, names, units, plan.moving, plan.approach,
-                                  plan.title))
-            summary = f"{plan.title}: {plan.samples} samples, {t[-1]:.2f} s"
+            shown = [*plan.moving, *(j for j in moving_joints(plan.path)
+                                     if j not in plan.moving)]
+            plot.show(path_figure(t, plan.path, names, units, shown, plan.approach, plan.title),
+                      path_compact(t, plan.path, names, shown, plan.approach, plan.title))
+            summary = f"{plan.title}: {t[-1]:.2f} s"
         elif plan.profile is not None:
             t = np.arange(plan.samples) * dt
-            plot.show(path_figure(t, plan.profile, ["duty"], ["%"], [0], 0, plan.title))
-            summary = f"{plan.title}: open loop, {plan.samples} samples"
+            plot.show(path_figure(t, plan.profile, names, ["%"] * len(names), list(plan.moving),
+                                  0, plan.title))
+            summary = f"{plan.title}: open loop, {t[-1]:.2f} s"
         else:
             plot.show(None)
             summary = "initialise: drives down to the bottom stop, then zeroes the encoder"
         note = f" · {plan.note}" if plan.note else ""
-        approach = (f" · includes a {plan.approach * dt:.2f} s approach to the start"
-                    if plan.approach else "")
-        title.update(Text.assemble(("preview  ", "bold"), summary, approach, note))
+        title.update(Text.assemble(("preview  ", "bold"), summary, note, "\n",
+                                   start_text(plan, current, self.machine)))
 
     # -- running ----------------------------------------------------------------------------
 
@@ -305,11 +311,16 @@ class MovesTab(TabPage):
         self.last_result = result
         saved = (f"saved as {result.files.stem}" if result.files else
                  result.save_error or "nothing recorded")
-        style = "green" if result.complete else "bold yellow"
-        self._state(Text(f"{plan.title}: {result.status} · {saved}", style))
         bar = self.query_one("#move-progress", ProgressBar)
+        bar.update(total=max(1, plan.samples), progress=result.run.samples)  # where it stopped
         if result.complete:
-            bar.update(progress=bar.total)
+            self._state(Text(f"{plan.title}: {result.status} · {saved}", "green"))
+        else:
+            dt = self.machine.sample_time_s
+            self._state(Text(
+                f"{plan.title}: {result.status} at {result.run.samples * dt:.2f} of "
+                f"{plan.samples * dt:.2f} s ({100 * result.run.samples / max(1, plan.samples):.0f}"
+                f" %) · {saved}", "bold yellow"))
         self._result_table(message.summaries)
         if result.files is None and result.run.samples:
             self.post_message(self.RunUnsaved(result.run))
@@ -323,24 +334,20 @@ class MovesTab(TabPage):
         self.initialising = False
         self._state(Text(f"initialise: {status}", "green" if "complete" in status else "yellow"))
 
-    def _result_table(self, summaries: list[tuple[str, moves.StepSummary]]) -> None:
+    def _result_table(self, summaries: list[tuple[str, Summary]]) -> None:
         table = self.query_one("#move-result", DataTable)
-        table.clear()
+        table.clear(columns=True)
+        table.add_columns(*move_results.columns(summaries))
         for label, s in summaries:
-            u = " " + ("°" if s.unit == "deg" else s.unit)
-            table.add_row(
-                label, f"{s.step:+.2f}{u}", f"{s.overshoot:.2f}{u} ({s.overshoot_pct:.1f} %)",
-                _seconds(s.rise_time_s), _seconds(s.settling_time_s),
-                f"{s.steady_state_error:+.3f}{u}", f"{s.max_abs_error:.3f}{u}")
+            table.add_row(*move_results.cells(label, s))
 
     def _state(self, text: Text) -> None:
         self.query_one("#move-state", LiveText).show(text)
 
     def refresh_live(self) -> None:
         status = self.status()
-        here = self._position(status)
-        for form in self.forms:
-            form.here = here
+        if status is not None:
+            self.form.here = tuple(status.position)  # the others get it when shown
         handle = self.handle
         if status is None or handle is None:
             return
@@ -352,5 +359,25 @@ class MovesTab(TabPage):
                              f"{status.move_total * dt:.2f} s", "cyan"))
 
 
-def _seconds(value: float | None) -> str:
-    return "–" if value is None or not math.isfinite(value) else f"{value:.3f}"
+
+def start_text(plan: MovePlan, current: np.ndarray, machine: Machine, most: int = 3) -> Text:
+    """Where the move starts, from where the joints are now: "starts here" with the moving
+    joints' positions, or the approach ramp in front and the joints it moves (``most`` of
+    them named)."""
+    if plan.path is None:
+        return Text("starts where the joints are", "dim")
+    dt = machine.sample_time_s
+    start = plan.path[plan.approach]
+    joints = machine.joints
+    if not plan.approach:
+        named = [f"{joints[j].name} {current[j]:.2f}{joints[j].symbol}"
+                 for j in plan.moving[:most]]
+        return Text.assemble(("start ", "bold"), "here" + (f": {', '.join(named)}" if named
+                                                          else ""), ("  · no approach", "dim"))
+    away = [j for j in range(machine.n_joints)
+            if abs(start[j] - current[j]) > joints[j].tolerance]
+    named = [f"{joints[j].name} {current[j]:.2f}→{start[j]:.2f}{joints[j].symbol}"
+             for j in away[:most]]
+    more = f" and {len(away) - most} more" if len(away) > most else ""
+    return Text.assemble(("approach ", "bold yellow"), f"{plan.approach * dt:.2f} s first: ",
+                         ", ".join(named) + more)

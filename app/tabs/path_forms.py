@@ -16,7 +16,7 @@ from textual.containers import Horizontal
 from textual.message import Message
 from textual.widgets import Button, Input, Label, Static, Switch, TextArea
 
-from app.tabs.move_forms import MoveForm
+from app.tabs.move_forms import MoveForm, mid_range
 from app.widgets.fields import NumberCheck, NumberField
 from control.motion.path_files import PathFileError, PathPoints, read_path, resample
 from control.motion.plan import MovePlan, moving_joints
@@ -63,7 +63,9 @@ class PathFileForm(MoveForm):
     @on(Input.Submitted, "#path-file")
     def _submitted(self, event: Input.Submitted) -> None:
         event.stop()
-        self.load(event.value, self.here)
+        # the joints the file leaves out are checked where they are now, and played from
+        # where they are when the move runs (``plan``)
+        self.load(event.value, np.array(self.here) if self.here else mid_range(self.machine))
 
     @work(thread=True, exclusive=True, group="path-file")
     def load(self, text: str, current: np.ndarray) -> None:
@@ -91,7 +93,8 @@ class PathFileForm(MoveForm):
         wanted = self.query_one("#path-file", Input).value
         if self.points is None or wanted != self.loaded_from:
             raise ValueError("load the file first: type its path and press Enter")
-        path = resample(self.points, dt)
+        hold = np.clip(current, self.machine.lower, self.machine.upper)
+        path = resample(self.points.held_at(hold), dt)
         return MovePlan("path", f"path {Path(self.loaded_from).name}", path,
                         meta={"file": str(Path(self.loaded_from).expanduser().resolve())},
                         moving=moving_joints(path))
@@ -113,7 +116,7 @@ class ViaPointsForm(MoveForm):
                                                         strict_low=True), "0.5", id="speed")
         yield Label("points", classes="field-label")
         yield TextArea(id="via-points", soft_wrap=False, show_line_numbers=True)
-        yield Button("Add the current position", id="via-add")
+        yield Button("Add the current position", id="via-add", compact=True)
 
     @property
     def cartesian_allowed(self) -> bool:
@@ -137,7 +140,12 @@ class ViaPointsForm(MoveForm):
     @on(Button.Pressed, "#via-add")
     def _add_current(self, event: Button.Pressed) -> None:
         event.stop()
-        row = self.model.pose(self.here)[:3] if self.cartesian else self.here
+        if not self.here:
+            self.notify("the controller has not reported where the joints are yet",
+                        severity="warning")
+            return
+        here = np.array(self.here)
+        row = self.model.pose(here)[:3] if self.cartesian else here
         area = self.query_one("#via-points", TextArea)
         text = area.text.rstrip("\n")
         area.text = (text + "\n" if text else "") + " ".join(f"{v:.2f}" for v in row)

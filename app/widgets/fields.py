@@ -156,11 +156,7 @@ class NumberField(Vertical):
     def on_input_changed(self, event: Input.Changed) -> None:
         if event.value != self._initial:
             self.touched = True
-        if not self.touched:
-            return
-        result = event.validation_result
-        self.show_error("" if result is None or result.is_valid
-                        else result.failure_descriptions[0])
+        self.revalidate()  # by the check as it is now: a joint chosen since the value was set
 
 
 def position_check(joint: Joint, machine: Machine, what: str, optional: bool = False

@@ -33,7 +33,7 @@ sample (function.c FollowPath), where the blends are shorter than a sample.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -59,14 +59,25 @@ class PathFileError(ValueError):
 
 @dataclass(frozen=True)
 class PathPoints:
-    """Points of a path file: ``t (M,)`` s from 0, ``q (M, J)`` mm/deg, ``lines (M,)``, and
-    ``max_accel (J,)`` the changes of speed are blended at (none: straight corners)."""
+    """Points of a path file: ``t (M,)`` s from 0, ``q (M, J)`` mm/deg, ``lines (M,)``,
+    ``max_accel (J,)`` the changes of speed are blended at (none: straight corners), and
+    ``held``, the joints the file leaves out (they stay where they are: ``held_at``)."""
 
     source: str
     t: np.ndarray
     q: np.ndarray
     lines: tuple[int, ...]
     max_accel: tuple[float, ...] = ()
+    held: tuple[int, ...] = ()
+
+    def held_at(self, hold: np.ndarray) -> PathPoints:
+        """These points with the joints the file leaves out at ``hold (J,)``: where they are
+        when the path is played, not when the file was read."""
+        if not self.held:
+            return self
+        q = self.q.copy()
+        q[:, list(self.held)] = np.asarray(hold, dtype=np.float64)[list(self.held)]
+        return replace(self, q=q)
 
     @property
     def duration(self) -> float:
@@ -146,7 +157,8 @@ def parse_csv(text: str, machine: Machine, hold: tuple[float, ...],
         times.append(t)
         rows.append(q)
         lines.append(number)
-    return _points(source, times, rows, lines, machine)
+    held = tuple(j for j in range(machine.n_joints) if j not in joint_cols.values())
+    return replace(_points(source, times, rows, lines, machine), held=held)
 
 
 def resample(points: PathPoints, dt: float) -> np.ndarray:

@@ -95,6 +95,9 @@ def test_the_thesis_tsv_is_resampled_with_its_changes_of_speed_blended() -> None
 def test_a_csv_names_its_joints_and_the_others_stay() -> None:
     points = parse_csv("t,In/Out,updown [deg]\n0,1500,0\n2,1510,5\n", UNIMATE, HERE)
     assert points.q.tolist() == [[1500, 0, 0, 0, 0, 0], [1510, 0, 5, 0, 0, 0]]
+    # the joints it leaves out stay where they are when it plays, not where they were read
+    later = points.held_at(np.array([1400.0, 12.0, -3.0, 4.0, 5.0, 6.0]))
+    assert later.q.tolist() == [[1500, 12, 0, 4, 5, 6], [1510, 12, 5, 4, 5, 6]]
 
 
 def test_a_saved_run_plays_back_its_desired_columns() -> None:

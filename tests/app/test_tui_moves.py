@@ -11,12 +11,14 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
-from textual.widgets import DataTable, Input, OptionList, Switch, TextArea
+import pytest
+from textual.widgets import DataTable, Input, OptionList, ProgressBar, Switch, TextArea
 
 from app.tabs.end_point_form import POSE_FIELDS, EndPointForm
 from app.tabs.moves import MovesTab
 from app.tabs.runs import RunsTab
 from app.widgets.fields import NumberField
+from app.widgets.live_text import LiveText
 from control.layout import Mode
 from kinematics import unimate
 
@@ -109,6 +111,11 @@ def test_abort_holds_and_an_unsaved_run_is_kept_and_saved_elsewhere(tui, tmp_pat
             result = tab.last_result
             assert result.status == "aborted by operator" and result.files is None, result.status
             assert "Not a directory" in (result.save_error or ""), result.save_error
+            # the progress stays where the move stopped, and says so
+            bar = app.query_one("#move-progress", ProgressBar)
+            assert bar.progress == result.run.samples and 0 < bar.percentage < 1
+            state = app.query_one("#move-state", LiveText).text
+            assert f"({100 * bar.percentage:.0f} %)" in state, state
             assert app.client.status().mode == Mode.HOLD
             await pilot.press("f6")
             runs = app.query_one(RunsTab)
@@ -291,5 +298,61 @@ def test_via_points_preview_and_run_in_joint_space_and_cartesian(tui) -> None:
                                atol=0.01)
             assert np.ptp(desired[:, 4:], axis=0).max() < 1e-6  # γ β held: Yaw, Swivel still
             assert np.allclose(app.client.status().position, desired[-1], atol=1.0)
+
+    asyncio.run(scenario())
+
+
+def test_after_a_jog_the_forms_show_the_new_pose_and_run_from_it(tui) -> None:
+    """The issue's sequence: End point seen, Rotate jogged elsewhere, End point again shows
+    the pose where the arm is now, and ctrl+s there does not drive the arm back."""
+
+    async def scenario() -> None:
+        app = tui.app()
+        async with app.run_test(size=SIZE) as pilot:
+            before = await tui.ready(app, pilot)
+            client = app.client
+            await pilot.press("f2")
+            await choose(app, pilot, "End point")  # filled with the pose before the jog
+            x = app.query_one("#form-end_point #pose-x", NumberField)
+            now = unimate.pose(np.array(client.status().position))
+            assert float(x.text) == pytest.approx(now[0], abs=1.0)  # the arm still settles
+            await pilot.press("f1", "9", "s", "s")  # Rotate at 18 % duty
+            await tui.until(lambda: client.status().position[1] > before.position[1] + 5.0,
+                            timeout=30, what="Rotate jogged 5° on")
+            await pilot.press("space", "enter")
+            await tui.until(lambda: client.status().mode == Mode.HOLD, what="holding again")
+            await tui.until(lambda: abs(client.status().desired[1] - client.status().position[1])
+                            < 0.05, timeout=30, what="Rotate settled where it holds")
+            await pilot.press("f2")
+            await pilot.pause()
+            jogged = np.array(client.status().position)
+            pose = unimate.pose(jogged)
+            assert abs(pose[0] - now[0]) > 10.0  # x moved with Rotate: a stale x would show
+            for (_, unit, key), value in zip(POSE_FIELDS, pose, strict=True):
+                shown = float(app.query_one(f"#form-end_point #pose-{key}", NumberField).text)
+                # as the arm still creeps on its hold: 2 mm at 1.7 m is 0.07° of Rotate
+                assert shown == pytest.approx(value, abs=2.0 if unit == "mm" else 0.3), key
+            tab = await run_and_wait(tui, app, pilot)
+            assert tab.last_result.complete, tab.last_result.status
+            final = np.array(client.status().position)
+            assert abs(final[1] - jogged[1]) < 0.5, (final, jogged)  # stayed where jogged
+            assert abs(final[1] - before.position[1]) > 4.5
+            await choose(app, pilot, "Step")
+            app.query_one("#form-step JointField Select").value = 1  # Rotate
+            await pilot.pause()
+            start = field(app, "step", "start")
+            assert not start.text  # a blank start is where the joint is when the move runs
+            here, value = start.input.placeholder.split()  # "here 5.23": Rotate, live
+            assert here == "here" and float(value) == pytest.approx(final[1], abs=0.3)
+            # the preview says where the move starts: here, or after an approach from here
+            field(app, "step", "target").text = f"{final[1] + 5:.1f}"
+            title = app.query_one("#move-preview-title")
+            await tui.until(lambda: "start here: Rotate" in title.render().plain,
+                            what=lambda: f"the start in the preview: {title.render().plain}")
+            elsewhere = round(final[1] - 5.0, 1)
+            start.text = str(elsewhere)
+            await tui.until(lambda: "s first:" in title.render().plain,
+                            what=lambda: f"the approach in the preview: {title.render().plain}")
+            assert f"→{elsewhere:.2f}°" in title.render().plain
 
     asyncio.run(scenario())
