@@ -24,7 +24,7 @@ import numpy as np
 from rich.text import Text
 from textual import work
 from textual.app import ComposeResult
-from textual.containers import Horizontal, Vertical
+from textual.containers import Horizontal, VerticalScroll
 from textual.message import Message
 from textual.widgets import Button, DataTable, Label, Select, Static, Switch
 
@@ -151,7 +151,7 @@ class IdentifyTab(TabPage):
     def compose(self) -> ComposeResult:
         self.models = [None] * self.machine.n_joints
         with Horizontal():
-            with Vertical(id="identify-left"):
+            with VerticalScroll(id="identify-left"):
                 yield Static("Open loop (tracking_actuate): the joint moves by itself about "
                              "where it is now, twice (the profile, then a fresh PRBS to check "
                              "the fit on); both are sized to keep off the stops.",
@@ -161,12 +161,12 @@ class IdentifyTab(TabPage):
                     yield Label("profile", classes="field-label")
                     yield Select(PROFILES, value="prbs", allow_blank=False, compact=True,
                                  id="identify-profile", classes="field-select")
-                yield NumberField("amplitude (blank: auto)",
+                yield NumberField("amplitude",
                                   NumberCheck("amplitude", " %", 0.0, 100.0, strict_low=True,
-                                              optional=True), id="identify-amplitude")
-                yield NumberField("duration (blank: auto)",
-                                  seconds_check("duration", optional=True),
-                                  id="identify-duration")
+                                              optional=True), placeholder="auto",
+                                  id="identify-amplitude")
+                yield NumberField("duration", seconds_check("duration", optional=True),
+                                  placeholder="auto", id="identify-duration")
                 yield Button("Run identification", id="identify-run", variant="success")
                 yield Static(id="identify-error")
                 with Horizontal(classes="field"):
@@ -177,7 +177,7 @@ class IdentifyTab(TabPage):
                                  disabled=True)
                     yield Button("Apply to hold", id="identify-apply-hold", variant="warning",
                                  disabled=True)
-            with Vertical(id="identify-right"):
+            with VerticalScroll(id="identify-right"):
                 yield LiveText(id="identify-state")
                 yield DataTable(id="identify-model", cursor_type="none", zebra_stripes=True)
                 yield Static("fit %: own = on the run it was fitted to, new = on a fresh PRBS "

@@ -1,7 +1,11 @@
 """Status: the thesis's ``visual`` printer, better (section 5.1: position and PWM of each
 joint every 300 interrupts). Here every joint's position, desired, error, duty, valve,
 raw encoder word, glitch count and a limit bar; the end-effector pose from the forward
-kinematics; the loop's sample number, mode, lateness and the link counters."""
+kinematics; the loop's sample number, mode, lateness and the link counters.
+
+Under ``FULL_WIDTH`` columns (an 80-column terminal) the joints' table leaves out the raw
+word and the glitch count and shortens its numbers, so names, values and limit bars stay
+whole; the tab scrolls when the screen is short."""
 
 from __future__ import annotations
 
@@ -12,7 +16,7 @@ from rich.console import Group
 from rich.table import Table
 from rich.text import Text
 from textual.app import ComposeResult
-from textual.containers import Horizontal
+from textual.containers import Horizontal, VerticalScroll
 
 from app.tabs.tab import TabPage
 from app.widgets.header import MODE_NAMES
@@ -21,6 +25,7 @@ from app.widgets.live_text import LiveText
 from control.layout import Flag, Status
 
 POSE_LABELS = (("x", "mm"), ("y", "mm"), ("z", "mm"), ("γ", "°"), ("β", "°"), ("α", "°"))
+FULL_WIDTH = 100  # columns the joints' table needs for every column
 
 
 class StatusTab(TabPage):
@@ -30,11 +35,12 @@ class StatusTab(TabPage):
     TITLE = "Status"
 
     def compose(self) -> ComposeResult:
-        yield LiveText(id="status-joints")
-        with Horizontal(id="status-lower"):
-            yield LiveText(id="status-pose")
-            yield LiveText(id="status-loop")
-            yield LiveText(id="status-link")
+        with VerticalScroll(id="status-scroll"):
+            yield LiveText(id="status-joints")
+            with Horizontal(id="status-lower"):
+                yield LiveText(id="status-pose")
+                yield LiveText(id="status-loop")
+                yield LiveText(id="status-link")
 
     def on_mount(self) -> None:
         self.query_one("#status-joints").styles.height = self.machine.n_joints + 2
@@ -45,8 +51,10 @@ class StatusTab(TabPage):
             self.query_one("#status-joints", LiveText).show(
                 Text("waiting for the controller…", "yellow"))
             return
-        self.query_one("#status-joints", LiveText).show(self._joints(status))
-        self.query_one("#status-pose", LiveText).show(self._pose(status))
+        joints = self.query_one("#status-joints", LiveText)
+        full = joints.size.width >= FULL_WIDTH
+        joints.show(self._joints(status) if full else self._joints_narrow(status))
+        self.query_one("#status-pose", LiveText).show(self._pose(status, full))
         self.query_one("#status-loop", LiveText).show(self._loop(status))
         self.query_one("#status-link", LiveText).show(self._link(status))
 
@@ -69,20 +77,39 @@ class StatusTab(TabPage):
                 LimitBar(q, joint.lower, joint.upper, d))
         return table
 
-    def _pose(self, status: Status) -> Group | Text:
+    def _joints_narrow(self, status: Status) -> Table:
+        """The joints' table in 80 columns: no raw word or glitches, two decimals."""
+        table = Table(expand=True, header_style="bold", box=None, padding=(0, 1),
+                      pad_edge=False, title="joints", title_justify="left",
+                      title_style="bold")
+        for name in ("joint", "position", "desired", "error", "duty %", "valve %"):
+            table.add_column(name, justify="left" if name == "joint" else "right",
+                             no_wrap=True)
+        table.add_column("limits", ratio=1, no_wrap=True, min_width=10)
+        for j, joint in enumerate(self.machine.joints):
+            q, d = status.position[j], status.desired[j]
+            e = d - q if math.isfinite(d) else math.nan
+            table.add_row(
+                joint.name, f"{q:.2f} {joint.symbol}", _num(d, joint.symbol, ".2f"),
+                _num(e, "", "+.3f"), f"{status.duty[j]:+.1f}", f"{status.valve[j]:+.1f}",
+                LimitBar(q, joint.lower, joint.upper, d))
+        return table
+
+    def _pose(self, status: Status, full: bool = True) -> Group | Text:
         if self.model is None:
             return Text.assemble(("end effector\n", "bold"),
                                  ("no kinematic model for this machine", "dim"))
         pose = self.model.pose(np.asarray(status.position))
-        table = Table(box=None, padding=(0, 1), show_header=False)
+        table = Table(box=None, padding=(0, 1), pad_edge=False, show_header=False)
         table.add_column(justify="left")
         table.add_column(justify="right")
         for (name, unit), value in zip(POSE_LABELS, pose, strict=True):
             table.add_row(name, f"{value:9.2f} {unit}")
-        return Group(Text("end effector (X-Y-Z fixed, eq. 4.04)", "bold"), table)
+        title = "end effector (X-Y-Z fixed, eq. 4.04)" if full else "end effector"
+        return Group(Text(title, "bold"), table)
 
     def _loop(self, status: Status) -> Group:
-        table = Table(box=None, padding=(0, 1), show_header=False)
+        table = Table(box=None, padding=(0, 1), pad_edge=False, show_header=False)
         table.add_column(justify="left")
         table.add_column(justify="right")
         progress = (f"{status.move_done}/{status.move_total} (move {status.move_id})"
@@ -105,7 +132,7 @@ class StatusTab(TabPage):
         return Group(Text("loop", "bold"), table)
 
     def _link(self, status: Status) -> Group:
-        table = Table(box=None, padding=(0, 1), show_header=False)
+        table = Table(box=None, padding=(0, 1), pad_edge=False, show_header=False)
         table.add_column(justify="left")
         table.add_column(justify="right")
         for name, value in status.link.items():
@@ -119,5 +146,5 @@ def _share(busy_s: float, elapsed_s: float) -> str:
     return f"{100.0 * busy_s / elapsed_s:.1f} % of the period" if elapsed_s > 0 else "–"
 
 
-def _num(value: float, unit: str) -> str:
-    return f"{value:10.3f} {unit}" if math.isfinite(value) else "–"
+def _num(value: float, unit: str, spec: str = "10.3f") -> str:
+    return f"{value:{spec}} {unit}".rstrip() if math.isfinite(value) else "–"

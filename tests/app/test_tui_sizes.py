@@ -1,0 +1,148 @@
+"""Every tab at 80×24, 120×36 and 160×48: what the operator needs on it is on the screen,
+whole (or scrolled into view where the tab scrolls), with room to be read: the Moves tab's
+kinds, form, buttons, preview, progress and result table; Status' names, values and limit
+bars; six joints previewed at 160×48 each in its own panel with a curve, none overlapping."""
+
+from __future__ import annotations
+
+import asyncio
+from pathlib import Path
+
+import numpy as np
+import pytest
+from textual.geometry import Region
+from textual.widget import Widget
+from textual.widgets import OptionList
+
+from app.tabs.runs import RunsTab
+from app.tui import TABS
+from app.widgets.fields import NumberField
+from app.widgets.figure_plot import MIN_ROWS, FigurePlot
+from app.widgets.live_text import LiveText
+from control.recorder import Run, save_run
+from hw.machine import load_machine
+
+SIZES = ((80, 24), (120, 36), (160, 48))
+BRAILLE = range(0x2801, 0x2900)
+# the widgets each tab is for (the Moves tab's preview and the Runs plot are checked drawn)
+ESSENTIAL = {
+    "jog": ("#jog-table",),
+    "moves": ("#move-kinds", "#move-forms", "#move-run", "#move-abort", "#move-preview-title",
+              "#move-preview", "#move-progress", "#move-state", "#move-result"),
+    "scope": ("#scope-bar", *(f"#scope-joint-{j}" for j in range(6))),
+    "status": ("#status-joints", "#status-pose", "#status-loop", "#status-link"),
+    "tuning": ("#tuning-which", "#tuning-joints", "#tuning-common"),
+    "runs": ("#runs-table", "#runs-bar", "#runs-plot"),
+    "latency": ("#latency-fresh", "#latency-tables"),
+    "identify": ("#identify-joint", "#identify-run", "#identify-ff", "#identify-apply",
+                 "#identify-model", "#identify-plot"),
+}
+
+
+def a_saved_run(data_dir: Path) -> None:
+    """A step of Up/Down in the data directory, for the Runs tab to plot."""
+    machine = load_machine("unimate2000b")
+    t = np.arange(2000) * machine.sample_time_s
+    desired = np.zeros((2000, 6))
+    desired[t >= 0.1, 2] = 5.0
+    actual = desired.copy()
+    actual[:, 2] = np.where(t >= 0.1, 5.0 * (1 - np.exp(-(t - 0.1) / 0.1)), 0.0)
+    save_run(Run.from_machine(machine, "step", "complete", {}, t, desired, actual,
+                              np.zeros_like(desired)), data_dir)
+
+
+def on_screen(widget: Widget) -> Region:
+    """Where ``widget`` is drawn on the screen, after scrolling it into view; it must be
+    there whole (its region inside every container's clip) and not empty."""
+    screen = widget.screen
+    geometry = screen.find_widget(widget)
+    region = geometry.region
+    assert region.width > 0 and region.height > 0, f"{widget!r} has no room: {region}"
+    assert geometry.clip.contains_region(region), f"{widget!r} clipped: {region} in {geometry.clip}"
+    assert screen.region.contains_region(region), f"{widget!r} off the screen: {region}"
+    return region
+
+
+def braille(plot: FigurePlot, region: tuple[int, int, int, int]) -> int:
+    """How many braille cells (curves) one panel of ``plot`` shows."""
+    x, y, w, h = region
+    rows = [plot.render_line(row).text[x:x + w] for row in range(y, y + h)]
+    return sum(ord(c) in BRAILLE for row in rows for c in row)
+
+
+@pytest.mark.parametrize("size", SIZES, ids=[f"{w}x{h}" for w, h in SIZES])
+def test_every_tab_shows_what_it_is_for(tui, size: tuple[int, int]) -> None:
+    a_saved_run(tui.data_dir)
+
+    async def scenario() -> None:
+        app = tui.app()
+        async with app.run_test(size=size) as pilot:
+            status = await tui.ready(app, pilot)
+            for i, (name, _) in enumerate(TABS):
+                await pilot.press(f"f{i + 1}")
+                tab = app.tab(name)
+                await tui.until(lambda tab=tab: tab.visible_now, what=f"the {name} tab shown")
+                if name == "runs":
+                    runs = app.query_one(RunsTab)
+                    await tui.until(lambda runs=runs: runs.infos, what="the run listed")
+                    runs.open_latest()
+                    await tui.until(lambda runs=runs: runs.run is not None, what="run open")
+                await pilot.pause()
+                for selector in ESSENTIAL[name]:
+                    widget = tab.query_one(selector)
+                    widget.scroll_visible(animate=False, immediate=True)
+                    await pilot.pause()
+                    on_screen(widget)
+                if name == "status":
+                    joints = app.query_one("#status-joints", LiveText)
+                    await tui.until(lambda joints=joints: "Swivel" in tui.text(joints),
+                                    what="the joints' table")
+                    text = tui.text(joints)
+                    assert "…" not in text, text
+                    for j, joint in enumerate(app.machine.joints):
+                        (row,) = [r for r in text.splitlines() if r.strip().startswith(
+                            joint.name)]
+                        assert row.count("├") == 1 and row.rstrip().endswith("┤"), row
+                        assert f"{status.position[j]:.1f}"[:-1] in row, row  # its value
+                if name == "runs":
+                    plot = app.query_one("#runs-plot", FigurePlot)
+                    await tui.until(lambda plot=plot: plot.drawn is not None, what="run plot")
+                    assert all(braille(plot, r) for r in plot.panel_regions())
+
+    asyncio.run(scenario())
+
+
+@pytest.mark.parametrize("size", SIZES, ids=[f"{w}x{h}" for w, h in SIZES])
+def test_six_joints_are_previewed_legibly(tui, size: tuple[int, int]) -> None:
+    """A multi-step of all six joints: at 160×48 six panels with a height and a curve each,
+    side by side without overlapping; on a smaller screen at least the one-panel summary of
+    every joint (never an empty plot)."""
+
+    async def scenario() -> None:
+        app = tui.app()
+        async with app.run_test(size=size) as pilot:
+            status = await tui.ready(app, pilot)
+            await pilot.press("f2")
+            kinds = app.query_one("#move-kinds", OptionList)
+            kinds.highlighted = next(i for i in range(kinds.option_count)
+                                     if str(kinds.get_option_at_index(i).prompt) == "Multi-step")
+            await pilot.pause()
+            for j, q in enumerate(status.position):
+                app.query_one(f"#form-multi_step #target{j}", NumberField).text = f"{q + 3:.1f}"
+            plot = app.query_one("#move-preview", FigurePlot)
+            await tui.until(lambda: plot.drawn is not None and len(plot.drawn.panels) in (1, 6)
+                            and plot.figure is not None and len(plot.figure.panels) == 6,
+                            what="the six joints previewed")
+            on_screen(plot)
+            regions = plot.panel_regions()
+            if size == (160, 48):
+                assert plot.drawn is plot.figure and len(regions) == 6
+            for k, (x, y, w, h) in enumerate(regions):
+                assert h >= MIN_ROWS + 2 and w > 0
+                assert braille(plot, (x, y, w, h)), f"panel {k} shows no curve"
+                for other in regions[k + 1:]:
+                    assert not Region(x, y, w, h).overlaps(Region(*other))
+            if plot.drawn is not plot.figure:  # one panel: every joint's share of its move
+                assert len(plot.drawn.panels[0].lines) == 6
+
+    asyncio.run(scenario())
