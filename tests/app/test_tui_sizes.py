@@ -31,9 +31,9 @@ ESSENTIAL = {
               "#move-preview", "#move-progress", "#move-state", "#move-result"),
     "scope": ("#scope-bar", *(f"#scope-joint-{j}" for j in range(6))),
     "status": ("#status-joints", "#status-pose", "#status-loop", "#status-link"),
-    "tuning": ("#tuning-which", "#tuning-joints", "#tuning-common"),
+    "tuning": ("#tuning-which", "#tuning-joints", "#tuning-common", "#tuning-files"),
     "runs": ("#runs-table", "#runs-bar", "#runs-plot"),
-    "latency": ("#latency-fresh", "#latency-tables"),
+    "latency": ("#latency-fresh", "#latency-tables", "#latency-thesis"),
     "identify": ("#identify-joint", "#identify-run", "#identify-ff", "#identify-apply",
                  "#identify-model", "#identify-plot"),
 }
