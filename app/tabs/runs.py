@@ -10,7 +10,7 @@ they can be saved elsewhere.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import datetime
 from pathlib import Path
 from typing import ClassVar
@@ -222,13 +222,18 @@ class RunsTab(TabPage):
             return
         views = self.views()
         self.view = min(self.view, len(views) - 1)
-        self.query_one("#runs-plot", FigurePlot).show(self.figure())
+        figure = self.figure()
         view = views[self.view]
+        plot = self.query_one("#runs-plot", FigurePlot)
+        # plotdata on a short screen: the response and its error, the panels that matter most
+        plot.show(figure, replace(figure, panels=figure.panels[:2]))
         extra = ""
         if view.startswith("plotdata"):
             j = run.joint_names.index(view.split(" ", 1)[1])
             extra = (f" · steady velocity {steady_velocity(run.t, run.actual[:, j]):+.4g} "
                      f"{run.joint_units[j]}/s")
+        if plot.drawn is not None and plot.drawn is not figure:
+            extra += f" · {len(plot.drawn.panels)} of {len(figure.panels)} panels (x exports all)"
         self.query_one("#runs-bar", Static).update(Text.assemble(
             (view, "bold"), extra, ("   v next plot · x export", "dim")))
 

@@ -126,4 +126,4 @@ def _panel_strips(panel: Panel, width: int, height: int, widget: Widget) -> list
     traces = [Trace(line.x, line.y, Style(color=line.color)) for line in panel.lines]
     return plot_strips(traces, (x0, x1), panel.y_range(), title, width, height,
                        widget.app.console, zero_line=panel.zero_line,
-                       x_labels=(f"{x0:.3g}", "", f"{x1:.3g} s"))
+                       x_labels=(f"{x0:.2f}", "", f"{x1:.2f} s"))

@@ -108,6 +108,11 @@ def test_every_tab_shows_what_it_is_for(tui, size: tuple[int, int]) -> None:
                     plot = app.query_one("#runs-plot", FigurePlot)
                     await tui.until(lambda plot=plot: plot.drawn is not None, what="run plot")
                     assert all(braille(plot, r) for r in plot.panel_regions())
+                    runs.view = runs.views().index("plotdata Up/Down")  # four panels
+                    runs.draw()
+                    await pilot.pause()
+                    assert plot.drawn is not None and len(plot.drawn.panels) >= 2
+                    assert all(braille(plot, r) for r in plot.panel_regions())
 
     asyncio.run(scenario())
 
