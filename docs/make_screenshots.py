@@ -1,10 +1,12 @@
 """Regenerate the screenshots of every tab in ``docs/screenshots/`` (SVG, from Textual).
 
-Run: ``python docs/make_screenshots.py`` (about half a minute). The app runs
+Run: ``python docs/make_screenshots.py`` (about two minutes). The app runs
 headless at 160 × 48 against the real-time simulated Unimate 2000B: it jogs a joint,
 runs an Up/Down step from the Moves tab (and watches it on the Scope), identifies Bend,
-then saves each tab as the operator would see it. Runs go to a temporary directory;
-``--rig`` adds the rig's Jog and Moves tabs.
+then saves each tab as the operator would see it. Then every tab again at 80 × 24, the
+smallest terminal servodesk is laid out for, in ``docs/screenshots/80x24/``. Runs go to
+a temporary directory; ``--rig`` adds the rig's Jog and Moves tabs; ``--small`` makes
+only the 80 × 24 ones.
 """
 
 from __future__ import annotations
@@ -30,6 +32,10 @@ from app.widgets.fields import NumberField
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "docs" / "screenshots"
 SIZE = (160, 48)
+SMALL = (80, 24)
+# a machine busy with other work can stall the first frames past the 250 ms heartbeat (the
+# controller holds, rightly); the screenshots are of the tabs, not of that
+CLIENT = {"heartbeat_timeout_s": 2.0}
 
 
 async def wait_for(condition: Callable[[], object], timeout: float = 30.0) -> None:
@@ -40,13 +46,14 @@ async def wait_for(condition: Callable[[], object], timeout: float = 30.0) -> No
         await asyncio.sleep(0.05)
 
 
-def save(app: ServodeskApp, name: str) -> None:
-    path = app.save_screenshot(filename=f"{name}.svg", path=str(OUT))
+def save(app: ServodeskApp, name: str, folder: Path = OUT) -> None:
+    folder.mkdir(parents=True, exist_ok=True)
+    path = app.save_screenshot(filename=f"{name}.svg", path=str(folder))
     print(f"wrote {Path(path).relative_to(ROOT)}")
 
 
 async def unimate(data_dir: str) -> None:
-    app = ServodeskApp("unimate2000b", data_dir=data_dir)
+    app = ServodeskApp("unimate2000b", data_dir=data_dir, client_options=CLIENT)
     async with app.run_test(size=SIZE) as pilot:
         await wait_for(lambda: app.sampler is not None and app.sampler.latest is not None)
         await pilot.pause(1.0)
@@ -87,7 +94,8 @@ async def unimate(data_dir: str) -> None:
         await wait_for(lambda: bool(runs.infos))
         runs.open_latest()
         await wait_for(lambda: runs.run is not None)
-        await pilot.press("v", "v", "v")  # plotdata of Up/Down
+        runs.view = runs.views().index("plotdata Up/Down")
+        runs.draw()
         await pilot.pause(0.8)
         save(app, "runs")
         await pilot.press("f7")
@@ -110,7 +118,7 @@ async def unimate(data_dir: str) -> None:
 
 
 async def rig(data_dir: str) -> None:
-    app = ServodeskApp("rig", data_dir=data_dir)
+    app = ServodeskApp("rig", data_dir=data_dir, client_options=CLIENT)
     async with app.run_test(size=SIZE) as pilot:
         await wait_for(lambda: app.sampler is not None and app.sampler.latest is not None)
         await pilot.press("up", "up")
@@ -127,15 +135,66 @@ async def rig(data_dir: str) -> None:
         save(app, "rig-moves")
 
 
+async def small(data_dir: str) -> None:
+    """Every tab at 80 × 24: a jog, an Up/Down step previewed with its approach, then run
+    (its result table), the run's plot, and the others as they open."""
+    folder = OUT / f"{SMALL[0]}x{SMALL[1]}"
+    app = ServodeskApp("unimate2000b", data_dir=data_dir, client_options=CLIENT)
+    async with app.run_test(size=SMALL) as pilot:
+        await wait_for(lambda: app.sampler is not None and app.sampler.latest is not None)
+        await pilot.pause(1.0)
+        await pilot.press("3", "s", "s", "s", "s", "s", "s", "s", "s")  # Rotate at 24 %
+        await pilot.pause(1.5)
+        save(app, "jog", folder)
+        await pilot.press("space", "enter")
+        await pilot.press("f2")
+        await pilot.pause(0.3)
+        app.query_one("#move-kinds", OptionList).highlighted = 0
+        await pilot.pause(0.3)
+        app.query_one("#form-step JointField Select").value = 2
+        await pilot.pause(0.3)
+        position = app.client.status().position[2]
+        app.query_one("#form-step #start", NumberField).text = f"{position - 2:.1f}"
+        app.query_one("#form-step #target", NumberField).text = f"{position + 6:.1f}"
+        await pilot.pause(0.8)
+        save(app, "moves-preview", folder)
+        moves = app.query_one(MovesTab)
+        await pilot.press("ctrl+s")
+        await wait_for(lambda: moves.handle is not None)
+        await wait_for(lambda: moves.handle is None)
+        await pilot.pause(0.5)
+        save(app, "moves", folder)
+        for key, name in (("f3", "scope"), ("f4", "status"), ("f5", "tuning")):
+            await pilot.press(key)
+            await pilot.pause(1.0)
+            save(app, name, folder)
+        await pilot.press("f6")
+        runs = app.query_one(RunsTab)
+        await wait_for(lambda: bool(runs.infos))
+        runs.open_latest()
+        await wait_for(lambda: runs.run is not None)
+        runs.view = runs.views().index("plotdata Up/Down")
+        runs.draw()
+        await pilot.pause(0.8)
+        save(app, "runs", folder)
+        for key, name in (("f7", "latency"), ("f8", "identify")):
+            await pilot.press(key)
+            await pilot.pause(1.0)
+            save(app, name, folder)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rig", action="store_true", help="also the rig's Jog and Moves tabs")
+    parser.add_argument("--small", action="store_true", help="only the 80 × 24 screenshots")
     args = parser.parse_args()
     OUT.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as data_dir:
-        asyncio.run(unimate(data_dir))
-        if args.rig:
-            asyncio.run(rig(data_dir))
+        if not args.small:
+            asyncio.run(unimate(data_dir))
+            if args.rig:
+                asyncio.run(rig(data_dir))
+        asyncio.run(small(data_dir))
 
 
 if __name__ == "__main__":
