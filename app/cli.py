@@ -15,7 +15,7 @@ import os
 import signal
 import sys
 
-from app import cli_emulate, cli_kinematics, cli_machine
+from app import cli_emulate, cli_kinematics, cli_machine, cli_move, cli_runs
 from hw.factory import BACKENDS
 
 
@@ -35,7 +35,7 @@ def build_parser() -> argparse.ArgumentParser:
                              "servodesk/runs)")
     parser.add_argument("--seed", type=int, default=0, help="simulator seed (default 0)")
     sub = parser.add_subparsers(title="commands (none: open the TUI)", metavar="COMMAND")
-    for module in (cli_kinematics, cli_machine, cli_emulate):
+    for module in (cli_kinematics, cli_machine, cli_emulate, cli_move, cli_runs):
         module.add_parsers(sub)
     return parser
 

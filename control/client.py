@@ -24,7 +24,7 @@ import tempfile
 import threading
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -60,10 +60,10 @@ from control.layout import (
     MoveLayout,
     Status,
 )
+from control.motion import form_plans
 from control.motion.acceptance import accept
 from control.motion.moves import StepSummary
-from control.motion.plan import MovePlan, moving_joints, summaries
-from control.motion.trajectory import via_path
+from control.motion.plan import MovePlan, summaries
 from control.recorder import Run, RunFiles, coefficients_record, default_data_dir, save_run
 from control.recovery import recover_runs
 from control.runs import encode_meta, run_from_segment, segment_meta
@@ -554,14 +554,9 @@ class ControlClient:
         """A joint-space move from where the joints are to ``q`` (mm, deg): a quintic
         trajectory at ``speed`` of each joint's max_speed and max_accel (0 < speed ≤ 1).
         ValueError (nothing sent) for a target outside the limits or a bad speed."""
-        target = self.machine.check_targets(tuple(float(v) for v in q))
-        here = np.array(self.status().position)
-        path = via_path(np.vstack([here, target]), self.machine, dt=self.dt,
-                        speed_fraction=speed).q
-        return self.run(MovePlan("go_to", "go to", path,
-                                 meta={"target": list(target), "speed_fraction": speed,
-                                       **(meta or {})},
-                                 moving=moving_joints(path)))
+        plan = form_plans.go_to(self.machine, np.array(self.status().position), q, speed,
+                                dt=self.dt)
+        return self.run(replace(plan, meta={**plan.meta, **(meta or {})}))
 
     def run(self, plan: MovePlan) -> MoveHandle:
         """Run a planned move (``control.motion.plan``): its path, with an approach from where
@@ -590,6 +585,10 @@ class ControlClient:
             "backend": self.backend,
             "coefficients": {k: {**coefficients_record(c), "check": self.coefficient_checks[k]}
                              for k, c in self.coefficients.items()},
+            # what a saved run's summary needs of its plan (control.motion.plan.run_summaries)
+            "approach_samples": plan.approach,
+            "moving": list(plan.moving),
+            "open_loop": path is None,
             **plan.meta,
         })
         encoded = encode_meta(meta)

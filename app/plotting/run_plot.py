@@ -136,18 +136,46 @@ def draw_path(plt: Plot, t: np.ndarray, path: np.ndarray, names: Sequence[str],
             sub.xlabel("time (s)")
 
 
+def views(run: Run) -> list[str]:
+    """The plots of ``run`` the Runs tab cycles through: ``plotsix`` of each group of three
+    joints (none on a one-joint machine), then ``plotdata`` of each joint."""
+    n = len(run.joint_names)
+    groups = [f"plotsix {a + 1}–{min(n, a + 3)}" for a in range(0, n, 3)] if n > 1 else []
+    return groups + [f"plotdata {name}" for name in run.joint_names]
+
+
+def view_slug(view: str) -> str:
+    """``view`` as a part of a file name: ``plotsix-1-3``, ``plotdata-UpDown``."""
+    return view.replace(" ", "-").replace("–", "-").replace("/", "")
+
+
+def draw_view(plt: Plot, run: Run, view: str, width: int) -> None:
+    """Draw one of ``views(run)`` at ``width`` columns."""
+    if view.startswith("plotsix"):
+        first = int(view.split(" ")[1].split("–")[0]) - 1
+        draw_overview(plt, run, list(range(first, min(len(run.joint_names), first + 3))),
+                      max(20, width // 2))
+    else:
+        draw_joint(plt, run, run.joint_names.index(view.split(" ", 1)[1]), max(20, width // 2))
+
+
 def export(path: Path, draw: Callable[[Plot, int], None], width: int = 160,
-           height: int = 48) -> list[Path]:
-    """Draw at ``width × height`` and write ``path.txt`` (plain) and ``path.svg`` (colour)."""
+           height: int = 48, formats: Sequence[str] = ("txt", "svg")) -> list[Path]:
+    """Draw at ``width × height`` and write ``path.txt`` (plain) and ``path.svg`` (colour),
+    or those of ``formats``."""
     plt = Plot()
     draw(plt, width)
     plt.plotsize(width, height)
     plt.theme("pro")
     built = plt.build()
     path.parent.mkdir(parents=True, exist_ok=True)
-    txt, svg = path.with_suffix(".txt"), path.with_suffix(".svg")
-    txt.write_text(plt.uncolorize(built) + "\n", encoding="utf-8")
-    console = Console(record=True, width=width, file=io.StringIO())
-    console.print(Text.from_ansi(built))
-    svg.write_text(console.export_svg(title=path.stem), encoding="utf-8")
-    return [txt, svg]
+    written = []
+    if "txt" in formats:
+        written.append(path.with_suffix(".txt"))
+        written[-1].write_text(plt.uncolorize(built) + "\n", encoding="utf-8")
+    if "svg" in formats:
+        console = Console(record=True, width=width, file=io.StringIO())
+        console.print(Text.from_ansi(built))
+        written.append(path.with_suffix(".svg"))
+        written[-1].write_text(console.export_svg(title=path.stem), encoding="utf-8")
+    return written

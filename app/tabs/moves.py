@@ -17,7 +17,6 @@ the result summary. The wait for the end runs in a worker; the summary
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -136,8 +135,7 @@ class MovesTab(TabPage):
 
     def on_mount(self) -> None:
         self.forms = list(self.query(MoveForm))
-        self.query_one("#move-result", DataTable).add_columns(
-            "joint", "step", "overshoot", "rise s", "settle s", "steady error", "max |e|")
+        self.query_one("#move-result", DataTable).add_columns(*moves.SUMMARY_COLUMNS)
         self._state(Text("no move yet", "dim"))
 
     # -- plumbing ---------------------------------------------------------------------------
@@ -330,11 +328,7 @@ class MovesTab(TabPage):
         table = self.query_one("#move-result", DataTable)
         table.clear()
         for label, s in summaries:
-            u = " " + ("°" if s.unit == "deg" else s.unit)
-            table.add_row(
-                label, f"{s.step:+.2f}{u}", f"{s.overshoot:.2f}{u} ({s.overshoot_pct:.1f} %)",
-                _seconds(s.rise_time_s), _seconds(s.settling_time_s),
-                f"{s.steady_state_error:+.3f}{u}", f"{s.max_abs_error:.3f}{u}")
+            table.add_row(*moves.summary_cells(label, s))
 
     def _state(self, text: Text) -> None:
         self.query_one("#move-state", LiveText).show(text)
@@ -353,7 +347,3 @@ class MovesTab(TabPage):
             dt = self.machine.sample_time_s
             self._state(Text(f"running {handle.kind}: {status.move_done * dt:.2f} / "
                              f"{status.move_total * dt:.2f} s", "cyan"))
-
-
-def _seconds(value: float | None) -> str:
-    return "–" if value is None or not math.isfinite(value) else f"{value:.3f}"

@@ -10,7 +10,6 @@ listed first, so they can be saved elsewhere.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from datetime import datetime
 from pathlib import Path
 from typing import ClassVar
 
@@ -24,16 +23,10 @@ from textual.widgets import Button, DataTable, Input, Static
 from textual_plotext import PlotextPlot
 
 from app.desk import Desk
-from app.plotting.run_plot import draw_joint, draw_overview, export, steady_velocity
+from app.plotting.run_plot import draw_view, export, steady_velocity, view_slug, views
+from app.run_text import local_time, run_lines
 from app.tabs.tab import TabPage
 from control.recorder import RecorderError, Run, RunInfo, list_runs, load_run, save_run
-
-
-def local_time(iso: str) -> str:
-    try:
-        return datetime.fromisoformat(iso).astimezone().strftime("%Y-%m-%d %H:%M:%S")
-    except ValueError:
-        return iso or "?"
 
 
 class RunsTab(TabPage):
@@ -174,11 +167,7 @@ class RunsTab(TabPage):
     # -- the plot -------------------------------------------------------------------------
 
     def views(self) -> list[str]:
-        if self.run is None:
-            return []
-        n = len(self.run.joint_names)
-        groups = [f"plotsix {a + 1}–{min(n, a + 3)}" for a in range(0, n, 3)] if n > 1 else []
-        return groups + [f"plotdata {name}" for name in self.run.joint_names]
+        return [] if self.run is None else views(self.run)
 
     def on_runs_tab_opened(self, message: Opened) -> None:
         self._opened(message.run, message.name)
@@ -187,17 +176,7 @@ class RunsTab(TabPage):
         self.run = run
         self.run_name = name
         self.view = 0
-        meta = run.meta
-        lines = [f"{name}", f"{run.machine} · {run.kind} · {run.status}",
-                 f"started {local_time(run.start_time)} · {run.samples} samples at "
-                 f"{run.sample_time_s * 1e3:g} ms"]
-        if "backend" in meta:
-            lines.append(f"backend {meta['backend']}")
-        for key in ("joint", "target", "targets", "ramp_time", "period", "duration", "file",
-                    "duty", "pose"):
-            if key in meta:
-                lines.append(f"{key}: {meta[key]}")
-        self.query_one("#runs-meta", Static).update("\n".join(lines))
+        self.query_one("#runs-meta", Static).update("\n".join(run_lines(run, name)))
         self.draw()
 
     def action_next_view(self) -> None:
@@ -222,22 +201,14 @@ class RunsTab(TabPage):
             (view, "bold"), extra, ("   v next plot · x export", "dim")))
 
     def _draw_on(self, plt: object, width: int) -> None:
-        run = self.run
-        assert run is not None
-        view = self.views()[self.view]
-        if view.startswith("plotsix"):
-            first = int(view.split(" ")[1].split("–")[0]) - 1
-            joints = list(range(first, min(len(run.joint_names), first + 3)))
-            draw_overview(plt, run, joints, max(20, width // 2))  # type: ignore[arg-type]
-        else:
-            j = run.joint_names.index(view.split(" ", 1)[1])
-            draw_joint(plt, run, j, max(20, width // 2))  # type: ignore[arg-type]
+        assert self.run is not None
+        draw_view(plt, self.run, self.views()[self.view], width)  # type: ignore[arg-type]
 
     def action_export(self) -> None:
         if self.run is None:
             self.notify("open a run first (Enter on the list)", severity="warning")
             return
-        view = self.views()[self.view].replace(" ", "-").replace("–", "-").replace("/", "")
+        view = view_slug(self.views()[self.view])
         stem = self.run_name.replace(" ", "-")
         self._export(self.desk.data_dir / "plots" / f"{stem}-{view}")
 

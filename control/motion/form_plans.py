@@ -85,6 +85,18 @@ def sine(machine: Machine, current: np.ndarray, j: int, end: float, period: floa
                     moving=(j,))
 
 
+def go_to(machine: Machine, current: np.ndarray, target: Sequence[float], speed: float, *,
+          dt: float) -> MovePlan:
+    """A joint-space quintic move from ``current`` to ``target`` at ``speed`` of every joint's
+    max_speed and max_accel (0 < speed ≤ 1); ValueError for a target outside the limits."""
+    from control.motion.trajectory import via_path
+
+    q = machine.check_targets(tuple(float(v) for v in target))
+    path = via_path(np.vstack([current, q]), machine, dt=dt, speed_fraction=speed).q
+    return MovePlan("go_to", "go to", path, meta={"target": list(q), "speed_fraction": speed},
+                    moving=moving_joints(path))
+
+
 def pulse(machine: Machine, duty: float, duration: float, *, dt: float) -> MovePlan:
     """Open loop: ``duty`` % on the first joint for ``duration`` s (function.c SetPulse)."""
     profile = np.zeros((round(duration / dt) + 1, machine.n_joints))

@@ -64,6 +64,21 @@ class StepSummary:
     notes: tuple[str, ...] = ()
 
 
+SUMMARY_COLUMNS = ("joint", "step", "overshoot", "rise s", "settle s", "steady error", "max |e|")
+
+
+def summary_cells(label: str, s: StepSummary) -> tuple[str, ...]:
+    """One row of a result table under ``SUMMARY_COLUMNS`` (the Moves tab, ``servodesk``)."""
+    u = " " + ("°" if s.unit == "deg" else s.unit)
+    return (label, f"{s.step:+.2f}{u}", f"{s.overshoot:.2f}{u} ({s.overshoot_pct:.1f} %)",
+            _cell_seconds(s.rise_time_s), _cell_seconds(s.settling_time_s),
+            f"{s.steady_state_error:+.3f}{u}", f"{s.max_abs_error:.3f}{u}")
+
+
+def _cell_seconds(value: float | None) -> str:
+    return "–" if value is None or not math.isfinite(value) else f"{value:.3f}"
+
+
 def times(n: int, dt: float) -> np.ndarray:
     """``t (n,)`` in seconds: ``k·dt``."""
     return np.arange(n) * dt

@@ -110,3 +110,17 @@ def summaries(plan: MovePlan, run: Run, machine: Machine
         if s.step != 0:
             rows.append((f"{s.joint} step {len(rows) + 1}", s))
     return rows
+
+
+def run_summaries(run: Run, machine: Machine) -> list[tuple[str, moves.StepSummary]]:
+    """``summaries`` of a saved run, from what its metadata says of its plan (the approach in
+    front, the joints it meant to move; ``ControlClient`` records them); none for an open-loop
+    run, which follows no path."""
+    meta = run.meta
+    if meta.get("open_loop"):
+        return []
+    moving = meta.get("moving")
+    plan = MovePlan(run.kind, run.kind, path=run.desired, meta=dict(meta),
+                    approach=int(meta.get("approach_samples", 0)),
+                    moving=tuple(moving) if moving is not None else moving_joints(run.desired))
+    return summaries(plan, run, machine)
