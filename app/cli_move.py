@@ -333,9 +333,13 @@ def _plan_endpoint(args: argparse.Namespace, machine: Machine, here: np.ndarray,
 
 def _plan_path(args: argparse.Namespace, machine: Machine, here: np.ndarray, dt: float
                ) -> MovePlan:
-    from control.motion.path_files import read_path
+    from control.motion.path_files import PathFileError, read_path
 
-    return form_plans.path_file(read_path(args.file, machine, tuple(here)), args.file, dt=dt)
+    try:
+        points = read_path(args.file, machine, tuple(here))
+    except PathFileError as exc:
+        raise BadInput(f"FILE: {exc}") from None
+    return form_plans.path_file(points, args.file, dt=dt)
 
 
 def _plan_via(args: argparse.Namespace, machine: Machine, here: np.ndarray, dt: float
@@ -397,6 +401,9 @@ def run(args: argparse.Namespace) -> int:
     except BadInput as exc:
         print(f"servodesk: {exc}", file=sys.stderr)
         return BAD_INPUT
+    except KeyboardInterrupt:  # before the move was sent: the controller is closed, valves shut
+        print("servodesk: interrupted before the move started; nothing moved", file=sys.stderr)
+        return ENDED
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -411,6 +418,7 @@ def _run(args: argparse.Namespace) -> int:
     if args.backend == "serial" and not args.port:
         raise BadInput("--port: --backend serial needs the I/O board's URL (a device, the "
                        "emulator's pty path or socket://HOST:PORT)")
+    _check_fields(args, kind, machine)
     data_dir = Path(args.data_dir).expanduser() if args.data_dir else default_data_dir()
     _check_writable(data_dir)
     try:
@@ -422,6 +430,19 @@ def _run(args: argparse.Namespace) -> int:
         return _move(args, kind, client, machine)
     finally:
         client.close()
+
+
+def _check_fields(args: argparse.Namespace, kind: Kind, machine: Machine) -> None:
+    """Check the fields before a controller starts, as the forms do before it reports: from
+    the middle of every joint's range. Only a field's own error counts here; the plan from
+    where the joints are decides the rest."""
+    middle = np.array([(j.lower + j.upper) / 2 for j in machine.joints])
+    try:
+        kind.plan(args, machine, middle, machine.sample_time_s)
+    except BadInput:
+        raise
+    except ValueError:
+        pass
 
 
 def _check_writable(data_dir: Path) -> None:
@@ -437,12 +458,6 @@ def _move(args: argparse.Namespace, kind: Kind, client: ControlClient, machine: 
     from control.client import ControllerError
 
     if kind.name != "pulse" and not client.status().flags & Flag.HOMED:
-        try:  # the fields first: a typo costs no initialise
-            kind.plan(args, machine, np.array(client.status().position), client.dt)
-        except BadInput:
-            raise
-        except ValueError:
-            pass  # the plan from where the ram will be decides
         if not args.initialise:
             raise BadInput(f"--initialise: the {machine.title}'s encoder is not zeroed (every "
                            "`servodesk move` starts a new controller); add --initialise to drive "
@@ -464,10 +479,10 @@ def _move(args: argparse.Namespace, kind: Kind, client: ControlClient, machine: 
             print(f"servodesk: {exc}", file=sys.stderr)
             return ENDED
         _announce(client, handle, estop)
-        announced = 0
-        while not handle.done.wait(0.05):
-            if estop.pressed > announced:
-                announced = estop.pressed
+        announced = False
+        while not handle.done.wait(0.05) or (estop.pressed and not announced):
+            if estop.pressed and not announced:
+                announced = True
                 print("servodesk: E-stop: every valve closed and latched; saving the run "
                       "recorded so far", file=sys.stderr, flush=True)
     finally:

@@ -47,6 +47,8 @@ if os.environ.get("CI"):
 SLOW_PATHS = (
     "tests/faults/",                   # real controllers and emulators, faults injected
     "tests/app/test_smoke_tmux.py",    # the app in a tmux session
+    "tests/app/test_cli_move.py",      # servodesk move: a controller (and an emulator) each
+    "tests/app/test_cli_runs.py",      # servodesk runs in subprocesses
     "tests/control/test_client.py",    # the control subprocess, for real
     "tests/control/test_feed.py",      # feed override and hold on the control subprocess
     "tests/control/test_process.py",   # the control subprocess's imports
