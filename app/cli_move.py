@@ -401,8 +401,9 @@ def run(args: argparse.Namespace) -> int:
     except BadInput as exc:
         print(f"servodesk: {exc}", file=sys.stderr)
         return BAD_INPUT
-    except KeyboardInterrupt:  # before the move was sent: the controller is closed, valves shut
-        print("servodesk: interrupted before the move started; nothing moved", file=sys.stderr)
+    except KeyboardInterrupt:  # before the move was sent (starting, initialising)
+        print("servodesk: interrupted before the move started: the controller is stopped, "
+              "every valve closed; no run", file=sys.stderr)
         return ENDED
 
 

@@ -5,7 +5,7 @@ The Moves tab (``app.tabs.move_forms``, ``end_point_form``, ``path_forms``) and
 fields make the same move, refused with the same reasons. ``current (J,)`` is where the
 joints are; positions in mm and deg, times in s, ``dt`` the sample time. Each function
 raises ValueError naming the field or the joint and the fix; a field left blank is None.
-``ClientControl.run`` puts the approach in front (``MovePlan.approached``).
+``ControlClient.run`` puts the approach in front (``MovePlan.approached``).
 """
 
 from __future__ import annotations
