@@ -51,6 +51,7 @@ from control.motion.fields import (
     seconds_rule,
 )
 from control.motion.plan import MovePlan
+from control.timing import Timing
 from hw.machine import Machine, MachineError, load_machine
 
 if TYPE_CHECKING:
@@ -424,7 +425,8 @@ def _run(args: argparse.Namespace) -> int:
     _check_writable(data_dir)
     try:
         client = ControlClient(machine, args.backend, port=args.port, seed=args.seed,
-                               data_dir=data_dir)
+                               data_dir=data_dir, timing=Timing(args.timing, args.interrupt_ms,
+                                                                tuple(args.slip)))
     except (ControllerError, OSError, ValueError) as exc:
         raise BadInput(f"cannot start the controller: {exc}") from None
     try:

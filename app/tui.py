@@ -39,6 +39,7 @@ from control.client import ControlClient, ControllerError, Event
 from control.events import Died, EStop, Fault, Initialised, Notice, Refused
 from control.motion.robot_model import model_of
 from control.recorder import default_data_dir
+from control.timing import Timing
 from hw.machine import Machine, load_machine
 
 HEADER_HZ = 10.0
@@ -117,7 +118,10 @@ class ServodeskApp(App[None]):
         self.sim_options = sim_options
         self.client_options = client_options or {}
         self.history = History(self.machine.n_joints)
-        self.desk = Desk(self.machine, self.model, backend, self.data_dir, self.history)
+        timing = self.client_options.get("timing") or Timing()
+        self.desk = Desk(self.machine, self.model, backend, self.data_dir, self.history,
+                         timing.sample_time_s(self.machine))
+        self.timing_text = "" if timing.name == "servodesk" else timing.describe(self.machine)
         self.client: ControlClient | None = None
         self.client_problem = ""
         self.sampler: Sampler | None = None
@@ -136,6 +140,8 @@ class ServodeskApp(App[None]):
         backend = self.backend + (f" {self.port}" if self.port else "")
         if self.lockstep:
             backend += " (lockstep)"
+        if self.timing_text:
+            backend += f"  ·  {self.timing_text}"
         yield StatusHeader(self.machine.title, backend, id="header")
         yield FaultBanner(id="fault")
         with TabbedContent(id="tabs"):

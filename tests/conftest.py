@@ -50,6 +50,7 @@ SLOW_PATHS = (
     "tests/app/test_cli_move.py",      # servodesk move: a controller (and an emulator) each
     "tests/app/test_cli_runs.py",      # servodesk runs in subprocesses
     "tests/control/test_client.py",    # the control subprocess, for real
+    "tests/control/test_timing.py",    # the thesis's timing on the control subprocess
     "tests/control/test_feed.py",      # feed override and hold on the control subprocess
     "tests/control/test_process.py",   # the control subprocess's imports
 )

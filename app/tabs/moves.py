@@ -214,7 +214,7 @@ class MovesTab(TabPage):
         current = self.current()
         if isinstance(form, EndPointForm):
             form.solve(current)
-        dt = self.machine.sample_time_s
+        dt = self.desk.dt
         return form.plan(current, dt).approached(current, self.machine, dt)
 
     def preview(self) -> None:
@@ -227,7 +227,7 @@ class MovesTab(TabPage):
             plot.plt.clear_figure()
             plot.refresh()
             return
-        dt = self.machine.sample_time_s
+        dt = self.desk.dt
         if plan.path is not None:
             t = np.arange(plan.samples) * dt
             names = [j.name for j in self.machine.joints]
@@ -344,6 +344,6 @@ class MovesTab(TabPage):
         if status.move_id == handle.move_id and status.move_total:
             bar = self.query_one("#move-progress", ProgressBar)
             bar.update(total=status.move_total, progress=status.move_done)
-            dt = self.machine.sample_time_s
+            dt = self.desk.dt
             self._state(Text(f"running {handle.kind}: {status.move_done * dt:.2f} / "
                              f"{status.move_total * dt:.2f} s", "cyan"))
