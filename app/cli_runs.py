@@ -18,7 +18,7 @@ from app.run_text import local_time, run_lines, summary_records, summary_table
 from control.recorder import RecorderError, Run, RunFiles, default_data_dir, list_runs, load_run
 from hw.machine import Machine, MachineError, load_machine
 
-FORMATS = ("svg", "txt", "csv")
+FORMATS = ("svg", "txt", "csv", "mcap")
 
 
 class BadRun(ValueError):
@@ -49,7 +49,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         help="a run's plot as the Runs tab exports it (svg, txt), or its CSV table")
     export.add_argument("run", metavar="RUN", help="stem, a file of the run, or latest")
     export.add_argument("--format", choices=FORMATS, default="svg",
-                        help="svg (default) or txt: a plot; csv: the run's table")
+                        help="svg (default) or txt: a plot; csv: the run's table; mcap: the "
+                             "whole run for Foxglove or PlotJuggler (control/run_mcap.py)")
     export.add_argument("--view", help="the plot: plotsix-1-3, plotdata-<joint>, … (default "
                                        "the first the Runs tab shows)")
     export.add_argument("--out", metavar="FILE",
@@ -137,13 +138,15 @@ def _show(args: argparse.Namespace, data_dir: Path) -> int:
 
 def _export(args: argparse.Namespace, data_dir: Path) -> int:
     from app.plotting.run_plot import draw_view, export, view_slug, views
+    from control.run_mcap import write_mcap
 
     files, run = _load(args.run, data_dir)
     shown = views(run)
     slugs = [view_slug(v).lower() for v in shown]
-    if args.format == "csv":
+    if args.format in ("csv", "mcap"):
         if args.view:
-            raise BadRun("--view: a CSV export is the whole run; leave --view out")
+            raise BadRun(f"--view: a {args.format.upper()} export is the whole run; leave "
+                         "--view out")
         view = ""
     elif args.view is None:
         view = shown[0]
@@ -160,6 +163,9 @@ def _export(args: argparse.Namespace, data_dir: Path) -> int:
             out.parent.mkdir(parents=True, exist_ok=True)
             shutil.copyfile(files.csv, out)
             written = [out]
+        elif args.format == "mcap":
+            out.parent.mkdir(parents=True, exist_ok=True)
+            written = [write_mcap(run, out)]
         else:
             written = export(out, lambda plt, width: draw_view(plt, run, view, width),
                              formats=(args.format,))

@@ -129,3 +129,21 @@ def test_export_csv_is_the_runs_table(data_dir: Path, tmp_path: Path) -> None:
     done = servodesk("export", "latest", "--format", "csv", "--out", str(out), data_dir=data_dir)
     assert done.returncode == 0, done.stderr
     assert out.read_bytes() == (data_dir / "20261121-100000-rig-step.csv").read_bytes()
+
+
+def test_export_as_mcap_writes_the_whole_run(data_dir: Path, tmp_path: Path) -> None:
+    from control.run_mcap import read_mcap
+
+    out = tmp_path / "out" / "step.mcap"
+    done = servodesk("export", "latest", "--format", "mcap", "--out", str(out),
+                     data_dir=data_dir)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == str(out)
+    record, topics = read_mcap(out)
+    assert record["status"] == "estop: operator E-stop"
+    assert [len(topics[t]) for t in ("/joints/desired", "/joints/actual", "/joints/duty")] \
+        == [2001] * 3
+    assert topics["/joints/actual"][-1][1]["Ram"] == pytest.approx(50 * (1 - np.exp(-20)))
+    refused = servodesk("export", "latest", "--format", "mcap", "--view", "position",
+                        data_dir=data_dir)
+    assert refused.returncode == 2 and "MCAP export is the whole run" in refused.stderr
