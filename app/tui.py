@@ -28,6 +28,8 @@ from app.tabs.identify import IdentifyTab
 from app.tabs.jog import JogTab
 from app.tabs.latency import LatencyTab
 from app.tabs.moves import MovesTab
+from app.tabs.path_forms import ViaPointsForm
+from app.tabs.positions import PositionsTab
 from app.tabs.runs import RunsTab
 from app.tabs.scope import ScopeTab
 from app.tabs.status import StatusTab
@@ -47,7 +49,7 @@ SETTLE_S = 1.5  # after a tab's first frames its long-lived objects exist
 TABS: tuple[tuple[str, type[TabPage]], ...] = (
     ("jog", JogTab), ("moves", MovesTab), ("scope", ScopeTab), ("status", StatusTab),
     ("tuning", TuningTab), ("runs", RunsTab), ("latency", LatencyTab),
-    ("identify", IdentifyTab),
+    ("identify", IdentifyTab), ("positions", PositionsTab),
 )
 FAULT_ADVICE = {
     "limit": "Drive it back with the opposite jog key, or run a move that stays inside the "
@@ -98,6 +100,8 @@ class ServodeskApp(App[None]):
                 tooltip="decelerate the move along its path and hold; again to resume"),
         Binding("ctrl+down", "feed(-1)", "feed −10 %", priority=True, key_display="^↓"),
         Binding("ctrl+up", "feed(1)", "feed +10 %", priority=True, key_display="^↑"),
+        Binding("ctrl+t", "teach", "teach", tooltip="name where the joints are now "
+                "(Positions tab)"),
         *[Binding(f"f{i + 1}", f"show_tab('{name}')", f"{cls.TITLE} tab", show=False,
                   priority=True) for i, (name, cls) in enumerate(TABS)],
         Binding("ctrl+q", "quit", "quit", priority=True),
@@ -302,6 +306,10 @@ class ServodeskApp(App[None]):
         assert isinstance(runs, RunsTab)
         runs.keep_unsaved(message.run)
 
+    def on_positions_tab_changed(self, message: PositionsTab.Changed) -> None:
+        for form in self.query(ViaPointsForm):
+            form.offer(message.positions)
+
     def on_moves_tab_hold_requested(self, message: MovesTab.HoldRequested) -> None:
         self.action_hold()
 
@@ -463,6 +471,12 @@ class ServodeskApp(App[None]):
         self.fault_kind = ""
         self.banner.message = ""
         self.refresh_bindings()
+
+    def action_teach(self) -> None:
+        """Teach where the joints are under a name, from any tab."""
+        positions = self.tab("positions")
+        if isinstance(positions, PositionsTab) and not isinstance(self.screen, ModalScreen):
+            positions.action_teach()
 
     def action_run_move(self) -> None:
         """Run the move filled in on the Moves tab (whichever widget has the focus)."""

@@ -12,7 +12,7 @@ from textual import on, work
 from textual.app import ComposeResult
 from textual.containers import Horizontal
 from textual.message import Message
-from textual.widgets import Button, Input, Label, Static, Switch, TextArea
+from textual.widgets import Button, Input, Label, Select, Static, Switch, TextArea
 
 from app.tabs.move_forms import MoveForm
 from app.widgets.fields import NumberCheck, NumberField
@@ -20,6 +20,7 @@ from control.motion import form_plans
 from control.motion.fields import VIA_SPEED, fraction_rule
 from control.motion.path_files import PathFileError, PathPoints, read_path
 from control.motion.plan import MovePlan
+from control.motion.positions import Position
 from control.motion.robot_model import has_unimate_model
 from hw.machine import Machine
 from kinematics.unimate import Unimate2000B
@@ -100,6 +101,7 @@ class ViaPointsForm(MoveForm):
     HELP = ("A smooth path from here through points, one per line: every joint's position "
             "(joint space, section 6.4's via points), or with Cartesian on the tool's x y z in "
             "mm with γ and β held (section 6.4). Numbers separated by spaces or commas.")
+    named: tuple[Position, ...] = ()  # home, park and the taught positions, as offered
 
     def fields(self) -> ComposeResult:
         if self.cartesian_allowed:
@@ -111,6 +113,16 @@ class ViaPointsForm(MoveForm):
         yield Label("points", classes="field-label")
         yield TextArea(id="via-points", soft_wrap=False, show_line_numbers=True)
         yield Button("Add the current position", id="via-add")
+        with Horizontal(classes="field"):
+            yield Select[int]([], prompt="a named position", id="via-named", compact=True,
+                              classes="field-select")
+            yield Button("Add it", id="via-add-named")
+
+    def offer(self, positions: tuple[Position, ...]) -> None:
+        """The named positions (home, park, taught: the Positions tab's) the points may use."""
+        self.named = positions
+        self.query_one("#via-named", Select).set_options(
+            (p.name, i) for i, p in enumerate(positions))
 
     @property
     def cartesian_allowed(self) -> bool:
@@ -134,10 +146,24 @@ class ViaPointsForm(MoveForm):
     @on(Button.Pressed, "#via-add")
     def _add_current(self, event: Button.Pressed) -> None:
         event.stop()
-        row = self.model.pose(self.here)[:3] if self.cartesian else self.here
+        self.append(self.here)
+
+    @on(Button.Pressed, "#via-add-named")
+    def _add_named(self, event: Button.Pressed) -> None:
+        event.stop()
+        chosen = self.query_one("#via-named", Select).value
+        if not isinstance(chosen, int):
+            self.notify("choose a named position first (teach them on the Positions tab)",
+                        severity="warning")
+            return
+        self.append(np.array(self.named[chosen].joints))
+
+    def append(self, q: np.ndarray) -> None:
+        """Add the joints ``q (J,)`` as a point (their x y z when Cartesian)."""
+        row = self.model.pose(q)[:3] if self.cartesian else q
         area = self.query_one("#via-points", TextArea)
         text = area.text.rstrip("\n")
-        area.text = (text + "\n" if text else "") + " ".join(f"{v:.2f}" for v in row)
+        area.text = (text + "\n" if text else "") + " ".join(f"{v:.3f}" for v in row)
 
     def points(self) -> np.ndarray:
         """The typed points ``(M, J)`` or ``(M, 3)``; ValueError naming the line and the fix."""
