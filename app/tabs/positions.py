@@ -46,9 +46,9 @@ from control.motion.positions import (
 )
 
 SPEEDS = (0.05, 1.0)  # the speed fraction a go-to may ask for
-SETTLE_S = 5.0  # after its path a go-to waits this long at most for every joint to settle
+SETTLE_S = 10.0  # after its path a go-to waits this long at most for every joint to settle
 SETTLE_POLL_S = 0.02
-SETTLED_S = 0.2  # within tolerance this long (controller time) is settled
+SETTLED_S = 0.5  # within tolerance this long (controller time): settled, not swinging by
 
 
 class PositionsTab(TabPage):
@@ -323,6 +323,8 @@ class PositionsTab(TabPage):
                                                          or "wait for it to start")
         if status.estop:
             return "the E-stop is latched: release it (^R) when it is safe, then go again"
+        if status.moving:
+            return "a move is running (Moves tab): wait for it, or hold (^G)"
         field = self.query_one("#positions-speed", NumberField)
         try:
             field.check_now()

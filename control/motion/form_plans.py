@@ -92,7 +92,10 @@ def go_to(machine: Machine, current: np.ndarray, target: Sequence[float], speed:
     from control.motion.trajectory import via_path
 
     q = machine.check_targets(tuple(float(v) for v in target))
-    path = via_path(np.vstack([current, q]), machine, dt=dt, speed_fraction=speed).q
+    # a joint resting just past a limit (the rig on its stop) starts on it; one farther out
+    # is refused by the acceptance rules ("jog it back inside its limits first")
+    start = np.clip(current, machine.lower, machine.upper)
+    path = via_path(np.vstack([start, q]), machine, dt=dt, speed_fraction=speed).q
     return MovePlan("go_to", "go to", path, meta={"target": list(q), "speed_fraction": speed},
                     moving=moving_joints(path))
 

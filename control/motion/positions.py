@@ -31,7 +31,7 @@ from typing import Any
 
 from control.recorder import remove_stale_temps, replace_file
 from control.shm import pid_alive
-from hw.machine import UNPRINTABLE, Machine, MachineError, parse_toml, read_text
+from hw.machine import UNPRINTABLE, Joint, Machine, MachineError, parse_toml, read_text
 
 HOME, PARK = "home", "park"  # the machine file's positions; no taught one takes these names
 MAX_NAME = 40  # characters: a name fits the Positions table's column
@@ -111,11 +111,17 @@ class PositionBook:
         return name
 
     def teach(self, name: str, q: tuple[float, ...] | list[float]) -> PositionBook:
-        """Add the reading ``q (J,)`` (mm, deg; kept to ``DECIMALS`` places) as ``name``."""
+        """Add the reading ``q (J,)`` (mm, deg; kept to ``DECIMALS`` places) as ``name``. A
+        joint resting within its tolerance past a limit (the rig on its bottom stop) is
+        taught on the limit."""
         name = self.check_name(name)
         if len(self.taught) >= MAX_POSITIONS:
             raise ValueError(f"{MAX_POSITIONS} positions are taught already: delete some first")
-        joints = tuple(round(float(v), DECIMALS) for v in q)
+        reading = tuple(float(v) for v in q)
+        if len(reading) == self.machine.n_joints:  # else _check_joints names the count
+            reading = tuple(_onto_limits(v, j)
+                            for v, j in zip(reading, self.machine.joints, strict=True))
+        joints = tuple(round(v, DECIMALS) for v in reading)
         try:
             _check_joints(joints, self.machine)
         except ValueError as exc:
@@ -138,6 +144,15 @@ class PositionBook:
                              f"it is {what} there, not here")
         if not any(p.name == name for p in self.taught):
             raise ValueError(f"no taught position named {name!r}")
+
+
+def _onto_limits(v: float, joint: Joint) -> float:
+    """``v`` moved onto the nearer limit if it is past it by no more than the tolerance."""
+    if joint.lower - joint.tolerance <= v < joint.lower:
+        return joint.lower
+    if joint.upper < v <= joint.upper + joint.tolerance:
+        return joint.upper
+    return v
 
 
 def _check_joints(joints: tuple[float, ...], machine: Machine) -> None:

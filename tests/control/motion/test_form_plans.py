@@ -9,6 +9,7 @@ import pytest
 
 from app.widgets.fields import position_check
 from control.motion import form_plans, moves
+from control.motion.acceptance import accept
 from control.motion.fields import FieldError, position_rule
 from control.motion.plan import run_summaries, summaries
 from control.recorder import Run
@@ -54,6 +55,17 @@ def test_go_to_names_the_joint_outside_its_limits() -> None:
         form_plans.go_to(UNIMATE, MIDDLE, target, 0.5, dt=1e-3)
     plan = form_plans.go_to(UNIMATE, MIDDLE, MIDDLE + 1.0, 0.5, dt=1e-3)
     assert np.allclose(plan.path[-1], MIDDLE + 1.0) and plan.kind == "go_to"
+
+
+def test_go_to_starts_a_joint_resting_just_past_its_limit_on_it() -> None:
+    resting = np.array([-0.1])  # the rig on its bottom stop, inside its 1 mm tolerance
+    plan = form_plans.go_to(RIG, resting, RIG.home, 0.5, dt=1e-3)
+    assert plan.path[0, 0] == 0.0 and plan.path[-1, 0] == RIG.home[0]
+    accepted = accept(plan, resting, RIG, 1e-3)  # the rules every move meets, no approach
+    assert accepted.approach == 0 and np.array_equal(accepted.path, plan.path)
+    with pytest.raises(ValueError, match=r"Ram .*jog it back inside its limits first"):
+        accept(form_plans.go_to(RIG, np.array([-5.0]), RIG.home, 0.5, dt=1e-3),
+               np.array([-5.0]), RIG, 1e-3)
 
 
 @pytest.mark.parametrize("text, message", [

@@ -92,8 +92,8 @@ def test_teach_rename_delete() -> None:
     (lambda b: b.teach("  ", UNIMATE.home), r"type a name"),
     (lambda b: b.teach("x" * (MAX_NAME + 1), UNIMATE.home), rf"at most {MAX_NAME} characters"),
     (lambda b: b.teach("a\x1b[2Jb", UNIMATE.home), r"character 2 of the name \('\\x1b'\)"),
-    (lambda b: b.teach("past", (1300, 0, 30.02, 0, 90, 0)),
-     r"Up/Down at 30\.02° is outside its limits -27…30°: jog it inside and teach again"),
+    (lambda b: b.teach("past", (1300, 0, 30.5, 0, 90, 0)),
+     r"Up/Down at 30\.5° is outside its limits -27…30°: jog it inside and teach again"),
     (lambda b: b.teach("short", (1300, 0)), r"2 joint values, unimate2000b has 6"),
     (lambda b: b.rename("p3", "above the fixture"), r"a position named 'above the fixture'"),
     (lambda b: b.rename("park", "rest"), r"park comes from the machine file"),
@@ -205,3 +205,11 @@ def test_a_writer_killed_between_temporary_and_rename_leaves_the_old_file(
 def test_teaching_keeps_the_reading_to_a_thousandth() -> None:
     b = PositionBook(RIG).teach("r", [599.99951])
     assert b.find("r").joints == (round(599.99951, DECIMALS),) == (600.0,)
+
+
+def test_a_joint_resting_just_past_a_limit_is_taught_on_it() -> None:
+    (ram,) = RIG.joints  # on its bottom stop the rig reads -0.1 mm; its tolerance is 1 mm
+    assert PositionBook(RIG).teach("stop", [-0.1]).find("stop").joints == (ram.lower,)
+    assert PositionBook(RIG).teach("top", [1200.9]).find("top").joints == (ram.upper,)
+    with pytest.raises(ValueError, match=r"Ram at -1\.5mm is outside its limits 0…1200mm: jog"):
+        PositionBook(RIG).teach("below", [-1.5])
