@@ -127,26 +127,26 @@ def test_teach_list_rename_go_to_and_delete(tui, data_dir: Path) -> None:
 
 def test_a_damaged_file_is_reported_with_its_line_and_left_alone(tui, data_dir: Path) -> None:
     async def scenario() -> None:
-        app = tui.app()
+        app = tui.app("rig")
         path = positions_file(data_dir, app.machine)
         path.parent.mkdir(parents=True)
-        damaged = ('machine = "unimate2000b"\n\n[[position]]\nname = "a"\n'
-                   'joints = [1300.0, 0.0, 99.0, 0.0, 90.0, 0.0]\n')
+        damaged = 'machine = "rig"\n\n[[position]]\nname = "top"\njoints = [1300.0]\n'
         path.write_text(damaged)
         async with app.run_test(size=SIZE) as pilot:
             await tui.ready(app, pilot)
             await pilot.press("f9")
             state = app.query_one("#positions-state", LiveText)
             await tui.until(lambda: "line 5" in state.text, what="the damage reported")
-            assert "Up/Down at 99° is outside its limits -27…30°" in state.text
+            assert "position 1: 'top': Ram at 1300mm is outside its limits 0…1200mm" in state.text
             assert "fix the file" in state.text
             await pilot.press("t")
-            await name_it(app, pilot, "b")
+            await name_it(app, pilot, "bottom")
             await tui.until(lambda: "Nothing was changed" in state.text)
             assert path.read_text() == damaged  # never overwritten
-            path.write_text(damaged.replace("99.0", "9.0"))
+            path.write_text(damaged.replace("1300.0", "1100.0"))
             await pilot.press("l")
             table = app.query_one("#positions-table", DataTable)
             await tui.until(lambda: table.row_count == 3, what="the mended file read again")
+            assert [str(c) for c in table.get_row("top")] == ["top", "taught", "1100.00"]  # no pose
 
     asyncio.run(scenario())
