@@ -15,7 +15,9 @@ import os
 import signal
 import sys
 
-from app import cli_emulate, cli_kinematics, cli_machine
+from app import cli_emulate, cli_kinematics, cli_machine, cli_move, cli_runs
+from control.law import SLIPS
+from control.timing import TIMINGS, Timing
 from hw.factory import BACKENDS
 
 
@@ -34,8 +36,17 @@ def build_parser() -> argparse.ArgumentParser:
                         help="where runs are saved (default: the user's data directory, "
                              "servodesk/runs)")
     parser.add_argument("--seed", type=int, default=0, help="simulator seed (default 0)")
+    parser.add_argument("--timing", default="servodesk", choices=TIMINGS,
+                        help="servodesk (every joint every tick, default) or thesis (one joint "
+                             "per interrupt, as RT.o: docs/thesis_timing.md)")
+    parser.add_argument("--interrupt-ms", type=float, default=1.0, metavar="MS",
+                        help="thesis timing: the interrupt period, one joint each (1 or 6 as "
+                             "the thesis; default 1)")
+    parser.add_argument("--slip", action="append", choices=sorted(SLIPS), default=[],
+                        help="thesis timing: run the listing's law with this slip (errata); "
+                             "repeat for several")
     sub = parser.add_subparsers(title="commands (none: open the TUI)", metavar="COMMAND")
-    for module in (cli_kinematics, cli_machine, cli_emulate):
+    for module in (cli_kinematics, cli_machine, cli_emulate, cli_move, cli_runs):
         module.add_parsers(sub)
     return parser
 
@@ -52,7 +63,12 @@ def main(argv: list[str] | None = None) -> int:
     from hw.machine import MachineError
 
     try:
-        app = ServodeskApp(args.machine, args.backend, args.port, args.data_dir, seed=args.seed)
+        timing = Timing(args.timing, args.interrupt_ms, tuple(args.slip))
+    except ValueError as exc:
+        parser.error(str(exc))
+    try:
+        app = ServodeskApp(args.machine, args.backend, args.port, args.data_dir, seed=args.seed,
+                           client_options={"timing": timing})
     except MachineError as exc:
         print(f"servodesk: {exc}", file=sys.stderr)
         return 2

@@ -46,6 +46,8 @@ def summary(machine: Machine) -> dict:
             for j in machine.joints
         ],
         "coefficient_sets": sorted(machine.coefficients),
+        "home": list(machine.home) if machine.home is not None else None,
+        "park": list(machine.park) if machine.park is not None else None,
     }
 
 
@@ -57,4 +59,8 @@ def describe(machine: Machine) -> str:
     for j in machine.joints:
         lines.append(f"{j.name:<10}{j.kind:<11}{j.limit_text():>18}"
                      f"{f'{j.min_pwm_pos:g}/{j.min_pwm_neg:g}':>14}{j.polarity:>10d}")
+    for name, q in (("home", machine.home), ("park", machine.park)):
+        if q is not None:
+            lines.append(f"{name}: " + ", ".join(f"{j.name} {v:g}{j.symbol}"
+                                                  for j, v in zip(machine.joints, q, strict=True)))
     return "\n".join(lines)

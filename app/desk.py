@@ -21,3 +21,4 @@ class Desk:
     backend: str  # sim or serial
     data_dir: Path
     history: History
+    dt: float  # between a path's rows: the machine's sample time, or the thesis timing's

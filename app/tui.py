@@ -28,6 +28,8 @@ from app.tabs.identify import IdentifyTab
 from app.tabs.jog import JogTab
 from app.tabs.latency import LatencyTab
 from app.tabs.moves import MovesTab
+from app.tabs.path_forms import ViaPointsForm
+from app.tabs.positions import PositionsTab
 from app.tabs.runs import RunsTab
 from app.tabs.scope import ScopeTab
 from app.tabs.status import StatusTab
@@ -39,6 +41,7 @@ from control.client import ControlClient, ControllerError, Event
 from control.events import Died, EStop, Fault, Initialised, Notice, Refused
 from control.motion.robot_model import model_of
 from control.recorder import default_data_dir
+from control.timing import Timing
 from hw.machine import Machine, load_machine
 
 HEADER_HZ = 10.0
@@ -46,7 +49,7 @@ SETTLE_S = 1.5  # after a tab's first frames its long-lived objects exist
 TABS: tuple[tuple[str, type[TabPage]], ...] = (
     ("jog", JogTab), ("moves", MovesTab), ("scope", ScopeTab), ("status", StatusTab),
     ("tuning", TuningTab), ("runs", RunsTab), ("latency", LatencyTab),
-    ("identify", IdentifyTab),
+    ("identify", IdentifyTab), ("positions", PositionsTab),
 )
 FAULT_ADVICE = {
     "limit": "Drive it back with the opposite jog key, or run a move that stays inside the "
@@ -101,6 +104,8 @@ class ServodeskApp(App[None]):
                 tooltip="decelerate the move along its path and hold; again to resume"),
         Binding("ctrl+down", "feed(-1)", "feed −10 %", priority=True, key_display="^↓"),
         Binding("ctrl+up", "feed(1)", "feed +10 %", priority=True, key_display="^↑"),
+        Binding("ctrl+t", "teach", "teach", tooltip="name where the joints are now "
+                "(Positions tab)"),
         *[Binding(f"f{i + 1}", f"show_tab('{name}')", f"{cls.TITLE} tab", show=False,
                   priority=True) for i, (name, cls) in enumerate(TABS)],
         Binding("ctrl+q", "quit", "quit", priority=True),
@@ -121,7 +126,10 @@ class ServodeskApp(App[None]):
         self.sim_options = sim_options
         self.client_options = client_options or {}
         self.history = History(self.machine.n_joints)
-        self.desk = Desk(self.machine, self.model, backend, self.data_dir, self.history)
+        timing = self.client_options.get("timing") or Timing()
+        self.desk = Desk(self.machine, self.model, backend, self.data_dir, self.history,
+                         timing.sample_time_s(self.machine))
+        self.timing_text = "" if timing.name == "servodesk" else timing.describe(self.machine)
         self.client: ControlClient | None = None
         self.client_problem = ""
         self.sampler: Sampler | None = None
@@ -140,6 +148,8 @@ class ServodeskApp(App[None]):
         backend = self.backend + (f" {self.port}" if self.port else "")
         if self.lockstep:
             backend += " (lockstep)"
+        if self.timing_text:
+            backend += f"  ·  {self.timing_text}"
         yield StatusHeader(self.machine.title, backend, id="header")
         yield FaultBanner(id="fault")
         with TabbedContent(id="tabs"):
@@ -299,6 +309,10 @@ class ServodeskApp(App[None]):
         runs = self.tab("runs")
         assert isinstance(runs, RunsTab)
         runs.keep_unsaved(message.run)
+
+    def on_positions_tab_changed(self, message: PositionsTab.Changed) -> None:
+        for form in self.query(ViaPointsForm):
+            form.offer(message.positions)
 
     def on_moves_tab_hold_requested(self, message: MovesTab.HoldRequested) -> None:
         self.action_hold()
@@ -461,6 +475,12 @@ class ServodeskApp(App[None]):
         self.fault_kind = ""
         self.banner.message = ""
         self.refresh_bindings()
+
+    def action_teach(self) -> None:
+        """Teach where the joints are under a name, from any tab."""
+        positions = self.tab("positions")
+        if isinstance(positions, PositionsTab) and not isinstance(self.screen, ModalScreen):
+            positions.action_teach()
 
     def action_run_move(self) -> None:
         """Run the move filled in on the Moves tab (whichever widget has the focus)."""

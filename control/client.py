@@ -60,13 +60,14 @@ from control.layout import (
     MoveLayout,
     Status,
 )
+from control.motion import form_plans
 from control.motion.acceptance import accept
-from control.motion.plan import MovePlan, Summary, moving_joints, result_records, summaries
-from control.motion.trajectory import via_path
+from control.motion.plan import MovePlan, Summary, result_records, summaries
 from control.recorder import Run, RunFiles, coefficients_record, default_data_dir, save_run
 from control.recovery import recover_runs
 from control.runs import encode_meta, run_from_segment, segment_meta
 from control.seqlock import SeqlockReader, SeqlockWriter
+from control.timing import Timing
 from hw.machine import Coefficients, Machine, load_machine
 
 if TYPE_CHECKING:
@@ -162,12 +163,16 @@ class ControlClient:
                  realtime: bool = True, spin_us: float = SPIN_US,
                  heartbeat_timeout_s: float = DEATH_S, orphan_timeout_s: float = 5.0,
                  start_timeout_s: float = 30.0, sim_options: dict | None = None,
-                 on_event: Callable[[Event], None] | None = None) -> None:
+                 on_event: Callable[[Event], None] | None = None,
+                 timing: Timing | None = None) -> None:
         self.machine = machine if isinstance(machine, Machine) else load_machine(machine)
         self.backend = backend
         self.lockstep = lockstep
         self.data_dir = Path(data_dir) if data_dir is not None else default_data_dir()
-        self.dt = period_s or self.machine.sample_time_s
+        self.timing = timing or Timing()
+        self.dt = period_s or self.timing.sample_time_s(self.machine)  # between path rows
+        slots = self.timing.slots(self.machine)
+        sim_options = {**self.timing.sim_options(self.machine), **(sim_options or {})}
         self.on_event = on_event
         self.events: queue.Queue[Event] = queue.Queue()
         self.notice = ""
@@ -203,10 +208,10 @@ class ControlClient:
             self._coefficient_writers[which].write(*self.layout.coefficients.encode(c))
         config = process.ProcessConfig(
             machine=str(self.machine.path), backend=backend, port=port, seed=seed,
-            lockstep=lockstep, control_segment=self._segment.name, period_s=self.dt,
+            lockstep=lockstep, control_segment=self._segment.name, period_s=self.dt / slots,
             spin_us=spin_us, realtime=realtime, heartbeat_timeout_s=heartbeat_timeout_s,
-            orphan_timeout_s=orphan_timeout_s,
-            sim_options=dict(sim_options or {}))
+            orphan_timeout_s=orphan_timeout_s, sim_options=sim_options, slots=slots,
+            slips=self.timing.slips)
         ours, theirs = socket.socketpair()
         self._conn = Connection(ours.detach())
         self._stderr = tempfile.TemporaryFile()  # noqa: SIM115  # lives as long as the client
@@ -563,14 +568,9 @@ class ControlClient:
         """A joint-space move from where the joints are to ``q`` (mm, deg): a quintic
         trajectory at ``speed`` of each joint's max_speed and max_accel (0 < speed ≤ 1).
         ValueError (nothing sent) for a target outside the limits or a bad speed."""
-        target = self.machine.check_targets(tuple(float(v) for v in q))
-        here = np.array(self.status().position)
-        path = via_path(np.vstack([here, target]), self.machine, dt=self.dt,
-                        speed_fraction=speed).q
-        return self.run(MovePlan("go_to", "go to", path,
-                                 meta={"target": list(target), "speed_fraction": speed,
-                                       **(meta or {})},
-                                 moving=moving_joints(path)))
+        plan = form_plans.go_to(self.machine, np.array(self.status().position), q, speed,
+                                dt=self.dt)
+        return self.run(replace(plan, meta={**plan.meta, **(meta or {})}))
 
     def run(self, plan: MovePlan) -> MoveHandle:
         """Run a planned move (``control.motion.plan``): its path, with an approach from where
@@ -596,9 +596,13 @@ class ControlClient:
         kind, path, profile = plan.kind, plan.path, plan.profile
         samples = len(path if path is not None else profile)
         meta = segment_meta(self.machine, kind, self.dt, self.data_dir, self._process.pid, {
-            "backend": self.backend,
+            "backend": self.backend, "timing": self.timing.describe(self.machine),
             "coefficients": {k: {**coefficients_record(c), "check": self.coefficient_checks[k]}
                              for k, c in self.coefficients.items()},
+            # what a saved run's summary needs of its plan (control.motion.plan.run_summaries)
+            "approach_samples": plan.approach,
+            "moving": list(plan.moving),
+            "open_loop": path is None,
             **plan.meta,
         })
         encoded = encode_meta(meta)

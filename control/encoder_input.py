@@ -48,14 +48,16 @@ class EncoderInput:
         self.step_floor = [3 * abs(j.encoder.gradient) for j in machine.joints]  # 3 counts
         self.homed = machine.encoder_kind == "gray"
 
-    def read(self, backend: Backend) -> None:
+    def read(self, backend: Backend, joints: range | None = None) -> None:
+        """Read the board and judge the readings of ``joints`` (all; in the thesis's timing
+        the one joint whose encoder this tick switched on); the others keep their belief."""
         raw, reading, actuator = self.raw, self.reading, self.actuator
         backend.read(raw)
         now = backend.sample_ns  # a late serial reply re-reads old words: time them so
         self.transmission.actuators_from_words(raw, self.offset, reading)
         rejects, last_ok, believe = self.rejects, self.last_ok_ns, self.believe
         speed, floor = self.speed_per_ns, self.step_floor
-        for j in range(self.n):
+        for j in range(self.n) if joints is None else joints:
             a = reading[j]
             if abs(a - actuator[j]) <= speed[j] * (now - last_ok[j]) + floor[j] or believe[j]:
                 actuator[j] = a

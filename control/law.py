@@ -30,6 +30,12 @@ EQ33_DIVISOR = 6.0  # eq. 3.3: divided by 6·Δt (errata #1, #20)
 INTEGRAL_LIMIT = 50.0  # section 3.6.1: Σ Ki·e·Δt limited to 50
 SATURATION = 100.0  # u(k) ∈ [−100 %, 100 %], eq. 5.1
 _INF = math.inf
+# The listings' slips (docs/errata.md), to run the thesis's law as printed (control/timing.py)
+SLIPS = {
+    "derivative": "errata #1: the derivative is divided by 6 and multiplied by Δt",
+    "integral_oldest": "errata #2: the integral sums the oldest error of the history",
+    "min_pwm": "errata #5: integer division makes the minimum-PWM factor 1: u + pmin",
+}
 
 
 @dataclass(frozen=True, slots=True)
@@ -40,6 +46,7 @@ class _JointGains:
     w: tuple[float, ...]  # weights on u(k), u(k−1), …
     b: tuple[float, ...]  # taps on e(k), e(k−1), …: kp[i] + kd·f[i] / (p·Δt), see _error_taps
     ki_dt: float  # ki·Δt
+    oldest: bool  # integrate the oldest error (slip "integral_oldest")
     integral_limit: float
     pos_scale: float  # 1 − pmin/100
     pmin: float
@@ -77,11 +84,15 @@ class DifferenceLaw:
     kept, so the change is bumpless.
     """
 
-    def __init__(self, machine: Machine, coefficients: Coefficients, dt: float) -> None:
+    def __init__(self, machine: Machine, coefficients: Coefficients, dt: float,
+                 slips: frozenset[str] = frozenset()) -> None:
         if not (math.isfinite(dt) and dt > 0):
             raise ValueError(f"sample time must be a positive number of seconds, got {dt}")
+        if not slips <= SLIPS.keys():
+            raise ValueError(f"unknown slips {sorted(slips - SLIPS.keys())}")
         self.machine = machine
         self.dt = dt
+        self.slips = slips
         self._states = [_JointState(1, 1) for _ in machine.joints]
         self.set_coefficients(coefficients)
 
@@ -92,7 +103,8 @@ class DifferenceLaw:
     def set_coefficients(self, c: Coefficients) -> None:
         """Swap the gains; histories grow to the new tap lengths, integrators are kept."""
         _check_shape(c, self.machine)
-        gains = tuple(_prepare(joint, c, j, self.dt) for j, joint in enumerate(self.machine.joints))
+        gains = tuple(_prepare(joint, c, j, self.dt, self.slips)
+                      for j, joint in enumerate(self.machine.joints))
         for state, g in zip(self._states, gains, strict=True):
             _grow(state.e, max(len(g.b), len(c.filter)))
             _grow(state.u, max(len(g.w), 1))
@@ -126,7 +138,7 @@ class DifferenceLaw:
         errors.insert(0, e)  # e(k), e(k−1), … newest first
         u = sum(map(mul, g.w, s.u))  # Σ w[i]·u(k−i)
         u += sum(map(mul, g.b, errors))  # Σ kp[i]·e(k−i) + kd·Σ f[i]·e(k−i) / (p·Δt)
-        integral = s.integral + g.ki_dt * e  # Σ ki·e(k)·Δt on the newest error, errata #2, #3
+        integral = s.integral + g.ki_dt * (errors[-1] if g.oldest else e)  # errata #2, #3
         if integral > g.integral_limit:
             integral = g.integral_limit
         elif integral < -g.integral_limit:
@@ -196,17 +208,21 @@ def preset(name: str, machine: Machine) -> Coefficients:
                        f"(it has: {have})") from None
 
 
-def _prepare(joint: Joint, c: Coefficients, j: int, dt: float) -> _JointGains:
+def _prepare(joint: Joint, c: Coefficients, j: int, dt: float,
+             slips: frozenset[str]) -> _JointGains:
     up, down = output_min_pwm(joint)
+    unscaled = "min_pwm" in slips
     return _JointGains(
         gain_unit=joint.gain_unit,
         w=tuple(c.w[j]),
-        b=_error_taps(c.kp[j], c.kd[j], c.filter, c.filter_divisor, dt),
+        b=_error_taps(c.kp[j], c.kd[j], c.filter, c.filter_divisor, dt,
+                      "derivative" in slips),
         ki_dt=c.ki[j] * dt,
+        oldest="integral_oldest" in slips,
         integral_limit=c.integral_limit,
-        pos_scale=1.0 - up / 100.0,
+        pos_scale=1.0 if unscaled else 1.0 - up / 100.0,
         pmin=up,
-        neg_scale=1.0 - down / 100.0,
+        neg_scale=1.0 if unscaled else 1.0 - down / 100.0,
         nmin=down,
         duty_limit=c.duty_limit,
         kv=c.kv[j] if c.kv else 0.0,
@@ -214,11 +230,13 @@ def _prepare(joint: Joint, c: Coefficients, j: int, dt: float) -> _JointGains:
 
 
 def _error_taps(kp: Sequence[float], kd: float, f: Sequence[float], divisor: float,
-                dt: float) -> tuple[float, ...]:
+                dt: float, as_printed: bool = False) -> tuple[float, ...]:
     """The proportional and derivative terms of eq. 5.1 both weigh e(k−i), so they are one
     tap vector: b[i] = kp[i] + kd·f[i] / (p·Δt). Summing once per tick instead of twice
-    saves a quarter of a PID tick (benchmarks/law.py); the arithmetic is the equation's."""
-    d = [kd * fi / (divisor * dt) for fi in f] if kd else []
+    saves a quarter of a PID tick (benchmarks/law.py); the arithmetic is the equation's.
+    ``as_printed``: PDcontrol.c's ``/6*SampleTime``, kd·f[i]·Δt / p (errata #1)."""
+    scale = dt / divisor if as_printed else 1.0 / (divisor * dt)
+    d = [kd * fi * scale for fi in f] if kd else []
     n = max(len(kp), len(d))
     kp = [*kp, *[0.0] * (n - len(kp))]
     d = [*d, *[0.0] * (n - len(d))]

@@ -47,6 +47,8 @@ class LoopConfig:
     orphan_timeout_ns: int = 5_000 * MS
     glitch_margin: float = 1.5  # plausible jump = margin x max_speed x elapsed + 3 counts
     initialise: InitialiseConfig = field(default_factory=InitialiseConfig)
+    slots: int = 1  # ticks per sample: the thesis's timing (control/timing.py) serves n
+    slips: frozenset[str] = frozenset()  # the listing's slips to run (control.law.SLIPS)
 
 
 class Controller:
@@ -74,7 +76,8 @@ class Controller:
         self.guards = Guards(machine, self.outbox)
         self.supervisor = Supervisor(machine, config.period_ns)
         self.modes = ModeMachine(machine, self.transmission, self.encoders, self.guards,
-                                 self.outbox, config.period_ns / 1e9, config.initialise)
+                                 self.outbox, config.period_ns * config.slots / 1e9,
+                                 config.initialise, slots=config.slots, slips=config.slips)
         self.saver = RunSaver()
         self.valve = [0.0] * n
         self.client = ClientWatch(self.layout.client_words(control_buf),
@@ -128,12 +131,14 @@ class Controller:
 
     def tick(self, woke: int) -> None:
         self.latency.woke(woke - self.deadline)
+        self.modes.begin_tick(self.tick_count)
         self.read()
         self.poll()
         self.watch(woke)
         self.modes.control(self.guards.latched, woke)
         self.guard(woke)
-        if self.modes.move is not None and self.modes.record(self.clock.now_ns()):
+        if (self.modes.move is not None and self.modes.sample_end
+                and self.modes.record(self.clock.now_ns())):
             self.finish_move()
         self.write()
         self.latency.computed(self.clock.now_ns() - woke)
@@ -143,7 +148,7 @@ class Controller:
 
     def read(self) -> None:
         before = self.clock.now_ns()
-        self.encoders.read(self.backend)
+        self.encoders.read(self.backend, self.modes.serviced)
         self.latency.io_total_ns += self.clock.now_ns() - before
 
     # -- poll: the client's E-stop word, then its commands (the FIFO analogue) -----
@@ -240,9 +245,6 @@ class Controller:
         self.rearm()
 
     def on_feed(self, command: cmd.FeedOverride | cmd.Pause | cmd.Resume) -> None:
-        if isinstance(command, cmd.Pause) and self.modes.move is None:
-            self.outbox.put(Refused(command.NAME, "no move is running"))
-            return
         self.modes.feed_command(command, self.clock.now_ns())
 
     def on_inject(self, command: cmd.Inject) -> None:
@@ -360,13 +362,10 @@ class Controller:
         elif orphaned:
             self.running = False
         if self.modes.held_too_long(now):
-            self.abort(Fault("feed_hold", -1, "feed hold: the move was held longer than "
-                             f"{self.machine.supervision.max_pause_s:g} s; ended, holding"))
-        overloaded = self.latency.overloaded(now)
-        if overloaded:
+            self.abort(Fault("feed_hold", -1, self.modes.held_too_long_text))
+        if overloaded := self.latency.overloaded(now):
             self.abort(Fault("overrun", -1, f"overrun: {overloaded:.0%} of the last second's "
-                                            "ticks were late (a flooded link or a starved "
-                                            "CPU); holding"))
+                             "ticks were late (a flooded link or a starved CPU); holding"))
 
     @property
     def orphaned(self) -> bool:

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from control import shm
 from control.commands import STEP_KINDS, FeedOverride, Pause, Resume, StartMove
 from control.encoder_input import EncoderInput
-from control.events import Fault, Initialised, Notice
+from control.events import Fault, Initialised, Notice, Refused
 from control.feed import FeedRate
 from control.guards import Guards
 from control.jog import PositionJog
@@ -96,11 +96,16 @@ class ModeMachine:
     move: ActiveMove | None = None
     init_run: InitialiseRun | None = None
     coefficients: dict[str, Coefficients] = field(default_factory=dict)
+    slots: int = 1  # ticks per sample: the thesis's timing serves one joint a tick
+    slips: frozenset[str] = frozenset()  # the listing's slips (control.law.SLIPS)
 
     def __post_init__(self) -> None:
         n = self.n = self.machine.n_joints
         self.coefficients = {"hold": self.machine.hold, "track": self.machine.track}
-        self.law = DifferenceLaw(self.machine, self.machine.hold, self.dt)
+        self.law = DifferenceLaw(self.machine, self.machine.hold, self.dt, self.slips)
+        self.serviced: range = range(n)  # the joints this tick runs eq. 5.1 for
+        self.slot_joints = [range(j, j + 1) for j in range(n)]
+        self.sample_start = self.sample_end = True  # this tick begins / ends a sample
         self.jog = PositionJog(self.machine, self.dt)
         self.feed = FeedRate(self.machine, self.dt)
         self.path_velocity = [0.0] * self.machine.n_joints
@@ -125,6 +130,15 @@ class ModeMachine:
         self.fault = ""  # a row that cannot be trusted: the controller aborts into hold
         self.fault_joint = -1
 
+    def begin_tick(self, tick: int) -> None:
+        """The thesis's timing (``control/timing.py``): tick ``tick`` serves joint
+        ``tick mod n``; a sample's path row, jog and feed step at its first tick, its record at
+        its last. servodesk's timing serves every joint every tick."""
+        if self.slots > 1:
+            slot = tick % self.slots
+            self.serviced = self.slot_joints[slot]
+            self.sample_start, self.sample_end = slot == 0, slot == self.slots - 1
+
     # -- entering modes ------------------------------------------------------------------
 
     def hold_at(self, target: list[float]) -> None:
@@ -145,7 +159,11 @@ class ModeMachine:
         self.hold_at(self.position)
 
     def feed_command(self, command: FeedOverride | Pause | Resume, now: int) -> None:
-        """The operator's feed override, feed hold or resume (``control/feed.py``)."""
+        """The operator's feed override, feed hold or resume (``control/feed.py``); a hold
+        with no move is refused."""
+        if isinstance(command, Pause) and self.move is None:
+            self.outbox.put(Refused(command.NAME, "no move is running"))
+            return
         t = (now - self.move.start_ns) / 1e9 if self.move is not None else 0.0
         match command:
             case FeedOverride(value=value):
@@ -154,6 +172,11 @@ class ModeMachine:
                 self.feed.pause(t)
             case Resume():
                 self.feed.resume(t)
+
+    @property
+    def held_too_long_text(self) -> str:
+        return (f"feed hold: the move was held longer than {self.max_pause_s:g} s; ended, "
+                "holding")
 
     def held_too_long(self, now: int) -> bool:
         """A feed hold on the move for longer than ``max_pause_s``."""
@@ -193,7 +216,7 @@ class ModeMachine:
         if latched:
             self.zero_duty()
         elif mode == Mode.HOLD:
-            if self.jog.moving:
+            if self.jog.moving and self.sample_start:
                 self.jog.advance(self.hold_target)
                 self.velocity[:] = self.jog.velocity
             self.closed_loop(self.hold_target, None)
@@ -208,13 +231,15 @@ class ModeMachine:
 
     def closed_loop(self, target: list[float], velocity: list[float] | None) -> None:
         update, position, desired, duty = self.law.update, self.position, self.desired, self.duty
-        for j in range(self.n):
+        if self.slots > 1:
+            desired[:] = target
+        for j in self.serviced:
             desired[j] = target[j]
             duty[j] = update(j, target[j] - position[j], velocity[j] if velocity else 0.0)
 
     def open_loop(self, source: list[float]) -> None:
         desired, duty = self.desired, self.duty
-        for j in range(self.n):
+        for j in self.serviced:
             desired[j] = math.nan
             duty[j] = source[j]
 
@@ -253,7 +278,8 @@ class ModeMachine:
             a, b = cells[row + j], cells[ahead + j]
             path_velocity[j] = (b - a) / self.dt
             desired[j] = a + frac * (b - a)
-        self.feed.advance(path_velocity)
+        if self.sample_start:
+            self.feed.advance(path_velocity)
         rate = self.feed.rate
         for j in range(n):
             velocity[j] = rate * path_velocity[j]
@@ -293,7 +319,7 @@ class ModeMachine:
         row = move.layout.profile_offset // 8 + move.index * self.n
         desired, duty, cells = self.desired, self.duty, move.cells
         limit = 100.0 if self.encoders.homed else self.initialise_config.duty
-        for j in range(self.n):
+        for j in self.serviced:
             u = cells[row + j]
             if not -100.0 <= u <= 100.0:
                 self.reject_row(move, j, f"{self.machine.joints[j].name} duty {u:g} % is not "

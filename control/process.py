@@ -41,6 +41,8 @@ class ProcessConfig:
     heartbeat_timeout_s: float
     orphan_timeout_s: float
     sim_options: dict
+    slots: int = 1  # ticks per sample (control/timing.py)
+    slips: tuple[str, ...] = ()
 
     def to_json(self) -> str:
         return json.dumps(asdict(self))
@@ -67,6 +69,7 @@ def main(config: ProcessConfig, conn: Connection) -> None:
             period_ns=round(config.period_s * 1e9),
             heartbeat_timeout_ns=round(config.heartbeat_timeout_s * 1e9),
             orphan_timeout_ns=round(config.orphan_timeout_s * 1e9),
+            slots=config.slots, slips=frozenset(config.slips),
         )
         if isinstance(backend.clock, RealClock):
             backend.clock.spin_ns = round(config.spin_us * 1e3)

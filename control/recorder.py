@@ -505,20 +505,45 @@ def _place_all(contents: tuple[tuple[Path, bytes], ...], placed: list[Path]) -> 
     return True
 
 
+def replace_file(data: bytes, target: Path) -> None:
+    """Replace ``target`` (or create it) with exactly ``data``, complete or not at all: the
+    temporary file is renamed over it, so a reader sees the old file or the new one, and a
+    writer killed before the rename leaves the old one and a temporary file that
+    ``remove_stale_temps`` clears. OSError if it cannot be written (then ``target`` is as
+    it was)."""
+    tmp = _temp_file(data, target.parent)
+    try:
+        os.replace(tmp, target)
+    finally:
+        tmp.unlink(missing_ok=True)
+    _sync_dir(target.parent)
+
+
 def _place(data: bytes, target: Path) -> bool:
     """Give ``target`` exactly ``data``, complete or not at all; False if ``target`` exists."""
     if target.exists():
         return False
-    tmp = target.parent / f".{os.getpid()}-{uuid.uuid4().hex}.tmp"
+    tmp = _temp_file(data, target.parent)
+    try:
+        return _link(tmp, target)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def _temp_file(data: bytes, directory: Path) -> Path:
+    """A new temporary file in ``directory`` named for this process, holding ``data`` on
+    disk (fsynced); nothing is left behind if writing it fails."""
+    tmp = directory / f".{os.getpid()}-{uuid.uuid4().hex}.tmp"
     try:
         fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
         with os.fdopen(fd, "wb") as f:
             f.write(data)
             f.flush()
             os.fsync(f.fileno())
-        return _link(tmp, target)
-    finally:
+    except BaseException:
         tmp.unlink(missing_ok=True)
+        raise
+    return tmp
 
 
 def _link(tmp: Path, target: Path) -> bool:

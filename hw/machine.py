@@ -204,6 +204,8 @@ class Machine:
     dh: tuple[DHRow, ...]
     plant: Mapping[str, float]
     supervision: Supervision = field(default_factory=Supervision)
+    home: tuple[float, ...] | None = None  # (J,) mm, deg: where the machine works from
+    park: tuple[float, ...] | None = None  # (J,) mm, deg: where it rests, power off
 
     @property
     def n_joints(self) -> int:
@@ -443,7 +445,7 @@ class _Reader:
         self.only(doc, "", {"machine", "valve", "encoder", "kinematics", "joints",
                             "coefficients", "plant", "supervisor"})
         head = self.table(doc, "", "machine")
-        self.only(head, "machine", {"name", "title", "sample_time_ms"})
+        self.only(head, "machine", {"name", "title", "sample_time_ms", "home", "park"})
         valve = self.table(doc, "", "valve")
         self.only(valve, "valve", {"period_us", "resolution_pct"})
         enc = self.table(doc, "", "encoder")
@@ -484,7 +486,23 @@ class _Reader:
             dh=self.dh(doc, keys),
             plant=self.plant(doc, ""),
             supervision=self.supervision(doc),
+            home=self.joint_vector(head, "home", joints),
+            park=self.joint_vector(head, "park", joints),
         )
+
+    def joint_vector(self, head: Mapping[str, Any], name: str, joints: tuple[Joint, ...]
+                     ) -> tuple[float, ...] | None:
+        """A named position of the machine (``home``, ``park``): one number per joint, in
+        joint order and units, inside the joint's limits; None when the file has none."""
+        if name not in head:
+            return None
+        full = f"machine.{name}"
+        q = self.numbers(head[name], full, len(joints))
+        for i, (joint, v) in enumerate(zip(joints, q, strict=True)):
+            if not joint.lower <= v <= joint.upper:
+                raise self.fail(f"{full}[{i}]", f"{joint.name} at {v:g}{joint.symbol} is outside "
+                                                f"its limits {joint.limit_text()}")
+        return q
 
     def encoder_words(self, joints: tuple[Joint, ...], kind: str, bits: int) -> None:
         """Refuse limits the encoders' words cannot cover. A Gray word reads counts

@@ -47,7 +47,10 @@ if os.environ.get("CI"):
 SLOW_PATHS = (
     "tests/faults/",                   # real controllers and emulators, faults injected
     "tests/app/test_smoke_tmux.py",    # the app in a tmux session
+    "tests/app/test_cli_move.py",      # servodesk move: a controller (and an emulator) each
+    "tests/app/test_cli_runs.py",      # servodesk runs in subprocesses
     "tests/control/test_client.py",    # the control subprocess, for real
+    "tests/control/test_timing.py",    # the thesis's timing on the control subprocess
     "tests/control/test_feed.py",      # feed override and hold on the control subprocess
     "tests/control/test_process.py",   # the control subprocess's imports
 )
@@ -64,6 +67,8 @@ SLOW_FIXTURES = {
 SLOW_TESTS = (
     "tests/control/test_seqlock.py::test_reader_never_sees_a_torn_record",  # spawned writer
     "tests/control/test_shm.py::test_orphan_of_a_killed_process_is_cleaned_up",
+    "tests/control/motion/test_positions.py::"
+    "test_a_writer_killed_between_temporary_and_rename_leaves_the_old_file",  # a killed writer
     # files at their size bound: 600,001 points parsed, 2-4 s each
     "tests/control/motion/test_path_files.py::test_a_path_file_at_its_bound_loads",
     "tests/control/motion/test_cartesian.py::test_a_pose_file_at_its_bound_is_read",

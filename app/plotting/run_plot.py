@@ -23,6 +23,7 @@ from app.plotting.figure import (
     Panel,
 )
 from app.plotting.svg import figure_svg
+from app.widgets.figure_plot import figure_text
 from control.recorder import Run
 
 SMOOTH_S = 0.02  # velocity estimate: moving average over 20 ms before differencing
@@ -107,9 +108,39 @@ def path_compact(t: np.ndarray, path: np.ndarray, names: Sequence[str],
     return Figure(title, (panel,))
 
 
-def export(path: Path, figure: Figure) -> list[Path]:
-    """Write the figure as ``path.svg``, drawn from its data; the files written."""
+def views(run: Run, group: int = 3) -> list[str]:
+    """The plots of ``run`` the Runs tab cycles through: ``plotsix`` of each ``group`` of
+    joints (the thesis's three; none on a one-joint machine), then ``plotdata`` of each
+    joint."""
+    n = len(run.joint_names)
+    groups = ([f"plotsix {a + 1}" + (f"–{min(n, a + group)}" if group > 1 else "")
+               for a in range(0, n, group)] if n > 1 else [])
+    return groups + [f"plotdata {name}" for name in run.joint_names]
+
+
+def view_slug(view: str) -> str:
+    """``view`` as a part of a file name: ``plotsix-1-3``, ``plotdata-UpDown``."""
+    return view.replace(" ", "-").replace("–", "-").replace("/", "")
+
+
+def view_figure(run: Run, view: str, title: str = "") -> Figure:
+    """The figure of one of ``views(run)``, titled ``title · view`` (or by the run)."""
+    heading = f"{title} · {view}" if title else ""
+    if view.startswith("plotsix"):
+        joints = [int(k) for k in view.split(" ")[1].split("–")]
+        return overview(run, range(joints[0] - 1, joints[-1]), heading)
+    return joint_figure(run, run.joint_names.index(view.split(" ", 1)[1]), heading)
+
+
+def export(path: Path, figure: Figure, formats: Sequence[str] = ("svg",)) -> list[Path]:
+    """Write the figure drawn from its data as ``path.svg`` and, if asked, ``path.txt`` (the
+    terminal's braille drawing at 160 × 48, plain text); the files written."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    svg = path.with_suffix(".svg")
-    svg.write_text(figure_svg(figure), encoding="utf-8")
-    return [svg]
+    written = []
+    if "txt" in formats:
+        written.append(path.with_suffix(".txt"))
+        written[-1].write_text(figure_text(figure), encoding="utf-8")
+    if "svg" in formats:
+        written.append(path.with_suffix(".svg"))
+        written[-1].write_text(figure_svg(figure), encoding="utf-8")
+    return written

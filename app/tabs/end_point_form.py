@@ -12,11 +12,11 @@ from textual.app import ComposeResult
 from textual.widgets import Button, DataTable, Static
 
 from app.tabs.move_forms import MoveForm
-from app.widgets.fields import FieldError, NumberCheck, NumberField, seconds_check
-from control.motion import moves
-from control.motion.plan import APPROACH_SPEED, MovePlan, moving_joints
+from app.widgets.fields import NumberCheck, NumberField, seconds_check
+from control.motion import form_plans
+from control.motion.fields import pose_rule
+from control.motion.plan import MovePlan
 from hw.machine import Machine
-from kinematics import Unreachable
 from kinematics.unimate import Unimate2000B
 
 POSE_FIELDS = (("x", "mm", "x"), ("y", "mm", "y"), ("z", "mm", "z"), ("γ", "°", "gamma"),
@@ -37,7 +37,7 @@ class EndPointForm(MoveForm):
 
     def fields(self) -> ComposeResult:
         for name, unit, key in POSE_FIELDS:
-            yield NumberField(name, NumberCheck(name, unit), placeholder="required",
+            yield NumberField(name, NumberCheck.of(pose_rule(name, unit)), placeholder="required",
                               id=f"pose-{key}")
         yield NumberField("ramp time", seconds_check("ramp time", optional=True),
                           placeholder="auto", id="ramp_time")
@@ -74,15 +74,11 @@ class EndPointForm(MoveForm):
         table = self.query_one("#ik-solutions", DataTable)
         state = self.query_one("#ik-state", Static)
         try:
-            pose = self.pose()
-            self.solutions = self.model.inverse(pose, near=current)
+            self.solutions = form_plans.end_point_solutions(
+                self.model, self.pose(), current, ": press the button above")
             self.problem = ""
-        except FieldError as exc:
+        except ValueError as exc:  # a FieldError, or no solution
             self.solutions, self.problem = np.zeros((0, 6)), str(exc)
-        except Unreachable as exc:
-            self.solutions = np.zeros((0, 6))
-            self.problem = (f"unreachable: {exc}. Change the position or the angles "
-                            "(the current pose is always reachable: press the button above).")
         chosen = table.cursor_row if table.row_count == len(self.solutions) else 0
         table.clear()
         for k, q in enumerate(self.solutions):
@@ -99,14 +95,5 @@ class EndPointForm(MoveForm):
         if not len(self.solutions):
             raise ValueError(self.problem or "no solution")
         k = self.query_one("#ik-solutions", DataTable).cursor_row
-        q = self.solutions[max(0, min(k, len(self.solutions) - 1))]
-        ramp_time = self.field("ramp_time").value()
-        if ramp_time is None:
-            speeds = np.array([APPROACH_SPEED * j.max_speed for j in self.machine.joints])
-            ramp_time = max(0.5, float(np.max(np.abs(q - current) / speeds)))
-        path = moves.ramp(current, q, ramp_time, dt=dt, machine=self.machine)
-        return MovePlan("end_point", f"end point, solution {k + 1}", path,
-                        meta={"pose": self.pose().tolist(), "solution": q.tolist(),
-                              "solution_index": int(k), "ramp_time": ramp_time},
-                        moving=moving_joints(path),
-                        note=f"joint-space ramp to solution {k + 1} in {ramp_time:.2f} s")
+        return form_plans.end_point(self.machine, current, self.pose(), self.solutions, k,
+                                    self.field("ramp_time").value(), dt=dt)

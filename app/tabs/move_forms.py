@@ -36,12 +36,24 @@ from app.widgets.fields import (
     seconds_check,
     set_position_limits,
 )
-from control.motion import moves
-from control.motion.plan import MovePlan, moving_joints
+from control.motion import form_plans
+from control.motion.fields import (
+    DWELL_S,
+    MAX_SEQUENCE,
+    PULSE_DUTY_PCT,
+    PULSE_MAX_S,
+    PULSE_S,
+    RAMP_TIME_S,
+    SEQUENCE_STEPS,
+    SINE_DURATION_S,
+    SINE_PERIOD_S,
+    count_rule,
+    duty_rule,
+)
+from control.motion.moves import SETTLE_TAIL_S
+from control.motion.plan import MovePlan
 from hw.machine import Machine
 from kinematics.unimate import Unimate2000B
-
-MAX_SEQUENCE = 10
 
 
 def mid_range(machine: Machine) -> np.ndarray:
@@ -116,13 +128,6 @@ class MoveForm(VerticalScroll):
     def joint(self) -> int:
         return self.query_one(JointField).index if self.machine.n_joints > 1 else 0
 
-    def start_vector(self, current: np.ndarray, j: int) -> np.ndarray:
-        start = current.copy()
-        value = self.field("start").value()
-        if value is not None:
-            start[j] = value
-        return start
-
     def joint_fields(self, what: tuple[str, ...]) -> ComposeResult:
         """A joint chooser (unless there is one joint) and position fields for it: ``start``
         may be left blank (where the joint is), the others are required."""
@@ -164,15 +169,9 @@ class StepForm(MoveForm):
         self.show_start()
 
     def plan(self, current: np.ndarray, dt: float) -> MovePlan:
-        j = self.joint()
-        start = self.start_vector(current, j)
-        target = self.field("target").value()
-        duration = self.field("duration").value()
-        path = moves.step(start, j, target, duration, dt=dt, machine=self.machine)
-        joint = self.machine.joints[j]
-        return MovePlan("step", f"step {joint.name} to {target:g}{joint.symbol}", path,
-                        meta={"joint": joint.name, "start": float(start[j]),
-                              "target": float(target)}, moving=(j,))
+        return form_plans.step(self.machine, current, self.joint(), self.field("target").value(),
+                               self.field("start").value(), self.field("duration").value(),
+                               dt=dt)
 
 
 class MultiStepForm(MoveForm):
@@ -211,13 +210,9 @@ class MultiStepForm(MoveForm):
             self.filled(field, f"{self.here[j]:.2f}")
 
     def plan(self, current: np.ndarray, dt: float) -> MovePlan:
-        typed = [self.field(f"target{j}").value() for j in range(self.machine.n_joints)]
-        targets = [current[j] if t is None else t for j, t in enumerate(typed)]
-        duration = self.field("duration").value()
-        path = moves.multi_step(current, targets, duration, dt=dt, machine=self.machine)
-        return MovePlan("multi_step", "multi-step", path,
-                        meta={"targets": [float(t) for t in targets]},
-                        moving=moving_joints(path))
+        targets = [self.field(f"target{j}").value() for j in range(self.machine.n_joints)]
+        return form_plans.multi_step(self.machine, current, targets,
+                                     self.field("duration").value(), dt=dt)
 
 
 class SequenceForm(MoveForm):
@@ -228,18 +223,18 @@ class SequenceForm(MoveForm):
 
     def fields(self) -> ComposeResult:
         joint = self.machine.joints[0]
-        yield NumberField("steps", NumberCheck("number of steps", "", 1, MAX_SEQUENCE,
-                                               integer=True), "3", id="count")
+        yield NumberField("steps", NumberCheck.of(count_rule("number of steps", MAX_SEQUENCE)),
+                          f"{SEQUENCE_STEPS}", id="count")
         for i in range(MAX_SEQUENCE):
             with Horizontal(classes="sequence-row", id=f"row{i}"):
                 yield NumberField(f"{i + 1}. position", position_check(joint, self.machine,
                                                                       f"step {i + 1} position"),
                                   id=f"pos{i}")
-                yield NumberField("dwell", seconds_check(f"step {i + 1} dwell"), "2",
+                yield NumberField("dwell", seconds_check(f"step {i + 1} dwell"), f"{DWELL_S:g}",
                                   id=f"dwell{i}")
 
     def on_mount(self) -> None:
-        self._rows(3)
+        self._rows(SEQUENCE_STEPS)
 
     @on(Input.Changed, "#count Input")
     def _count_changed(self, event: Input.Changed) -> None:
@@ -257,10 +252,7 @@ class SequenceForm(MoveForm):
         count = int(self.field("count").value() or 1)
         steps = [(self.field(f"pos{i}").value(), self.field(f"dwell{i}").value())
                  for i in range(count)]
-        path = moves.rig_sequence(current, steps, dt=dt, machine=self.machine)
-        return MovePlan("multi_step", f"sequence of {count} steps", path,
-                        meta={"steps": [[float(p), float(d)] for p, d in steps]},
-                        moving=(0,))
+        return form_plans.sequence(self.machine, current, steps, dt=dt)
 
 
 class StartEndForm(MoveForm):
@@ -268,14 +260,6 @@ class StartEndForm(MoveForm):
 
     def show_here(self) -> None:
         self.show_start()
-
-    def ends(self, current: np.ndarray) -> tuple[int, np.ndarray, np.ndarray]:
-        """The joint, and the start and end joint vectors (the others stay where they are)."""
-        j = self.joint()
-        start = self.start_vector(current, j)
-        end = start.copy()
-        end[j] = self.field("end").value()
-        return j, start, end
 
 
 class RampForm(StartEndForm):
@@ -285,20 +269,15 @@ class RampForm(StartEndForm):
 
     def fields(self) -> ComposeResult:
         yield from self.joint_fields(("start", "end"))
-        yield NumberField("ramp time", seconds_check("ramp time"), "2", id="ramp_time")
+        yield NumberField("ramp time", seconds_check("ramp time"), f"{RAMP_TIME_S:g}",
+                          id="ramp_time")
         yield NumberField("total", seconds_check("total duration", optional=True),
-                          placeholder=f"auto: ramp + {moves.SETTLE_TAIL_S:g} s", id="total")
+                          placeholder=f"auto: ramp + {SETTLE_TAIL_S:g} s", id="total")
 
     def plan(self, current: np.ndarray, dt: float) -> MovePlan:
-        j, start, end = self.ends(current)
-        ramp_time = self.field("ramp_time").value()
-        path = moves.ramp(start, end, ramp_time, self.field("total").value(), dt=dt,
-                          machine=self.machine)
-        joint = self.machine.joints[j]
-        return MovePlan("ramp", f"ramp {joint.name} to {end[j]:g}{joint.symbol}", path,
-                        meta={"joint": joint.name, "start": float(start[j]),
-                              "end": float(end[j]), "ramp_time": ramp_time},
-                        moving=(j,))
+        return form_plans.ramp(self.machine, current, self.joint(), self.field("end").value(),
+                               self.field("ramp_time").value(), self.field("start").value(),
+                               self.field("total").value(), dt=dt)
 
 
 class SineForm(StartEndForm):
@@ -309,19 +288,14 @@ class SineForm(StartEndForm):
 
     def fields(self) -> ComposeResult:
         yield from self.joint_fields(("start", "end"))
-        yield NumberField("period T", seconds_check("period"), "4", id="period")
-        yield NumberField("duration", seconds_check("duration"), "8", id="duration")
+        yield NumberField("period T", seconds_check("period"), f"{SINE_PERIOD_S:g}", id="period")
+        yield NumberField("duration", seconds_check("duration"), f"{SINE_DURATION_S:g}",
+                          id="duration")
 
     def plan(self, current: np.ndarray, dt: float) -> MovePlan:
-        j, start, end = self.ends(current)
-        period, duration = self.field("period").value(), self.field("duration").value()
-        path = moves.sine(start, end, period, duration, dt=dt, machine=self.machine)
-        joint = self.machine.joints[j]
-        return MovePlan("sine", f"sine {joint.name} {start[j]:g}↔{end[j]:g}{joint.symbol}",
-                        path, meta={"joint": joint.name, "start": float(start[j]),
-                                    "end": float(end[j]), "period": period,
-                                    "duration": duration},
-                        moving=(j,))
+        return form_plans.sine(self.machine, current, self.joint(), self.field("end").value(),
+                               self.field("period").value(), self.field("duration").value(),
+                               self.field("start").value(), dt=dt)
 
 
 class PulseForm(MoveForm):
@@ -331,17 +305,13 @@ class PulseForm(MoveForm):
             "drives the ram up. The controller stops it at a limit.")
 
     def fields(self) -> ComposeResult:
-        yield NumberField("duty", NumberCheck("duty", " %", -100, 100, nonzero=True), "20",
-                          id="duty")
-        yield NumberField("duration", seconds_check("duration", high=60), "1", id="duration")
+        yield NumberField("duty", NumberCheck.of(duty_rule()), f"{PULSE_DUTY_PCT:g}", id="duty")
+        yield NumberField("duration", seconds_check("duration", high=PULSE_MAX_S), f"{PULSE_S:g}",
+                          id="duration")
 
     def plan(self, current: np.ndarray, dt: float) -> MovePlan:
-        duty, duration = self.field("duty").value(), self.field("duration").value()
-        samples = round(duration / dt) + 1
-        profile = np.zeros((samples, self.machine.n_joints))
-        profile[:, 0] = duty
-        return MovePlan("set_pulse", f"pulse {duty:g} % for {duration:g} s", profile=profile,
-                        meta={"duty": duty, "duration": duration}, moving=(0,))
+        return form_plans.pulse(self.machine, self.field("duty").value(),
+                                self.field("duration").value(), dt=dt)
 
 
 class InitialiseForm(MoveForm):

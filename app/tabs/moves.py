@@ -14,9 +14,9 @@ when it starts elsewhere than where the joints are (the thesis's move() to the s
 position; grey in the plot, left out of the result). The forms take where the joints
 are from the controller's status when they are shown and as it changes (``MoveForm``:
 nothing they show is stale). The wait for the end runs in a worker; the result appears when
-it ends, by the move's kind (``move_results``): a step's response, a smooth path's
-tracking error, a sine's amplitude ratio and phase lag, for each joint that moved; a move
-that stopped early shows where.
+it ends, by the move's kind (``control.motion.moves.summary_cells``): a step's response, a
+smooth path's tracking error, a sine's amplitude ratio and phase lag, for each joint that
+moved; a move that stopped early shows where.
 """
 
 from __future__ import annotations
@@ -45,7 +45,6 @@ from textual.widgets.option_list import Option
 from app.desk import Desk
 from app.messages import RunsChanged
 from app.plotting.run_plot import path_compact, path_figure
-from app.tabs import move_results
 from app.tabs.end_point_form import EndPointForm
 from app.tabs.move_forms import (
     InitialiseForm,
@@ -65,6 +64,7 @@ from app.widgets.figure_plot import FigurePlot
 from app.widgets.live_text import LiveText
 from control.client import ControlClient, MoveHandle, MoveResult
 from control.layout import Status
+from control.motion.moves import summary_cells, summary_columns
 from control.motion.plan import MovePlan, Summary, moving_joints
 from control.motion.robot_model import has_unimate_model
 from control.recorder import Run
@@ -219,7 +219,7 @@ class MovesTab(TabPage):
         current = self.current()
         if isinstance(form, EndPointForm):
             form.solve(current)
-        dt = self.machine.sample_time_s
+        dt = self.desk.dt
         return form.plan(current, dt).approached(current, self.machine, dt)
 
     def preview(self) -> None:
@@ -232,7 +232,7 @@ class MovesTab(TabPage):
             title.update(Text(str(exc), "yellow"))
             plot.show(None)
             return
-        dt = self.machine.sample_time_s
+        dt = self.desk.dt
         names = [j.name for j in self.machine.joints]
         if plan.path is not None:
             t = np.arange(plan.samples) * dt
@@ -252,7 +252,7 @@ class MovesTab(TabPage):
             summary = "initialise: drives down to the bottom stop, then zeroes the encoder"
         note = f" · {plan.note}" if plan.note else ""
         title.update(Text.assemble(("preview  ", "bold"), summary, note, "\n",
-                                   start_text(plan, current, self.machine)))
+                                   start_text(plan, current, self.machine, dt)))
 
     # -- running ----------------------------------------------------------------------------
 
@@ -316,7 +316,7 @@ class MovesTab(TabPage):
         if result.complete:
             self._state(Text(f"{plan.title}: {result.status} · {saved}", "green"))
         else:
-            dt = self.machine.sample_time_s
+            dt = self.desk.dt
             self._state(Text(
                 f"{plan.title}: {result.status} at {result.run.samples * dt:.2f} of "
                 f"{plan.samples * dt:.2f} s ({100 * result.run.samples / max(1, plan.samples):.0f}"
@@ -337,9 +337,9 @@ class MovesTab(TabPage):
     def _result_table(self, summaries: list[tuple[str, Summary]]) -> None:
         table = self.query_one("#move-result", DataTable)
         table.clear(columns=True)
-        table.add_columns(*move_results.columns(summaries))
+        table.add_columns(*summary_columns(summaries))
         for label, s in summaries:
-            table.add_row(*move_results.cells(label, s))
+            table.add_row(*summary_cells(label, s))
 
     def _state(self, text: Text) -> None:
         self.query_one("#move-state", LiveText).show(text)
@@ -354,19 +354,19 @@ class MovesTab(TabPage):
         if status.move_id == handle.move_id and status.move_total:
             bar = self.query_one("#move-progress", ProgressBar)
             bar.update(total=status.move_total, progress=status.move_done)
-            dt = self.machine.sample_time_s
+            dt = self.desk.dt
             self._state(Text(f"running {handle.kind}: {status.move_done * dt:.2f} / "
                              f"{status.move_total * dt:.2f} s", "cyan"))
 
 
 
-def start_text(plan: MovePlan, current: np.ndarray, machine: Machine, most: int = 3) -> Text:
+def start_text(plan: MovePlan, current: np.ndarray, machine: Machine, dt: float,
+               most: int = 3) -> Text:
     """Where the move starts, from where the joints are now: "starts here" with the moving
     joints' positions, or the approach ramp in front and the joints it moves (``most`` of
     them named)."""
     if plan.path is None:
         return Text("starts where the joints are", "dim")
-    dt = machine.sample_time_s
     start = plan.path[plan.approach]
     joints = machine.joints
     if not plan.approach:

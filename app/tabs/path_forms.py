@@ -4,9 +4,7 @@ tool's x y z with γ and β held (section 6.4)."""
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 from rich.text import Text
@@ -14,12 +12,15 @@ from textual import on, work
 from textual.app import ComposeResult
 from textual.containers import Horizontal
 from textual.message import Message
-from textual.widgets import Button, Input, Label, Static, Switch, TextArea
+from textual.widgets import Button, Input, Label, Select, Static, Switch, TextArea
 
 from app.tabs.move_forms import MoveForm, mid_range
 from app.widgets.fields import NumberCheck, NumberField
-from control.motion.path_files import PathFileError, PathPoints, read_path, resample
-from control.motion.plan import MovePlan, moving_joints
+from control.motion import form_plans
+from control.motion.fields import VIA_SPEED, fraction_rule
+from control.motion.path_files import PathFileError, PathPoints, read_path
+from control.motion.plan import MovePlan
+from control.motion.positions import Position
 from control.motion.robot_model import has_unimate_model
 from hw.machine import Machine
 from kinematics.unimate import Unimate2000B
@@ -93,11 +94,7 @@ class PathFileForm(MoveForm):
         wanted = self.query_one("#path-file", Input).value
         if self.points is None or wanted != self.loaded_from:
             raise ValueError("load the file first: type its path and press Enter")
-        hold = np.clip(current, self.machine.lower, self.machine.upper)
-        path = resample(self.points.held_at(hold), dt)
-        return MovePlan("path", f"path {Path(self.loaded_from).name}", path,
-                        meta={"file": str(Path(self.loaded_from).expanduser().resolve())},
-                        moving=moving_joints(path))
+        return form_plans.path_file(self.machine, current, self.points, self.loaded_from, dt=dt)
 
 
 class ViaPointsForm(MoveForm):
@@ -106,17 +103,28 @@ class ViaPointsForm(MoveForm):
     HELP = ("A smooth path from here through points, one per line: every joint's position "
             "(joint space, section 6.4's via points), or with Cartesian on the tool's x y z in "
             "mm with γ and β held (section 6.4). Numbers separated by spaces or commas.")
+    named: tuple[Position, ...] = ()  # home, park and the taught positions, as offered
 
     def fields(self) -> ComposeResult:
         if self.cartesian_allowed:
             with Horizontal(classes="field"):
                 yield Label("Cartesian (x y z)", classes="field-label")
                 yield Switch(value=False, id="via-cartesian")
-        yield NumberField("speed fraction", NumberCheck("speed fraction", "", 0.0, 1.0,
-                                                        strict_low=True), "0.5", id="speed")
+        yield NumberField("speed fraction", NumberCheck.of(fraction_rule("speed fraction")),
+                          f"{VIA_SPEED:g}", id="speed")
         yield Label("points", classes="field-label")
         yield TextArea(id="via-points", soft_wrap=False, show_line_numbers=True)
         yield Button("Add the current position", id="via-add", compact=True)
+        with Horizontal(classes="field"):
+            yield Select[int]([], prompt="a named position", id="via-named", compact=True,
+                              classes="field-select")
+            yield Button("Add it", id="via-add-named", compact=True)
+
+    def offer(self, positions: tuple[Position, ...]) -> None:
+        """The named positions (home, park, taught: the Positions tab's) the points may use."""
+        self.named = positions
+        self.query_one("#via-named", Select).set_options(
+            (p.name, i) for i, p in enumerate(positions))
 
     @property
     def cartesian_allowed(self) -> bool:
@@ -144,46 +152,30 @@ class ViaPointsForm(MoveForm):
             self.notify("the controller has not reported where the joints are yet",
                         severity="warning")
             return
-        here = np.array(self.here)
-        row = self.model.pose(here)[:3] if self.cartesian else here
+        self.append(np.array(self.here))
+
+    @on(Button.Pressed, "#via-add-named")
+    def _add_named(self, event: Button.Pressed) -> None:
+        event.stop()
+        chosen = self.query_one("#via-named", Select).value
+        if not isinstance(chosen, int):
+            self.notify("choose a named position first (teach them on the Positions tab)",
+                        severity="warning")
+            return
+        self.append(np.array(self.named[chosen].joints))
+
+    def append(self, q: np.ndarray) -> None:
+        """Add the joints ``q (J,)`` as a point (their x y z when Cartesian)."""
+        row = self.model.pose(q)[:3] if self.cartesian else q
         area = self.query_one("#via-points", TextArea)
         text = area.text.rstrip("\n")
-        area.text = (text + "\n" if text else "") + " ".join(f"{v:.2f}" for v in row)
+        area.text = (text + "\n" if text else "") + " ".join(f"{v:.3f}" for v in row)
 
     def points(self) -> np.ndarray:
         """The typed points ``(M, J)`` or ``(M, 3)``; ValueError naming the line and the fix."""
-        width = 3 if self.cartesian else self.machine.n_joints
-        what = "x y z (mm)" if self.cartesian else f"{width} joint positions"
-        rows = []
-        for n, line in enumerate(self.query_one("#via-points", TextArea).text.splitlines(), 1):
-            parts = line.replace(",", " ").split()
-            if not parts:
-                continue
-            try:
-                row = [float(p) for p in parts]
-            except ValueError:
-                raise ValueError(f"point line {n}: {line.strip()!r} is not numbers; "
-                                 f"type {what}") from None
-            if len(row) != width or not all(math.isfinite(v) for v in row):
-                raise ValueError(f"point line {n}: {len(row)} numbers; type {what}")
-            rows.append(row)
-        if not rows:
-            raise ValueError(f"type at least one point, one per line: {what}")
-        return np.array(rows)
+        return form_plans.via_point_rows(self.query_one("#via-points", TextArea).text,
+                                         self.machine, self.cartesian)
 
     def plan(self, current: np.ndarray, dt: float) -> MovePlan:
-        from control.motion.cartesian import cartesian_path  # scipy's splines: loaded on first use
-        from control.motion.trajectory import via_path
-
-        points = self.points()
-        fraction = self.field("speed").value()
-        meta = {"points": points.tolist(), "speed_fraction": fraction}
-        if self.cartesian:
-            path = cartesian_path(current, points, self.machine, dt=dt,
-                                  speed_fraction=fraction).q
-            return MovePlan("cartesian", f"Cartesian path through {len(points)} points", path,
-                            meta=meta, moving=moving_joints(path))
-        path = via_path(np.vstack([current, points]), self.machine, dt=dt,
-                        speed_fraction=fraction).q
-        return MovePlan("via_points", f"path through {len(points)} via points", path,
-                        meta=meta, moving=moving_joints(path))
+        return form_plans.via_points(self.machine, current, self.points(),
+                                     self.field("speed").value(), self.cartesian, dt=dt)

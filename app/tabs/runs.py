@@ -11,7 +11,6 @@ they can be saved elsewhere.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from datetime import datetime
 from pathlib import Path
 from typing import ClassVar
 
@@ -25,17 +24,11 @@ from textual.widgets import Button, DataTable, Input, Static
 
 from app.desk import Desk
 from app.plotting.figure import Figure
-from app.plotting.run_plot import export, joint_figure, overview, steady_velocity
+from app.plotting.run_plot import export, steady_velocity, view_figure, view_slug, views
+from app.run_text import local_time, run_lines
 from app.tabs.tab import TabPage
 from app.widgets.figure_plot import FigurePlot, panel_size
 from control.recorder import RecorderError, Run, RunInfo, list_runs, load_run, save_run
-
-
-def local_time(iso: str) -> str:
-    try:
-        return datetime.fromisoformat(iso).astimezone().strftime("%Y-%m-%d %H:%M:%S")
-    except ValueError:
-        return iso or "?"
 
 
 class RunsTab(TabPage):
@@ -178,13 +171,7 @@ class RunsTab(TabPage):
     def views(self) -> list[str]:
         """The plots of the open run: plotsix of as many joints as the plot has room for
         (the thesis's three), then plotdata of each joint."""
-        if self.run is None:
-            return []
-        n = len(self.run.joint_names)
-        group = self.joints_per_view()
-        groups = ([f"plotsix {a + 1}" + (f"–{min(n, a + group)}" if group > 1 else "")
-                   for a in range(0, n, group)] if n > 1 else [])
-        return groups + [f"plotdata {name}" for name in self.run.joint_names]
+        return [] if self.run is None else views(self.run, self.joints_per_view())
 
     def joints_per_view(self) -> int:
         """How many joints a plotsix view shows: three, or as many as the plot can hold."""
@@ -198,17 +185,7 @@ class RunsTab(TabPage):
         self.run = run
         self.run_name = name
         self.view = 0
-        meta = run.meta
-        lines = [f"{name}", f"{run.machine} · {run.kind} · {run.status}",
-                 f"started {local_time(run.start_time)} · {run.samples} samples at "
-                 f"{run.sample_time_s * 1e3:g} ms"]
-        if "backend" in meta:
-            lines.append(f"backend {meta['backend']}")
-        for key in ("joint", "target", "targets", "ramp_time", "period", "duration", "file",
-                    "duty", "pose"):
-            if key in meta:
-                lines.append(f"{key}: {meta[key]}")
-        self.query_one("#runs-meta", Static).update("\n".join(lines))
+        self.query_one("#runs-meta", Static).update("\n".join(run_lines(run, name)))
         self.draw()
 
     def action_next_view(self) -> None:
@@ -245,19 +222,13 @@ class RunsTab(TabPage):
         """The figure of the current view."""
         run = self.run
         assert run is not None
-        view = self.views()[self.view]
-        title = f"{self.run_name} · {run.status}"
-        if view.startswith("plotsix"):
-            joints = [int(k) for k in view.split(" ")[1].split("–")]
-            return overview(run, range(joints[0] - 1, joints[-1]), f"{title} · {view}")
-        j = run.joint_names.index(view.split(" ", 1)[1])
-        return joint_figure(run, j, f"{title} · {view}")
+        return view_figure(run, self.views()[self.view], f"{self.run_name} · {run.status}")
 
     def action_export(self) -> None:
         if self.run is None:
             self.notify("open a run first (Enter on the list)", severity="warning")
             return
-        view = self.views()[self.view].replace(" ", "-").replace("–", "-").replace("/", "")
+        view = view_slug(self.views()[self.view])
         stem = self.run_name.replace(" ", "-")
         self._export(self.desk.data_dir / "plots" / f"{stem}-{view}", self.figure())
 

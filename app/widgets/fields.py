@@ -7,7 +7,6 @@ in the classes: tabs lay out rows of their own with the same classes (``.field``
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 
 from textual.app import ComposeResult
@@ -15,73 +14,29 @@ from textual.containers import Horizontal, Vertical
 from textual.validation import ValidationResult, Validator
 from textual.widgets import Input, Label, Select, Static
 
+from control.motion.fields import FieldError, NumberRule, position_rule, seconds_rule
 from control.motion.path_files import MAX_MOVE_S
 from hw.machine import Joint, Machine
 
+__all__ = ["FieldError", "JointField", "NumberCheck", "NumberField", "position_check",
+           "seconds_check", "set_position_limits"]
 
-class FieldError(ValueError):
-    """A field holds no usable value; the message names the field and the fix."""
 
-
-class NumberCheck(Validator):
-    """A finite number, optionally within ``low…high`` (or above ``low`` when ``strict``).
-
-    ``what`` names the quantity in messages (``"Up/Down target"``), ``unit``
-    follows numbers, ``context`` is appended to range errors (``"machine rig"``).
-    An empty field is valid when ``optional`` (the form then uses its default).
-    """
+class NumberCheck(NumberRule, Validator):
+    """A ``NumberRule`` (``control.motion.fields``) checked as the field is typed."""
 
     def __init__(self, what: str, unit: str = "", low: float | None = None,
                  high: float | None = None, *, strict_low: bool = False, optional: bool = False,
                  nonzero: bool = False, integer: bool = False, context: str = "") -> None:
-        super().__init__()
-        self.what = what
-        self.unit = unit
-        self.low = low
-        self.high = high
-        self.strict_low = strict_low
-        self.optional = optional
-        self.nonzero = nonzero
-        self.integer = integer
-        self.context = context
+        NumberRule.__init__(self, what, unit, low, high, strict_low, optional, nonzero, integer,
+                            context)
+        Validator.__init__(self)
 
-    def parse(self, text: str) -> float | None:
-        """The value of ``text``, None for an empty optional field; FieldError otherwise."""
-        text = text.strip()
-        if not text:
-            if self.optional:
-                return None
-            raise FieldError(f"{self.what}: enter a number")
-        try:
-            value = float(text)
-        except ValueError:
-            raise FieldError(f"{self.what}: {text!r} is not a number; type digits such as "
-                             "12.5") from None
-        if not math.isfinite(value):
-            raise FieldError(f"{self.what}: {text} is not a usable number; enter a finite "
-                             "value")
-        if self.integer and value != int(value):
-            raise FieldError(f"{self.what}: enter a whole number, not {text}")
-        if self.nonzero and value == 0:
-            raise FieldError(f"{self.what}: must not be 0")
-        self._check_range(value)
-        return value
-
-    def _check_range(self, value: float) -> None:
-        low, high, u = self.low, self.high, self.unit
-        ctx = f" ({self.context})" if self.context else ""
-        too_low = low is not None and (value <= low if self.strict_low else value < low)
-        too_high = high is not None and value > high
-        if not (too_low or too_high):
-            return
-        if low is not None and high is not None:
-            rng = f"{low:g}…{high:g}{u}"
-            raise FieldError(f"{self.what} {value:g}{u} is outside {rng}{ctx}; enter a value in "
-                             "that range")
-        if too_low:
-            bound = "above" if self.strict_low else "at least"
-            raise FieldError(f"{self.what} must be {bound} {low:g}{u}{ctx}, not {value:g}{u}")
-        raise FieldError(f"{self.what} must be at most {high:g}{u}{ctx}, not {value:g}{u}")
+    @classmethod
+    def of(cls, rule: NumberRule) -> NumberCheck:
+        return cls(rule.what, rule.unit, rule.low, rule.high, strict_low=rule.strict_low,
+                   optional=rule.optional, nonzero=rule.nonzero, integer=rule.integer,
+                   context=rule.context)
 
     def validate(self, value: str) -> ValidationResult:
         try:
@@ -162,20 +117,16 @@ class NumberField(Vertical):
 def position_check(joint: Joint, machine: Machine, what: str, optional: bool = False
                    ) -> NumberCheck:
     """A position of ``joint`` inside its limits."""
-    return NumberCheck(f"{joint.name} {what}", joint.symbol, joint.lower, joint.upper,
-                       optional=optional, context=f"machine {machine.name}")
+    return NumberCheck.of(position_rule(joint, machine, what, optional))
 
 
 def seconds_check(what: str, optional: bool = False, high: float = MAX_MOVE_S) -> NumberCheck:
-    return NumberCheck(what, " s", 0.0, high, strict_low=True, optional=optional)
+    return NumberCheck.of(seconds_rule(what, optional, high))
 
 
 def set_position_limits(field: NumberField, joint: Joint, machine: Machine, what: str) -> None:
     """Point ``field`` at another joint: new limits, unit and message, checked again."""
-    field.check.what = f"{joint.name} {what}"
-    field.check.unit = joint.symbol
-    field.check.low, field.check.high = joint.lower, joint.upper
-    field.check.context = f"machine {machine.name}"
+    field.check.aim(joint, machine, what)
     field.query_one(".field-unit", Static).update(joint.symbol)
     field.revalidate()
 

@@ -2,12 +2,15 @@
 with the braille raster (``plot_strips``), as many columns as the panels need to keep at
 least ``MIN_ROWS`` rows of plot each. A figure whose panels cannot all get that much room
 is drawn as its ``compact`` stand-in (one panel, say), and says so rather than squeezing
-plots to nothing; ``fits`` tells a caller beforehand."""
+plots to nothing; ``fits`` tells a caller beforehand. ``figure_text`` draws a figure the
+same way as plain text (``servodesk runs export --format txt``)."""
 
 from __future__ import annotations
 
+import io
 import math
 
+from rich.console import Console
 from rich.segment import Segment
 from rich.style import Style
 from rich.text import Text
@@ -96,17 +99,38 @@ class FigurePlot(Widget):
                 Style(dim=True))])
             return
         self.drawn = figure
-        cells = self.panel_regions()
-        for panel, (x, y, w, h) in zip(figure.panels, cells, strict=True):
-            for row, strip in enumerate(_panel_strips(panel, w, h, self)):
-                line = self._lines[y + row]
-                self._lines[y + row] = Strip.join([line.crop(0, x), strip,
-                                                   line.crop(x + w, size.width)])
+        self._lines = figure_strips(figure, size, self.app.console)
 
     def render_line(self, y: int) -> Strip:
         if self.size != self._drawn_for:
             self._draw()
         return self._lines[y] if y < len(self._lines) else Strip.blank(self.size.width)
+
+
+def figure_strips(figure: Figure, size: Size, console: Console) -> list[Strip]:
+    """The figure's panels in their grid filling ``size``, one strip per row; blank if they
+    do not fit (``grid``)."""
+    lines = [Strip.blank(size.width) for _ in range(size.height)]
+    layout = grid(len(figure.panels), figure.columns, size)
+    if layout is None:
+        return lines
+    cells = _cells(len(figure.panels), *layout, size)
+    for panel, (x, y, w, h) in zip(figure.panels, cells, strict=True):
+        for row, strip in enumerate(_panel_strips(panel, w, h, console)):
+            line = lines[y + row]
+            lines[y + row] = Strip.join([line.crop(0, x), strip, line.crop(x + w, size.width)])
+    return lines
+
+
+def figure_text(figure: Figure, width: int = 160, height: int = 48) -> str:
+    """The figure as plain text, its title above the panels drawn as on the screen (braille
+    dots) at ``width × height``. ValueError if its panels do not fit."""
+    size = Size(width, height - 1)
+    if grid(len(figure.panels), figure.columns, size) is None:
+        raise ValueError(f"{len(figure.panels)} panel(s) do not fit {width}×{height}")
+    console = Console(width=width, file=io.StringIO(), color_system=None)
+    rows = [strip.text.rstrip() for strip in figure_strips(figure, size, console)]
+    return "\n".join([figure.title, *rows]).rstrip() + "\n"
 
 
 def _cells(count: int, columns: int, rows: int, size: Size) -> list[tuple[int, int, int, int]]:
@@ -116,7 +140,7 @@ def _cells(count: int, columns: int, rows: int, size: Size) -> list[tuple[int, i
             for k in range(count)]
 
 
-def _panel_strips(panel: Panel, width: int, height: int, widget: Widget) -> list[Strip]:
+def _panel_strips(panel: Panel, width: int, height: int, console: Console) -> list[Strip]:
     x0, x1 = panel.x_range()
     title = Text(panel.title + (f" ({panel.unit})" if panel.unit else ""), "bold")
     for line in panel.lines:
@@ -125,5 +149,5 @@ def _panel_strips(panel: Panel, width: int, height: int, widget: Widget) -> list
             title.append(line.label)
     traces = [Trace(line.x, line.y, Style(color=line.color)) for line in panel.lines]
     return plot_strips(traces, (x0, x1), panel.y_range(), title, width, height,
-                       widget.app.console, zero_line=panel.zero_line,
+                       console, zero_line=panel.zero_line,
                        x_labels=(f"{x0:.2f}", "", f"{x1:.2f} s"))

@@ -109,6 +109,43 @@ class SineSummary:
     notes: tuple[str, ...] = ()
 
 
+Summary = StepSummary | TrackingSummary | SineSummary
+
+# The result table of a move, by its kind (``METRIC``): the Moves tab, ``servodesk move`` and
+# ``servodesk runs show``. The columns are short, so the table fits 80 columns; units follow
+# the numbers.
+SUMMARY_COLUMNS = {
+    "step": ("joint", "step", "overshoot", "rise s", "settle s", "steady e", "max |e|"),
+    "tracking": ("joint", "travel", "RMS e", "max |e|", "at s", "end e"),
+    "sine": ("joint", "amplitude", "ratio", "lag °", "period s", "RMS e", "max |e|"),
+}
+
+
+def summary_columns(rows: Sequence[tuple[str, Summary]]) -> tuple[str, ...]:
+    """The table's columns for rows of one kind (a step's when there are none)."""
+    return SUMMARY_COLUMNS[rows[0][1].METRIC] if rows else SUMMARY_COLUMNS["step"]
+
+
+def summary_cells(label: str, s: Summary) -> tuple[str, ...]:
+    """One row of the table, as ``SUMMARY_COLUMNS[s.METRIC]`` names them."""
+    u = "°" if s.unit == "deg" else f" {s.unit}"
+    if isinstance(s, StepSummary):
+        return (label, f"{s.step:+.2f}{u}", f"{s.overshoot:.2f}{u} {s.overshoot_pct:.0f}%",
+                _cell(s.rise_time_s, ".3f"), _cell(s.settling_time_s, ".3f"),
+                _cell(s.steady_state_error, "+.3f", u), _cell(s.max_abs_error, ".3f", u))
+    if isinstance(s, TrackingSummary):
+        return (label, _cell(s.travel, ".2f", u), _cell(s.rms_error, ".3f", u),
+                _cell(s.max_abs_error, ".3f", u), _cell(s.max_error_time_s, ".2f"),
+                _cell(s.final_error, "+.3f", u))
+    return (label, _cell(s.amplitude, ".2f", u), _cell(s.amplitude_ratio, ".3f"),
+            _cell(s.phase_lag_deg, "+.1f"), _cell(s.period_s, ".2f"),
+            _cell(s.rms_error, ".3f", u), _cell(s.max_abs_error, ".3f", u))
+
+
+def _cell(value: float | None, spec: str, unit: str = "") -> str:
+    return "–" if value is None or not math.isfinite(value) else f"{value:{spec}}{unit}"
+
+
 def times(n: int, dt: float) -> np.ndarray:
     """``t (n,)`` in seconds: ``k·dt``."""
     return np.arange(n) * dt

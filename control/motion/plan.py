@@ -32,7 +32,7 @@ APPROACH_SPEED = 0.5  # approach ramps keep this fraction of each joint's max_sp
 APPROACH_MIN_S = 0.2
 APPROACH_SETTLE_S = 0.5
 
-Summary = moves.StepSummary | moves.TrackingSummary | moves.SineSummary
+Summary = moves.Summary
 
 
 @dataclass(frozen=True)
@@ -153,3 +153,17 @@ def _finite(value: object) -> object:
     if isinstance(value, tuple):
         return list(value)
     return value
+
+
+def run_summaries(run: Run, machine: Machine) -> list[tuple[str, Summary]]:
+    """``summaries`` of a saved run, from what its metadata says of its plan (the approach in
+    front, the joints it meant to move; ``ControlClient`` records them); none for an open-loop
+    run, which follows no path."""
+    meta = run.meta
+    if meta.get("open_loop"):
+        return []
+    moving = meta.get("moving")
+    plan = MovePlan(run.kind, run.kind, path=run.desired, meta=dict(meta),
+                    approach=int(meta.get("approach_samples", 0)),
+                    moving=tuple(moving) if moving is not None else moving_joints(run.desired))
+    return summaries(plan, run, machine)

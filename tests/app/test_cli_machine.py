@@ -33,4 +33,5 @@ def test_a_machine_is_described_from_its_file(capsys: pytest.CaptureFixture[str]
     assert cli.main(["machine", str(BUILTIN / "rig.toml")]) == 0
     out, err = capsys.readouterr()
     assert out.startswith(f"Single-axis hydraulic test rig (rig) from {BUILTIN / 'rig.toml'}\n")
+    assert out.endswith("\nhome: Ram 600mm\npark: Ram 10mm\n")  # the named positions
     assert err == ""

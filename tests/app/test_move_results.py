@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from app.tabs import move_results
 from control.motion import moves
 from control.motion.plan import MovePlan, summaries
 from control.recorder import Run
@@ -28,7 +27,7 @@ def table(plan: MovePlan, lag_s: float = 0.05) -> tuple[tuple[str, ...], list[tu
     run = Run.from_machine(UNIMATE, plan.kind, "complete", {}, t, path, actual,
                            np.zeros_like(path))
     rows = summaries(plan, run, UNIMATE)
-    return move_results.columns(rows), [move_results.cells(label, s) for label, s in rows]
+    return moves.summary_columns(rows), [moves.summary_cells(label, s) for label, s in rows]
 
 
 def test_a_step_shows_its_response_for_the_joint_that_moved() -> None:

@@ -219,3 +219,39 @@ def test_velocity_feed_forward_adds_kv_times_the_desired_velocity() -> None:
     assert law.update(0, 0.0, velocity=200.0) == pytest.approx(10.0)  # 0.05 %/(mm/s) x 200 mm/s
     assert law.update(0, 0.0, velocity=0.0) == 0.0
     assert DifferenceLaw(machine, base, 0.001).update(0, 0.0, velocity=200.0) == 0.0
+
+
+# -- the listings' slips (errata), for the thesis's timing mode ---------------------------------
+
+
+def test_the_derivative_slip_multiplies_by_dt_where_eq_3_3_divides() -> None:
+    dt, kd = 0.001, 0.01
+    law = DifferenceLaw(plain_machine(), one_joint(kd=kd), dt, frozenset({"derivative"}))
+    # PDcontrol.c: (11e(k) − 18e(k−1) + 9e(k−2) − 2e(k−3)) / 6 * SampleTime: S·kd·Δt/6
+    assert run(law, [0.5, 1.0, 1.5, 2.0]) == pytest.approx(
+        [kd * s * dt / 6 for s in (5.5, 2.0, 3.0, 3.0)], rel=1e-9)
+
+
+def test_the_integral_slip_sums_the_oldest_error_of_four() -> None:
+    law = DifferenceLaw(plain_machine(), one_joint(ki=100.0), 0.01,
+                        frozenset({"integral_oldest"}))
+    # Distance[0], the oldest of four: zero for three ticks, then the first error
+    run(law, [1.0, 2.0, 3.0])
+    assert law.state(0).integral == 0.0
+    run(law, [4.0])
+    assert law.state(0).integral == pytest.approx(100.0 * 1.0 * 0.01)
+
+
+def test_the_minimum_pwm_slip_adds_pmin_unscaled() -> None:
+    up, _ = output_min_pwm(UNIMATE.joints[0])
+    c = pi(UNIMATE, kp=1.0, ki=0.0)
+    law = DifferenceLaw(UNIMATE, c, 0.001, frozenset({"min_pwm"}))
+    fixed = DifferenceLaw(UNIMATE, c, 0.001)
+    e = 10.0 * UNIMATE.joints[0].gain_unit  # u = 10 % before the minimum-PWM map
+    assert law.update(0, e) == pytest.approx(10.0 + up)  # (1 − pmin/100) is 1 in int division
+    assert fixed.update(0, e) == pytest.approx((1 - up / 100) * 10.0 + up)
+
+
+def test_an_unknown_slip_is_refused() -> None:
+    with pytest.raises(ValueError, match="unknown slips"):
+        DifferenceLaw(plain_machine(), one_joint(kp=(1.0,)), 0.001, frozenset({"typo"}))

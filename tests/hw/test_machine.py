@@ -59,6 +59,20 @@ def test_rig_carries_the_thesis_numbers() -> None:
     assert m.coefficients["observer"].w[0] == (95.1, -11.1)
 
 
+def test_home_and_park_come_from_the_machine_file() -> None:
+    unimate, rig = load_machine("unimate2000b"), load_machine("rig")
+    assert unimate.home == (1300.0, 0.0, 0.0, 0.0, 90.0, 0.0)
+    assert unimate.park == (1000.0, 0.0, -20.0, 0.0, 90.0, 0.0)
+    assert (rig.home, rig.park) == ((600.0,), (10.0,))
+    for machine in (unimate, rig):
+        for q in (machine.home, machine.park):
+            assert machine.check_targets(q) == q
+    lines = "".join(line for line in UNIMATE_TEXT.splitlines(keepends=True)
+                    if not line.startswith(("home =", "park =")))
+    bare = parse_machine(lines, MACHINES / "unimate2000b.toml")
+    assert (bare.home, bare.park) == (None, None)  # optional: a machine may have neither
+
+
 def test_user_machine_from_a_path(tmp_path: Path) -> None:
     path = tmp_path / "gantry.toml"
     path.write_text(RIG_TEXT.replace('name = "rig"', 'name = "gantry"'))
@@ -147,6 +161,16 @@ BAD = [
      r"joints: 17 \[\[joints\]\] tables; the I/O board drives at most 16$"),
     (("[coefficients.thesis_pi]", '[coefficients."\\u001b[31mred"]'),
      r"coefficients: '\\x1b\[31mred': character 0 is '\\x1b'"),
+    # issue 14: home and park, one in-limit number per joint
+    (("home = [1300.0, 0.0, 0.0, 0.0, 90.0, 0.0]", "home = [1300.0, 0.0, 0.0, 0.0, 90.0]"),
+     r"machine\.home: must have 6 entries, got 5$"),
+    (("park = [1000.0, 0.0, -20.0", "park = [1000.0, 0.0, -30.0"),
+     r"machine\.park\[2\]: Up/Down at -30° is outside its limits -27…30°$"),
+    (("home = [1300.0, 0.0", "home = [1300.0, nan"), r"machine\.home\[1\]: must be finite"),
+    (("park = [1000.0", 'park = ["out"'), r"machine\.park\[0\]: must be a number, got 'out'"),
+    (("home = [1300.0, 0.0, 0.0, 0.0, 90.0, 0.0]", "home = 1300.0"),
+     r"machine\.home: must be a list of numbers, got 1300\.0$"),
+    (("home = [", "hom = ["), r"machine: unknown key\(s\) hom"),
 ]
 
 

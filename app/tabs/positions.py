@@ -1,0 +1,378 @@
+"""Positions: home and park from the machine file, and positions taught by the operator.
+
+The table lists every position with its joints and, for the Unimate, its pose
+(x, y, z, γ, β, α through the forward kinematics, eq. 4.11). ``t`` (or ^T on any
+tab) teaches where the joints are under a name; ``g`` goes to the selected one: a
+joint-space move at the speed fraction typed (``ControlClient.go_to``: every joint
+within that fraction of its max_speed and max_accel). ``r`` renames, Delete deletes,
+``l`` reads the file again after an edit by hand. Taught positions are kept in the
+data directory (``control/motion/positions.py``, ``docs/motion.md``); every change
+reads the file, changes it and writes it atomically in a worker, so an edit made by
+hand meanwhile is kept, and a damaged file is reported, never overwritten.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+from rich.text import Text
+from textual import work
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Horizontal, Vertical
+from textual.message import Message
+from textual.widgets import DataTable, Static
+
+from app.desk import Desk
+from app.messages import RunsChanged
+from app.tabs.status import POSE_LABELS
+from app.tabs.tab import TabPage
+from app.widgets.dialogs import ConfirmScreen, EditValueScreen
+from app.widgets.fields import FieldError, NumberCheck, NumberField
+from app.widgets.live_text import LiveText
+from control.client import ControlClient, ControllerError, MoveHandle, MoveResult
+from control.motion.positions import (
+    Position,
+    PositionBook,
+    PositionsError,
+    load_positions,
+    positions_file,
+    save_positions,
+)
+
+SPEEDS = (0.05, 1.0)  # the speed fraction a go-to may ask for
+SETTLE_S = 10.0  # after its path a go-to waits this long at most for every joint to settle
+SETTLE_POLL_S = 0.02
+SETTLED_S = 0.5  # within tolerance this long (controller time): settled, not swinging by
+
+
+class PositionsTab(TabPage):
+    """List, teach, rename, delete and go to named positions."""
+
+    REFRESH_HZ = 5.0
+    TITLE = "Positions"
+    BINDINGS: ClassVar = [
+        Binding("t", "teach", "teach here"),
+        Binding("g", "go_to", "go to"),
+        Binding("r", "rename", "rename"),
+        Binding("delete", "delete", "delete", key_display="Del"),
+        Binding("l", "reload", "reload file"),
+    ]
+
+    @dataclass
+    class Changed(Message):
+        """The positions are (re)read: every one, home and park first (for the via points)."""
+
+        positions: tuple[Position, ...]
+
+    @dataclass
+    class Loaded(Message, bubble=False):
+        """The file was read or written (from the file worker): ``done`` says what changed,
+        ``select`` names the position to put the cursor on."""
+
+        book: PositionBook
+        done: str = ""
+        select: str | None = None
+
+    @dataclass
+    class Problem(Message, bubble=False):
+        """The change was refused, or (``in_file``) the file could not be read or written."""
+
+        text: str
+        in_file: bool
+
+    @dataclass
+    class Arrived(Message, bubble=False):
+        """A go-to ended (from the waiting worker): ``away`` names the joints not within
+        their tolerance of the position once it settled (empty: there)."""
+
+        name: str
+        result: MoveResult
+        away: str
+
+    def __init__(self, desk: Desk, *, id: str | None = None) -> None:
+        super().__init__(desk, id=id)
+        self.path = positions_file(desk.data_dir, desk.machine)
+        self.book = PositionBook(desk.machine)
+        self.handle: MoveHandle | None = None
+        self._file_lock = threading.Lock()  # one read-change-write at a time
+
+    def compose(self) -> ComposeResult:
+        yield DataTable(id="positions-table", cursor_type="row", zebra_stripes=True)
+        with Horizontal(id="positions-lower"):
+            with Vertical(id="positions-controls"):
+                yield NumberField("speed fraction", NumberCheck("speed fraction", "", *SPEEDS),
+                                  "0.5", id="positions-speed")
+                yield Static(id="positions-file")
+            with Vertical():
+                yield LiveText(id="positions-here")
+                yield LiveText(id="positions-state")
+
+    def on_mount(self) -> None:
+        super().on_mount()
+        table = self.query_one("#positions-table", DataTable)
+        table.add_column("name", key="name")
+        table.add_column("from", key="from")
+        for joint in self.machine.joints:
+            table.add_column(f"{joint.name} {joint.symbol}", key=joint.key)
+        if self.model is not None:
+            for name, unit in POSE_LABELS:
+                table.add_column(f"{name} {unit}", key=f"pose-{name}")
+        self._state(Text("t teaches where the joints are; g goes to the selected position",
+                         "dim"))
+        self._change(None)
+
+    def focus_main(self) -> None:
+        self.query_one("#positions-table", DataTable).focus()
+
+    # -- the list ------------------------------------------------------------------------------
+
+    def _show(self, book: PositionBook, select: str | None = None) -> None:
+        table = self.query_one("#positions-table", DataTable)
+        keep = select or self.selected_name()
+        table.clear()
+        for p in book.positions:
+            table.add_row(*self._cells(p), key=p.name)
+        names = [p.name for p in book.positions]
+        if keep in names:
+            table.move_cursor(row=names.index(keep))
+        self.query_one("#positions-file", Static).update(Text(
+            f"{len(book.taught)} taught, kept in {self.path}", "dim"))
+
+    def _cells(self, p: Position) -> list[str | Text]:
+        joints = [f"{v:.2f}" for v in p.joints]
+        pose = ([f"{v:.1f}" for v in self.model.pose(np.array(p.joints))]
+                if self.model is not None else [])
+        source = Text(p.source, "dim" if p.taught else "cyan")
+        return [Text(p.name, "bold"), source, *joints, *pose]
+
+    def selected_name(self) -> str | None:
+        table = self.query_one("#positions-table", DataTable)
+        if not table.row_count:
+            return None
+        row_key, _ = table.coordinate_to_cell_key(table.cursor_coordinate)
+        return row_key.value
+
+    def selected(self) -> Position | None:
+        name = self.selected_name()
+        return None if name is None else self.book.find(name)
+
+    def refresh_live(self) -> None:
+        status = self.status()
+        here = self.query_one("#positions-here", LiveText)
+        if status is None:
+            here.show(Text("waiting for the controller…", "yellow"))
+            return
+        q = np.array(status.position)
+        joints = "  ".join(f"{j.name} {v:.2f}{j.symbol}"
+                           for j, v in zip(self.machine.joints, q, strict=True))
+        lines = [Text("here  ", "bold") + Text(joints)]
+        if self.model is not None:
+            pose = self.model.pose(q)
+            lines.append(Text("      " + "  ".join(
+                f"{name} {v:.1f}{unit if unit == '°' else ' ' + unit}"
+                for (name, unit), v in zip(POSE_LABELS, pose, strict=True))))
+        if status.estop:
+            lines.append(Text("E-STOP latched: release it (^R) before going anywhere",
+                              "bold red"))
+        here.show(Text("\n").join(lines))
+
+    def _state(self, text: Text) -> None:
+        self.query_one("#positions-state", LiveText).show(text)
+
+    # -- the file: every change is read, change, write, in a worker ----------------------------
+
+    @work(thread=True, group="positions-file")
+    def _change(self, change: Callable[[PositionBook], PositionBook] | None, done: str = "",
+                select: str | None = None) -> None:
+        with self._file_lock:
+            try:
+                book = load_positions(self.path, self.machine)
+                if change is not None:
+                    book = change(book)
+                    save_positions(book, self.path)
+            except PositionsError as exc:
+                self.post_message(self.Problem(str(exc), in_file=True))
+                return
+            except ValueError as exc:  # a name taken meanwhile (an edit by hand)
+                self.post_message(self.Problem(str(exc), in_file=False))
+                return
+        self.post_message(self.Loaded(book, done, select))
+
+    def on_positions_tab_loaded(self, message: Loaded) -> None:
+        self.book = message.book
+        self._show(message.book, message.select)
+        if message.done:
+            self._state(Text(message.done, "green"))
+            self.notify(message.done)
+        self.post_message(self.Changed(message.book.positions))
+
+    def on_positions_tab_problem(self, message: Problem) -> None:
+        fix = (". Nothing was changed: fix the file (or move it away) and press l to read it "
+               "again" if message.in_file else "")
+        self._state(Text(f"{message.text}{fix}", "bold red"))
+        self.notify(f"{message.text}{fix}", severity="error", timeout=8)
+
+    def action_reload(self) -> None:
+        self._change(None, f"read {self.path.name} again")
+
+    # -- teach, rename, delete -----------------------------------------------------------------
+
+    def action_teach(self) -> None:
+        """Teach where the joints are now, under a name the operator types."""
+        status = self.status()
+        if status is None:
+            self.command("teach", ControlClient.check)
+            return
+        q = tuple(status.position)
+        where = ", ".join(f"{j.name} {v:.2f}{j.symbol}"
+                          for j, v in zip(self.machine.joints, q, strict=True))
+
+        def taught(name: str | None) -> None:
+            if name is not None:
+                name = name.strip()
+                self._change(lambda book: book.teach(name, q), f"taught {name}", name)
+
+        self.app.push_screen(EditValueScreen(
+            "Teach the current position", self._free_name(), self.book.check_name,
+            f"Where the joints are: {where}. Its name:"), taught)
+
+    def _free_name(self) -> str:
+        names = {p.name for p in self.book.positions}
+        return next(f"p{n}" for n in range(1, len(names) + 2) if f"p{n}" not in names)
+
+    def action_rename(self) -> None:
+        p = self._taught_selected("rename")
+        if p is None:
+            return
+
+        def renamed(name: str | None) -> None:
+            if name is not None:
+                name = name.strip()
+                self._change(lambda book: book.rename(p.name, name),
+                             f"renamed {p.name} to {name}", name)
+
+        self.app.push_screen(EditValueScreen(
+            f"Rename {p.name}", p.name, lambda text: self.book.check_name(text, p.name)),
+            renamed)
+
+    def action_delete(self) -> None:
+        p = self._taught_selected("delete")
+        if p is None:
+            return
+
+        def deleted(yes: bool | None) -> None:
+            if yes:
+                self._change(lambda book: book.delete(p.name), f"deleted {p.name}")
+
+        self.app.push_screen(ConfirmScreen(
+            f"Delete the position {p.name}?",
+            f"It is removed from {self.path}.", "Delete"), deleted)
+
+    def _taught_selected(self, what: str) -> Position | None:
+        p = self.selected()
+        if p is None:
+            self.notify(f"{what}: no position yet: teach one with t", severity="warning")
+            return None
+        if not p.taught:
+            self.notify(f"{what}: {p.name} comes from the machine file "
+                        f"({self.machine.path.name}): change it there", severity="warning")
+            return None
+        return p
+
+    # -- go to ---------------------------------------------------------------------------------
+
+    def action_go_to(self) -> None:
+        """A joint-space move to the selected position at the speed fraction typed."""
+        p = self.selected()
+        refusal = self._go_refusal(p)
+        if refusal:
+            self._state(Text(f"not moved: {refusal}", "bold red"))
+            self.notify(f"go to: {refusal}", severity="error")
+            return
+        assert p is not None
+        speed = self.query_one("#positions-speed", NumberField).value()
+        client = self.client
+        assert client is not None and speed is not None
+        try:
+            handle = client.go_to(p.joints, speed, meta={"position": p.name})
+        except (ControllerError, ValueError) as exc:
+            self._state(Text(f"not moved: {exc}", "bold red"))
+            self.notify(f"go to {p.name}: {exc}", severity="error")
+            return
+        self.handle = handle
+        duration = handle.samples * self.machine.sample_time_s
+        self._state(Text(f"going to {p.name} at {speed:g} of full speed ({duration:.1f} s)…",
+                         "cyan"))
+        self._wait(client, handle, p)
+
+    def _go_refusal(self, p: Position | None) -> str:
+        """Why a go-to cannot start now, or "" if it can."""
+        if p is None:
+            return "no position to go to: teach one with t"
+        if self.handle is not None:
+            return "a go-to is running: wait for it, or hold (^G)"
+        status = self.status()
+        if status is None:
+            return "the controller is not running — " + (self.client_problem
+                                                         or "wait for it to start")
+        if status.estop:
+            return "the E-stop is latched: release it (^R) when it is safe, then go again"
+        if status.moving:
+            return "a move is running (Moves tab): wait for it, or hold (^G)"
+        field = self.query_one("#positions-speed", NumberField)
+        try:
+            field.check_now()
+            field.value()
+        except FieldError as exc:
+            return str(exc)
+        return ""
+
+    @work(thread=True, group="positions-go")
+    def _wait(self, client: ControlClient, handle: MoveHandle, p: Position) -> None:
+        """Wait for the path's end, then for the joints to settle on the position (the hold
+        takes out what they lag or overshoot), so that "at" means there."""
+        result = client.wait(handle)
+        target = np.array(p.joints)
+        tolerance = np.array([j.tolerance for j in self.machine.joints])
+        deadline = time.monotonic() + SETTLE_S
+        away = np.ones(len(target), dtype=bool)
+        inside_since: float | None = None  # controller time the joints came within tolerance
+        while result.complete and not client.dead and time.monotonic() < deadline:
+            try:
+                status = client.status()
+            except (ValueError, TimeoutError):  # closed while we waited
+                break
+            away = np.abs(np.array(status.position) - target) > tolerance
+            if away.any():
+                inside_since = None
+            elif inside_since is None:
+                inside_since = status.time_s
+            elif status.time_s - inside_since >= SETTLED_S:  # staying, not swinging through
+                break
+            time.sleep(SETTLE_POLL_S)
+        names = ", ".join(j.name for j, off in zip(self.machine.joints, away, strict=True)
+                          if off)
+        self.post_message(self.Arrived(p.name, result, names))
+
+    def on_positions_tab_arrived(self, message: Arrived) -> None:
+        self.handle = None
+        result = message.result
+        saved = (f"saved as {result.files.stem}" if result.files else
+                 result.save_error or "nothing recorded")
+        if result.complete and not message.away:
+            self._state(Text(f"at {message.name} · {saved}", "green"))
+            self.notify(f"at {message.name}")
+        elif result.complete:
+            self._state(Text(f"near {message.name}: {message.away} not within tolerance "
+                             f"{SETTLE_S:g} s after the move · {saved}", "bold yellow"))
+            self.notify(f"go to {message.name}: {message.away} not there", severity="warning")
+        else:
+            self._state(Text(f"go to {message.name}: {result.status} · {saved}", "bold yellow"))
+            self.notify(f"go to {message.name}: {result.status}", severity="warning")
+        self.post_message(RunsChanged())

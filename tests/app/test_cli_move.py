@@ -1,0 +1,252 @@
+"""``servodesk move …`` in real subprocesses: each kind runs on a real controller and leaves
+its run on disk (listed by ``servodesk runs list``); a bad field exits 2 naming it, with
+nothing started or saved; Ctrl+C during the move, or the board's E-stop, exits 1 with the
+run recorded so far saved; the serial backend against ``servodesk emulate`` on a pty."""
+
+from __future__ import annotations
+
+import json
+import os
+import select
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from control.motion.robot_model import unimate_model
+from hw.machine import load_machine
+from tests.conftest import EmulatorProcess
+
+ROOT = Path(__file__).resolve().parents[2]
+ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
+MOVE_S = 120.0  # the longest of these takes ~10 s alone; a loaded two-core machine, more
+UNIMATE = load_machine("unimate2000b")
+MIDDLE = [(j.lower + j.upper) / 2 for j in UNIMATE.joints]  # the simulator starts there
+
+
+def servodesk(*args: str, data_dir: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "app", *args, "--data-dir", str(data_dir)],
+                          cwd=ROOT, env=ENV, capture_output=True, text=True, timeout=MOVE_S)
+
+
+def listed(data_dir: Path) -> list[dict]:
+    done = servodesk("runs", "list", "--json", data_dir=data_dir)
+    assert done.returncode == 0, done.stderr
+    return json.loads(done.stdout)
+
+
+def test_a_step_runs_saves_its_run_and_reports_it_as_json(tmp_path: Path) -> None:
+    done = servodesk("move", "step", "--joint", "updown", "--target", "5", "--duration", "1.5",
+                     "--json", data_dir=tmp_path)
+    assert done.returncode == 0, done.stderr
+    report = json.loads(done.stdout)  # one object, nothing else on stdout
+    assert (report["status"], report["kind"], report["backend"]) == ("complete", "step", "sim")
+    assert report["samples"] == 1501
+    files = report["run"]
+    assert all(Path(files[k]).is_file() for k in ("json", "csv", "tsv"))
+    [metric] = report["metrics"]
+    assert metric["joint"] == "Up/Down" and metric["final"] == 5.0
+    assert metric["step"] == pytest.approx(5.0 - MIDDLE[2], abs=0.3)
+    assert metric["settling_time_s"] is not None and metric["settling_time_s"] < 1.5
+    assert [run["stem"] for run in listed(tmp_path)] == [files["stem"]]
+    shown = servodesk("runs", "show", files["stem"], "--json", data_dir=tmp_path)
+    assert shown.returncode == 0, shown.stderr
+    assert json.loads(shown.stdout)["metrics"] == report["metrics"]
+
+
+def _path_file(tmp_path: Path) -> str:
+    t = np.linspace(0.0, 2.0, 21)
+    rows = "\n".join(f"{a:.2f},{MIDDLE[2] + 3 * (1 - np.cos(np.pi * a / 2)):.4f}" for a in t)
+    (tmp_path / "nod.csv").write_text(f"t,Up/Down\n{rows}\n")
+    return str(tmp_path / "nod.csv")
+
+
+def _endpoint(tmp_path: Path) -> list[str]:
+    z = unimate_model(UNIMATE).pose(np.array(MIDDLE))[2]
+    return ["--z", f"{z + 20:.3f}", "--ramp-time", "1.5"]
+
+
+GOOD: dict[str, tuple[str, Callable[[Path], list[str]], str]] = {
+    # kind: (the summary's first line starts, the options, the run's kind)
+    "ramp": ("ramp Rotate to 10°: complete",
+             lambda d: ["--joint", "2", "--end", "10", "--ramp-time", "1", "--total", "1.5"],
+             "ramp"),
+    "sine": ("sine Up/Down", lambda d: ["--joint", "Up/Down", "--end", "4", "--period", "1",
+                                        "--duration", "1"], "sine"),
+    "multistep": ("multi-step: complete",
+                  lambda d: ["--targets", ",".join(f"{q + (2 if j == 3 else 0):g}"
+                                                   for j, q in enumerate(MIDDLE)),
+                             "--duration", "1"], "multi_step"),
+    "endpoint": ("end point, solution 1: complete", _endpoint, "end_point"),
+    "path": ("path nod.csv: complete", lambda d: [_path_file(d)], "path"),
+    "via": ("path through 1 via points: complete",
+            lambda d: ["--point", " ".join(f"{q + (3 if j == 4 else 0):g}"
+                                            for j, q in enumerate(MIDDLE)), "--speed", "0.8"],
+            "via_points"),
+    "goto": ("go to: complete",
+             lambda d: ["--targets", ",".join(f"{q - (3 if j == 5 else 0):g}"
+                                              for j, q in enumerate(MIDDLE))], "go_to"),
+}
+
+
+@pytest.mark.parametrize("kind", sorted(GOOD))
+def test_every_kind_runs_and_leaves_its_run_on_disk(kind: str, tmp_path: Path) -> None:
+    first_line, options, run_kind = GOOD[kind]
+    done = servodesk("move", kind, *options(tmp_path), data_dir=tmp_path)
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.splitlines()
+    assert lines[0].startswith(first_line), done.stdout
+    assert lines[1].startswith(f"saved as {tmp_path}"), done.stdout
+    assert "running " in done.stderr and "Ctrl+C is the E-stop" in done.stderr
+    [run] = listed(tmp_path)
+    assert (run["kind"], run["status"]) == (run_kind, "complete")
+
+
+@pytest.mark.parametrize("kind, options, what", [
+    ("multistep", ["--step", "60:0.8", "--step", "30:0.8"], "sequence of 2 steps: complete"),
+    ("step", ["--target", "40", "--duration", "1"], "step Ram to 40mm: complete"),
+])
+def test_the_rig_moves_once_initialised(kind: str, options: list[str], what: str,
+                                        tmp_path: Path) -> None:
+    done = servodesk("move", kind, "--machine", "rig", "--initialise", *options,
+                     data_dir=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.startswith(what), done.stdout
+    assert "initialising" in done.stderr
+    assert len(listed(tmp_path)) == 1
+
+
+def test_the_rig_pulse_is_open_loop_and_needs_no_initialise(tmp_path: Path) -> None:
+    done = servodesk("move", "pulse", "--machine", "rig", "--duty", "15", "--duration", "0.5",
+                     "--json", data_dir=tmp_path)
+    assert done.returncode == 0, done.stderr
+    report = json.loads(done.stdout)
+    assert (report["kind"], report["samples"], report["metrics"]) == ("set_pulse", 501, [])
+
+
+BAD = [
+    # (arguments, what stderr must say)
+    (["step", "--joint", "updown", "--target", "50"],
+     "--target: Up/Down target 50° is outside -27…30° (machine unimate2000b)"),
+    (["step", "--joint", "elbow", "--target", "5"], "--joint: no joint 'elbow'"),
+    (["step", "--target", "1500", "--duration", "-1"],
+     "--duration: duration -1 s is outside 0…600 s"),
+    (["ramp", "--joint", "rotate", "--end", "10", "--ramp-time", "soon"],
+     "--ramp-time: ramp time: 'soon' is not a number"),
+    (["ramp", "--joint", "rotate", "--end", "100", "--ramp-time", "0.5"],
+     "Rotate cannot ramp"),
+    (["sine", "--joint", "bend", "--end", "nan"], "--end: Bend end: nan is not a usable number"),
+    (["multistep", "--targets", "1,2"], "--targets: 2 values; give 6"),
+    (["endpoint", "--z", "99999"], "unreachable"),
+    (["path", "missing.csv"], "FILE: missing.csv: cannot read"),
+    (["via", "--point", "1 2 3"], "--point: point line 1: 3 numbers; type 6 joint positions"),
+    (["goto", "--targets", ",".join(map(str, MIDDLE)), "--speed", "2"],
+     "--speed: speed fraction 2 is outside 0…1"),
+    (["pulse"], "pulse: the set pulse is the rig's open-loop test"),
+    (["step", "--machine", "rig", "--target", "20"],
+     "--initialise: the Single-axis hydraulic test rig's encoder is not zeroed"),
+    (["multistep", "--machine", "rig", "--step", "20:later"],
+     "--step: step 1 dwell: 'later' is not a number"),
+    (["step", "--target", "5", "--backend", "serial"], "--port: --backend serial needs"),
+    (["step", "--target", "5", "--machine", "nope.toml"], "nope.toml: no such machine file"),
+]
+
+
+@pytest.mark.parametrize("args, message", BAD, ids=[" ".join(a)[:40] for a, _ in BAD])
+def test_bad_input_exits_2_naming_the_field_and_moves_nothing(
+        args: list[str], message: str, tmp_path: Path) -> None:
+    done = servodesk("move", *args, data_dir=tmp_path)
+    assert (done.returncode, done.stdout) == (2, ""), done.stderr
+    assert done.stderr.startswith("servodesk: ") and message in done.stderr, done.stderr
+    assert "Traceback" not in done.stderr
+    assert listed(tmp_path) == []
+
+
+def test_bad_usage_is_argparses_exit_2(tmp_path: Path) -> None:
+    done = servodesk("move", "step", data_dir=tmp_path)  # --target is required
+    assert done.returncode == 2 and "--target" in done.stderr
+
+
+class Moving:
+    """``servodesk move ARGS`` in the background, its stderr read line by line."""
+
+    def __init__(self, args: Sequence[str], data_dir: Path) -> None:
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "app", "move", *args, "--data-dir", str(data_dir)],
+            cwd=ROOT, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        self.err: list[str] = []
+
+    def wait_for_line(self, start: str, timeout: float = 60.0) -> None:
+        assert self.proc.stderr is not None
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if select.select([self.proc.stderr], [], [], 0.1)[0]:
+                line = self.proc.stderr.readline()
+                if not line:
+                    break
+                self.err.append(line)
+                if line.startswith(start):
+                    return
+        self.proc.kill()
+        pytest.fail(f"no line {start!r} on stderr: {''.join(self.err)}")
+
+    def finish(self) -> tuple[int, str, str]:
+        out, err = self.proc.communicate(timeout=MOVE_S)
+        return self.proc.returncode, out, "".join(self.err) + err
+
+
+def test_ctrl_c_during_the_move_is_an_estop_the_run_is_saved_and_the_exit_is_1(
+        tmp_path: Path) -> None:
+    moving = Moving(["sine", "--joint", "updown", "--end", "10", "--period", "4",
+                     "--duration", "60", "--json"], tmp_path)
+    try:
+        moving.wait_for_line("running sine Up/Down")
+        moving.proc.send_signal(signal.SIGINT)
+        code, out, err = moving.finish()
+    finally:
+        if moving.proc.poll() is None:
+            moving.proc.kill()
+    assert code == 1, err
+    assert "E-stop: every valve closed and latched" in err and "Traceback" not in err
+    report = json.loads(out)
+    assert report["status"].startswith("estop") and not report["complete"]
+    assert 0 < report["samples"] < 60_001
+    assert Path(report["run"]["json"]).is_file()
+    [run] = listed(tmp_path)
+    assert (run["stem"], run["samples"]) == (report["run"]["stem"], report["samples"])
+
+
+def test_a_step_on_the_serial_backend_through_the_emulator(
+        emulator: Callable[..., EmulatorProcess], tmp_path: Path) -> None:
+    board = emulator("--glitch-scale", "0")
+    done = servodesk("move", "step", "--backend", "serial", "--port", board.url, "--joint",
+                     "bend", "--target", "5", "--duration", "1.5", "--json", data_dir=tmp_path)
+    assert done.returncode == 0, done.stderr
+    report = json.loads(done.stdout)
+    assert (report["status"], report["backend"]) == ("complete", "serial")
+    shown = json.loads(servodesk("runs", "show", "latest", "--json", data_dir=tmp_path).stdout)
+    assert shown["meta"]["backend"] == "serial"
+    assert board.stop()["frames_rx"] > 1000
+
+
+def test_the_boards_estop_ends_a_serial_move_with_exit_1_and_its_run_saved(
+        emulator: Callable[..., EmulatorProcess], tmp_path: Path) -> None:
+    board = emulator("--glitch-scale", "0")
+    moving = Moving(["ramp", "--backend", "serial", "--port", board.url, "--joint", "rotate",
+                     "--end", "20", "--ramp-time", "30", "--json"], tmp_path)
+    try:
+        moving.wait_for_line("running ramp Rotate")
+        board.send(signal.SIGUSR1)  # the E-stop button on the board
+        code, out, err = moving.finish()
+    finally:
+        if moving.proc.poll() is None:
+            moving.proc.kill()
+    assert code == 1, err
+    report = json.loads(out)
+    assert report["status"].startswith("estop"), report["status"]
+    assert Path(report["run"]["json"]).is_file() and report["samples"] > 0
