@@ -15,9 +15,10 @@ the same move.
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import math
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, field, fields, replace
 from typing import Any
 
 import numpy as np
@@ -155,13 +156,39 @@ def _finite(value: object) -> object:
     return value
 
 
+def from_records(records: list[dict[str, Any]]) -> list[tuple[str, Summary]]:
+    """``result_records`` read back (a null is NaN, or None where the field may be None);
+    KeyError, TypeError or ValueError for a record that is not one."""
+    rows: list[tuple[str, Summary]] = []
+    for record in records:
+        kind = _SUMMARY_KINDS[record["metric"]]
+        values = {f.name: _read(record[f.name], str(f.type)) for f in fields(kind)}
+        rows.append((str(record["label"]), kind(**values)))
+    return rows
+
+
+_SUMMARY_KINDS: dict[str, type[Summary]] = {
+    k.METRIC: k for k in (moves.StepSummary, moves.TrackingSummary, moves.SineSummary)}
+
+
+def _read(value: object, annotation: str) -> object:
+    if value is None and annotation == "float":
+        return math.nan
+    return tuple(value) if isinstance(value, list) else value
+
+
 def run_summaries(run: Run, machine: Machine) -> list[tuple[str, Summary]]:
-    """``summaries`` of a saved run, from what its metadata says of its plan (the approach in
-    front, the joints it meant to move; ``ControlClient`` records them); none for an open-loop
-    run, which follows no path."""
+    """The results of a saved run: those saved with it when the move ended (``results`` in
+    its metadata, from the samples before they were rounded to be written), else
+    ``summaries`` from its samples and what its metadata says of its plan (the approach in
+    front, the joints it meant to move; ``ControlClient`` records them); none for an
+    open-loop run, which follows no path."""
     meta = run.meta
     if meta.get("open_loop"):
         return []
+    if "results" in meta:
+        with contextlib.suppress(KeyError, TypeError, ValueError):  # damaged: from the samples
+            return from_records(meta["results"])
     moving = meta.get("moving")
     plan = MovePlan(run.kind, run.kind, path=run.desired, meta=dict(meta),
                     approach=int(meta.get("approach_samples", 0)),

@@ -5,6 +5,7 @@ leave it out, by the move's kind, for the joints it moved (what the TUI and a sc
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -14,8 +15,10 @@ from control.motion.moves import SineSummary, StepSummary, TrackingSummary
 from control.motion.plan import (
     MovePlan,
     approach_ramp,
+    from_records,
     moving_joints,
     result_records,
+    run_summaries,
     summaries,
 )
 from control.recorder import Run
@@ -152,3 +155,27 @@ def test_results_are_json_records() -> None:
     assert record["step"] is None and record["overshoot"] is None
     assert record["notes"] == ["no valid samples"]
     json.dumps(record, allow_nan=False)
+
+
+@pytest.mark.parametrize("kind", ["step", "ramp", "sine"])
+def test_a_saved_run_gives_the_results_saved_with_it(kind: str) -> None:
+    """``runs show`` reports what the move reported when it ended, not a recomputation from
+    the samples as rounded to be written; a run saved without results is summarised from its
+    samples."""
+    end = HOME + np.array([0.0, 0.0, 10.0, 0.0, 0.0, 0.0])
+    path = {"step": moves.step(HOME, 2, 10.0, 2.0, dt=DT, machine=UNIMATE),
+            "ramp": moves.ramp(HOME, end, 2.0, dt=DT, machine=UNIMATE),
+            "sine": moves.sine(HOME, end, 2.0, 6.0, dt=DT, machine=UNIMATE)}[kind]
+    actual = np.vstack([path[:1], path[:-1]]) + 0.01  # a sample late, a little off
+    meta = {"period": 2.0} if kind == "sine" else {}
+    rows = summaries(MovePlan.of_path(path, kind, meta), run_of(path, actual, kind=kind), UNIMATE)
+    assert [s.METRIC for _, s in rows] == [{"ramp": "tracking"}.get(kind, kind)]
+    records = json.loads(json.dumps(result_records(rows)))
+    assert from_records(records) == rows
+    rounded = np.round(actual, 1)  # not what the move saw
+    saved = Run.from_machine(UNIMATE, kind, "complete", {}, np.arange(len(path)) * DT, path,
+                             rounded, np.zeros_like(path),
+                             meta={**meta, "approach_samples": 0, "moving": [2]})
+    assert run_summaries(replace(saved, meta={**saved.meta, "results": records}),
+                         UNIMATE) == rows
+    assert run_summaries(saved, UNIMATE) != rows  # from the samples written
