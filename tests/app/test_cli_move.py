@@ -105,6 +105,12 @@ def test_every_kind_runs_and_leaves_its_run_on_disk(kind: str, tmp_path: Path) -
     assert "running " in done.stderr and "Ctrl+C is the E-stop" in done.stderr
     [run] = listed(tmp_path)
     assert (run["kind"], run["status"]) == (run_kind, "complete")
+    # the result table as the Moves tab's for the kind: a step's response, a sine's
+    # fundamentals, else a smooth path's tracking error
+    second = {"multistep": "step", "sine": "amplitude"}.get(kind, "travel")
+    assert any(line.split()[:2] == ["joint", second] for line in lines), done.stdout
+    shown = servodesk("runs", "show", run["stem"], data_dir=tmp_path)
+    assert any(line.split()[:2] == ["joint", second] for line in shown.stdout.splitlines())
 
 
 @pytest.mark.parametrize("kind, options, what", [
