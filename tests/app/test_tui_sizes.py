@@ -36,6 +36,8 @@ ESSENTIAL = {
     "latency": ("#latency-fresh", "#latency-tables", "#latency-thesis"),
     "identify": ("#identify-joint", "#identify-run", "#identify-ff", "#identify-apply",
                  "#identify-model", "#identify-plot"),
+    "positions": ("#positions-table", "#positions-speed", "#positions-here",
+                  "#positions-state"),
 }
 
 
@@ -77,7 +79,7 @@ def test_every_tab_shows_what_it_is_for(tui, size: tuple[int, int]) -> None:
     async def scenario() -> None:
         app = tui.app()
         async with app.run_test(size=size) as pilot:
-            status = await tui.ready(app, pilot)
+            await tui.ready(app, pilot)
             for i, (name, _) in enumerate(TABS):
                 await pilot.press(f"f{i + 1}")
                 tab = app.tab(name)
@@ -99,11 +101,13 @@ def test_every_tab_shows_what_it_is_for(tui, size: tuple[int, int]) -> None:
                                     what="the joints' table")
                     text = tui.text(joints)
                     assert "…" not in text, text
+                    here = app.client.status().position
                     for j, joint in enumerate(app.machine.joints):
                         (row,) = [r for r in text.splitlines() if r.strip().startswith(
                             joint.name)]
                         assert row.count("├") == 1 and row.rstrip().endswith("┤"), row
-                        assert f"{status.position[j]:.1f}"[:-1] in row, row  # its value
+                        shown = float(row.strip().removeprefix(joint.name).split()[0])
+                        assert shown == pytest.approx(here[j], abs=0.2), row  # its value
                 if name == "runs":
                     plot = app.query_one("#runs-plot", FigurePlot)
                     await tui.until(lambda plot=plot: plot.drawn is not None, what="run plot")
