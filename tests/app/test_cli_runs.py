@@ -122,6 +122,9 @@ def test_export_writes_the_runs_tab_plot_as_svg_or_text(data_dir: Path, tmp_path
     assert done.returncode == 0, done.stderr
     text = out.with_suffix(".txt").read_text()
     assert "error" in text and "\x1b" not in text  # plotdata.m's panels, plain text
+    assert text.splitlines()[0] == "20261121-100000-rig-step · estop: operator E-stop · " \
+                                   "plotdata Ram"
+    assert sum(0x2800 < ord(c) < 0x2900 for c in text) > 100  # the curves, in braille dots
 
 
 def test_export_csv_is_the_runs_table(data_dir: Path, tmp_path: Path) -> None:
