@@ -60,6 +60,8 @@ SLOW_FIXTURES = {
     "emulator": "tests/conftest.py",                   # servodesk emulate
     "controller": "tests/faults/conftest.py",          # ControlClient
     "tui": "tests/app/conftest.py",                    # the TUI under Pilot, and its controller
+    "lockstep": "tests/control/conftest.py",           # ControlClient, lockstep
+    "realtime": "tests/control/conftest.py",           # ControlClient, real time
     "runs": "tests/control/identify/test_sysid.py",    # ControlClient's excitation runs
     "robot": "tests/control/identify/test_tuning.py",  # ControlClient
 }
