@@ -168,6 +168,8 @@ def test_a_read_only_directory_raises_and_leaves_nothing(tmp_path: Path) -> None
                               env={**os.environ, "PYTHONPATH": str(ROOT)})
     finally:
         target.chmod(0o700)
+    if os.geteuid() == 0 and done.returncode and "mount" in done.stderr:
+        pytest.skip(f"root here may not mount (no CAP_SYS_ADMIN): {done.stderr.strip()}")
     assert done.returncode == 0, done.stderr
     assert f"cannot save the step run in {target}: {reason}" in done.stdout
     assert visible(target) == []
