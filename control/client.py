@@ -51,7 +51,7 @@ from control.commands import (
     finite,
     joint_index,
 )
-from control.events import ControllerEvent, Crash, Died, Fault, MoveDone, Notice, Ready
+from control.events import ControllerEvent, Crash, Died, EStop, Fault, MoveDone, Notice, Ready
 from control.layout import (
     ESTOP_WORD,
     HEARTBEAT_WORD,
@@ -185,7 +185,8 @@ class ControlClient:
         self._outgoing: queue.Queue[Command] = queue.Queue(OUTGOING)
         self._closing = threading.Event()
         self._stopping = False
-        self._manual = [0.0] * self.machine.n_joints
+        self._manual = [0.0] * self.machine.n_joints  # the duties jog_joint keeps for the others
+        self._latched = False  # an E-stop sent or reported, until the controller releases it
         self.coefficients = {"hold": self.machine.hold, "track": self.machine.track}
         # what the gain check said of each set in use, saved with every run (control.identify.gains)
         self.coefficient_checks: dict[str, dict[str, object]] = {
@@ -383,7 +384,10 @@ class ControlClient:
 
     def _dispatch(self, event: Event) -> None:
         record = event.record
-        if isinstance(record, MoveDone):
+        if isinstance(record, EStop):
+            self._latched = record.latched
+            self._forget_manual()
+        elif isinstance(record, MoveDone):
             handle = self._moves.get(record.move_id)
             if handle is not None:
                 self._finish(handle, record.status, record.saved, record.timeline)
@@ -439,20 +443,39 @@ class ControlClient:
             raise ControllerError(f"the controller has not taken the last {OUTGOING} commands "
                                   "(frozen or overloaded): E-stop still works") from None
 
+    def _forget_manual(self) -> None:
+        """The controller left manual actuation (E-stop, hold, a move): a later ``jog_joint``
+        starts from zero duty on every other joint, never from duties set before."""
+        self._manual = [0.0] * self.machine.n_joints
+
     def hold(self) -> None:
         """Abort any move and hold every joint where it is (the thesis's default mode)."""
         self._send(Hold())
+        self._forget_manual()
 
     def estop(self) -> None:
         """Latch every valve closed until ``reset``. Never waits: the E-stop count in shared
         memory reaches the controller on its next tick whatever the channel holds; the message
         behind it is best effort."""
         self._words[ESTOP_WORD] += 1
+        self._latched = True
+        self._forget_manual()
         with contextlib.suppress(ControllerError):
             self._send(EmergencyStop())
 
+    @property
+    def latched(self) -> bool:
+        """The E-stop is latched, or was sent and the controller has not released it since."""
+        if self._latched:
+            return True
+        try:
+            return self.status().estop
+        except (ControllerError, TimeoutError, ValueError):
+            return False
+
     def reset(self) -> None:
-        """Release a latched E-stop (refused while the E-stop input is pressed)."""
+        """Release a latched E-stop (refused while the E-stop input is pressed); every joint
+        then holds where it is: nothing moves until a new command."""
         self._send(Reset())
 
     def initialise(self) -> None:
@@ -466,10 +489,13 @@ class ControlClient:
     def jog(self, duty: Sequence[float]) -> None:
         """Manual actuation: open-loop duty per joint in %, in each joint's positive sense.
 
-        Raises ValueError (nothing sent) unless there is one finite duty per joint."""
+        Raises ValueError (nothing sent) unless there is one finite duty per joint. While the
+        E-stop is latched the controller refuses it (a ``refused`` event) and the duty is not
+        remembered: nothing set then moves a joint after the release."""
         command = Manual.of(self.machine, duty)
         self._send(command)
-        self._manual = list(command.duty)
+        if not self.latched:
+            self._manual = list(command.duty)
 
     def jog_joint(self, joint: int | str, duty: float) -> None:
         """Set one joint's manual duty (joint by index or name), keeping the others'."""
@@ -615,6 +641,7 @@ class ControlClient:
             self._moves.pop(move_id, None)
             shm.release(segment, unlink=True)
             raise
+        self._forget_manual()  # the move ends manual actuation
         return handle
 
     def wait(self, handle: MoveHandle, timeout: float | None = None) -> MoveResult:

@@ -19,6 +19,7 @@ The keys belong to ``JogPad``, which posts what they ask for (``DutyChanged``,
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 from typing import ClassVar
@@ -44,6 +45,9 @@ RIG_ARROW_STEP = 10.0  # function.c Manual(): each arrow press changes the duty 
 HOLD_DUTY_PER_STEP = 10.0  # hold-to-move duty is 10 × increment %
 POSITION_STEPS = (0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0)  # mm or deg, keys 1-9
 RELEASE_CHECK_S = 0.01
+LATCHED_NOTICE_S = 3.0  # while latched, a jog key says why at most this often
+LATCHED = ("E-stop latched: the jog keys do nothing until you release it (^R); the joints "
+           "then hold where they are")
 MODE_HELP = {
     "duty": "each press adds ± increment % to the joint's duty; space zeroes all (option.c)",
     "hold-to-move": "a joint moves at 10 × increment % only while its key is held",
@@ -125,7 +129,8 @@ def _jog_bindings() -> list[Binding]:
 class JogPad(Widget, can_focus=True):
     """The focusable part of the Jog tab: its keys set the duties and steps it posts up.
 
-    ``armed`` is set by the tab: True only while the tab is the visible one.
+    ``armed`` is set by the tab: True only while the tab is the visible one. ``latched``
+    too: while the E-stop is latched a jog key changes nothing and says why.
     """
 
     BINDINGS: ClassVar = [
@@ -166,12 +171,17 @@ class JogPad(Widget, can_focus=True):
         self.duty = [0.0] * n_joints
         self.repeat = KeyRepeat()
         self.armed = False
+        self.latched = False
+        self._told_latched = -math.inf
 
     def on_mount(self) -> None:
         self._release_timer = self.set_interval(RELEASE_CHECK_S, self._check_release,
                                                 pause=True)
 
     def render(self) -> Text:
+        if self.latched:
+            return Text.assemble(("E-STOP latched", "bold red"), ("  ·  ", "dim"),
+                                 "jog keys do nothing until ^R releases it")
         step = POSITION_STEPS[self.increment - 1]
         amount = {"duty": f"increment {self.increment} %",
                   "hold-to-move": f"duty {HOLD_DUTY_PER_STEP * self.increment:g} % while held",
@@ -195,8 +205,18 @@ class JogPad(Widget, can_focus=True):
         self.stop(hold=False)
         self.mode = MODES[(MODES.index(self.mode) + 1) % len(MODES)]
 
+    def refused_while_latched(self) -> bool:
+        """True while the E-stop is latched; then say why (not at every key of a burst)."""
+        if not self.latched:
+            return False
+        now = time.monotonic()
+        if now - self._told_latched > LATCHED_NOTICE_S:
+            self._told_latched = now
+            self.notify(LATCHED, severity="warning")
+        return True
+
     def action_jog(self, joint: int, sign: int) -> None:
-        if joint >= self.n:
+        if joint >= self.n or self.refused_while_latched():
             return
         if self.mode == "duty":
             self.duty[joint] = max(-100.0, min(100.0, self.duty[joint] + sign * self.increment))
@@ -207,6 +227,8 @@ class JogPad(Widget, can_focus=True):
             self.post_message(self.TargetStepped(joint, sign * POSITION_STEPS[self.increment - 1]))
 
     def action_arrow(self, sign: int) -> None:
+        if self.refused_while_latched():
+            return
         if self.mode == "duty":
             self.duty[0] = max(-100.0, min(100.0, self.duty[0] + sign * RIG_ARROW_STEP))
             self.send()
@@ -214,11 +236,15 @@ class JogPad(Widget, can_focus=True):
             self.action_jog(0, sign)
 
     def action_stop_all(self) -> None:
+        if self.refused_while_latched():
+            return
         self.repeat.forget()
         self.duty = [0.0] * self.n
         self.send()
 
     def action_hold_here(self) -> None:
+        if self.refused_while_latched():
+            return
         self.stop(hold=True)
 
     def hold_key(self, joint: int, duty: float) -> None:
@@ -252,10 +278,17 @@ class JogPad(Widget, can_focus=True):
         self.duty = [0.0] * self.n
 
     def forget_duties(self) -> None:
-        """The controller left manual mode (E-stop, a move, hold): start again from zero."""
+        """The controller left manual mode (a move, hold): start again from zero."""
         if any(self.duty):
             self.repeat.forget()
             self.duty = [0.0] * self.n
+
+    def estop(self, latched: bool) -> None:
+        """The E-stop latched (every duty and held key forgotten) or was released (the pad
+        starts from zero: a release never starts motion by itself)."""
+        self.let_go()
+        self.latched = latched
+        self.refresh()
 
 
 class JogTab(TabPage):
@@ -290,20 +323,20 @@ class JogTab(TabPage):
         self.pad.let_go()  # leaving the tab must not leave a joint moving: decided now
         self._leave_manual(hold=False)
 
-    def forget_duties(self) -> None:
-        """The E-stop closed every valve: the pad starts again from zero."""
-        self.pad.forget_duties()
+    def estop(self, latched: bool) -> None:
+        self.pad.estop(latched)
+        self.refresh_live()
 
     def on_jog_pad_duty_changed(self, message: JogPad.DutyChanged) -> None:
         # A duty the pad has moved on from (a later key, or let go since: the tab was left,
         # the E-stop) is not sent: a later message carries the pad's duties, or none should.
-        if not self.visible_now or message.duty != tuple(self.pad.duty):
+        if not self.visible_now or self.pad.latched or message.duty != tuple(self.pad.duty):
             return
         self.command("jog", lambda client: client.jog(list(message.duty)))
         self.refresh_live()
 
     def on_jog_pad_target_stepped(self, message: JogPad.TargetStepped) -> None:
-        if not self.visible_now:  # pressed just before the tab was left
+        if not self.visible_now or self.pad.latched:  # pressed just before the tab was left
             return
         self.command("position jog",
                      lambda client: client.jog_position(message.joint, message.step))
@@ -321,6 +354,8 @@ class JogTab(TabPage):
     def refresh_live(self) -> None:
         status = self.status()
         if status is not None:
+            if status.estop and not self.pad.latched:  # latched before its event arrived
+                self.pad.estop(True)
             manual = status.mode == Mode.MANUAL_ACTUATE
             if self._was_manual and not manual:  # E-stop, hold or a move ended manual mode
                 self.pad.forget_duties()
