@@ -6,12 +6,15 @@ Three modes, cycled with ``m``:
   (1–9 %) from the duty of In/Out, Rotate, Up/Down, Bend, Yaw, Swivel; the
   joint keeps moving until its duty is changed back or space zeroes all. On
   the rig, as function.c Manual(): Up/Down arrows ±10 %, space closes the valve.
-- **hold-to-move** — a joint moves at 10 × increment % only while its key is
-  held. Terminals send no key-up event, so a held key is recognised by its
-  auto-repeat and a release by the silence after it (``KeyRepeat``), the way
-  keyboard teleop tools do it.
+- **hold-to-move** — a joint moves at 10 × increment % (at most
+  ``HOLD_DUTY_MAX``, 50 %) only while its key is held. Terminals send no key-up
+  event, so a held key is recognised by its auto-repeat and a release by the
+  silence after it (``KeyRepeat``), the way keyboard teleop tools do it. When
+  the last held key is let go the joints hold where they stopped (closed loop),
+  rather than sag at zero duty in manual actuation.
 - **position** — closed loop: each press moves the joint's hold target by the
-  step chosen with 1–9 (0.1 … 50 mm or degrees).
+  step chosen with 1–9, from its unit's table (``POSITION_STEPS``: 0.05 … 20 mm,
+  0.01 … 5°).
 
 The keys belong to ``JogPad``, which posts what they ask for (``DutyChanged``,
 ``TargetStepped``, ``Stopped``); ``JogTab`` sends it to the controller.
@@ -42,15 +45,24 @@ from control.layout import Mode, Status
 JOG_KEYS = (("a", "z"), ("s", "x"), ("d", "c"), ("f", "v"), ("g", "b"), ("h", "n"))
 MODES = ("duty", "hold-to-move", "position")
 RIG_ARROW_STEP = 10.0  # function.c Manual(): each arrow press changes the duty by 10 %
-HOLD_DUTY_PER_STEP = 10.0  # hold-to-move duty is 10 × increment %
-POSITION_STEPS = (0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0)  # mm or deg, keys 1-9
+HOLD_DUTY_PER_STEP = 10.0  # hold-to-move duty is 10 × increment %,
+HOLD_DUTY_MAX = 50.0  # at most this: a held key is for placing a joint, not for speed
+# Position-jog steps, keys 1-9, per unit: the same 1-2-5 ladder, up to 20 mm or 5° a press
+# (a Unimate joint's range is 57° to 1,065 mm). The first steps are finer than one encoder
+# count on some joints (In/Out 0.26 mm, Bend 0.06°): the hold target adds them up.
+POSITION_STEPS = {
+    "mm": (0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0),
+    "deg": (0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0),
+}
+SYMBOLS = {"mm": " mm", "deg": "°"}  # after a number
 RELEASE_CHECK_S = 0.01
 LATCHED_NOTICE_S = 3.0  # while latched, a jog key says why at most this often
 LATCHED = ("E-stop latched: the jog keys do nothing until you release it (^R); the joints "
            "then hold where they are")
 MODE_HELP = {
     "duty": "each press adds ± increment % to the joint's duty; space zeroes all (option.c)",
-    "hold-to-move": "a joint moves at 10 × increment % only while its key is held",
+    "hold-to-move": f"a joint moves at 10 × increment % (≤ {HOLD_DUTY_MAX:g} %) only while "
+                    "its key is held, then holds where it stopped",
     "position": "closed loop: each press moves the joint's hold target by the step",
 }
 
@@ -121,7 +133,8 @@ def _jog_bindings() -> list[Binding]:
                            show=first, key_display="a/z…h/n" if first else None))
         out.append(Binding(minus, f"jog({j}, -1)", f"joint {j} −", show=False))
     for k in range(1, 10):
-        out.append(Binding(str(k), f"increment({k})", "increment" if k == 1 else f"step {k}",
+        out.append(Binding(str(k), f"increment({k})", "increment / step" if k == 1
+                           else f"increment {k}",
                            show=k == 1, key_display="1-9" if k == 1 else None))
     return out
 
@@ -165,10 +178,11 @@ class JogPad(Widget, can_focus=True):
 
         hold: bool
 
-    def __init__(self, n_joints: int, *, id: str | None = None) -> None:
+    def __init__(self, units: tuple[str, ...], *, id: str | None = None) -> None:
         super().__init__(id=id)
-        self.n = n_joints
-        self.duty = [0.0] * n_joints
+        self.units = units  # each joint's unit, "mm" or "deg": its position steps
+        self.n = len(units)
+        self.duty = [0.0] * self.n
         self.repeat = KeyRepeat()
         self.armed = False
         self.latched = False
@@ -182,10 +196,11 @@ class JogPad(Widget, can_focus=True):
         if self.latched:
             return Text.assemble(("E-STOP latched", "bold red"), ("  ·  ", "dim"),
                                  "jog keys do nothing until ^R releases it")
-        step = POSITION_STEPS[self.increment - 1]
+        steps = " · ".join(f"{self.step(unit):g}{SYMBOLS[unit]}"
+                           for unit in POSITION_STEPS if unit in self.units)
         amount = {"duty": f"increment {self.increment} %",
-                  "hold-to-move": f"duty {HOLD_DUTY_PER_STEP * self.increment:g} % while held",
-                  "position": f"step {step:g} mm or °"}[self.mode]
+                  "hold-to-move": f"duty {self.hold_duty:g} % while held",
+                  "position": f"step {steps} a press"}[self.mode]
         return Text.assemble(("mode ", "dim"), (self.mode, "bold"), ("  ·  ", "dim"),
                              (amount, "bold"), ("  ·  ", "dim"), MODE_HELP[self.mode])
 
@@ -197,6 +212,15 @@ class JogPad(Widget, can_focus=True):
         if action == "arrow":
             return self.n == 1
         return True
+
+    def step(self, unit: str) -> float:
+        """The position-jog step of the chosen increment in ``unit`` (mm or deg)."""
+        return POSITION_STEPS[unit][self.increment - 1]
+
+    @property
+    def hold_duty(self) -> float:
+        """The hold-to-move duty of the chosen increment (%), capped at HOLD_DUTY_MAX."""
+        return min(HOLD_DUTY_MAX, HOLD_DUTY_PER_STEP * self.increment)
 
     def action_increment(self, k: int) -> None:
         self.increment = k
@@ -222,9 +246,9 @@ class JogPad(Widget, can_focus=True):
             self.duty[joint] = max(-100.0, min(100.0, self.duty[joint] + sign * self.increment))
             self.send()
         elif self.mode == "hold-to-move":
-            self.hold_key(joint, sign * HOLD_DUTY_PER_STEP * self.increment)
+            self.hold_key(joint, sign * self.hold_duty)
         else:
-            self.post_message(self.TargetStepped(joint, sign * POSITION_STEPS[self.increment - 1]))
+            self.post_message(self.TargetStepped(joint, sign * self.step(self.units[joint])))
 
     def action_arrow(self, sign: int) -> None:
         if self.refused_while_latched():
@@ -254,14 +278,17 @@ class JogPad(Widget, can_focus=True):
         self._release_timer.resume()
 
     def _check_release(self) -> None:
-        """Every RELEASE_CHECK_S while a key is held: stop the joints let go."""
+        """Every RELEASE_CHECK_S while a key is held: stop the joints let go; when the last
+        is let go, hold every joint where it stopped (at zero duty a joint would sag)."""
         gone = self.repeat.released(time.monotonic())
-        if gone:
+        if not self.repeat.held:
+            self._release_timer.pause()
+            if gone:
+                self.stop(hold=True)
+        elif gone:
             for j in gone:
                 self.duty[j] = 0.0
             self.send()
-        if not self.repeat.held:
-            self._release_timer.pause()
 
     def send(self) -> None:
         self.post_message(self.DutyChanged(tuple(self.duty)))
@@ -299,7 +326,7 @@ class JogTab(TabPage):
     _was_manual = False
 
     def compose(self) -> ComposeResult:
-        yield JogPad(self.machine.n_joints, id="jog-pad")
+        yield JogPad(tuple(j.unit for j in self.machine.joints), id="jog-pad")
         yield LiveText(id="jog-table")
         yield Static(self._keys_help(), id="jog-help")
 
@@ -391,6 +418,11 @@ class JogTab(TabPage):
         else:
             pairs = "  ".join(f"{p}/{m} {j.name}" for (p, m), j in
                               zip(JOG_KEYS, self.machine.joints, strict=False))
-        return Text.assemble(("keys  ", "dim"), pairs,
-                             ("   1–9 increment · space all stop · m mode · enter hold here",
-                              "dim"))
+        units = {j.unit for j in self.machine.joints}
+        steps = "  ".join(" ".join(f"{v:g}" for v in table) + SYMBOLS[unit]
+                          for unit, table in POSITION_STEPS.items() if unit in units)
+        return Text.assemble(
+            ("keys  ", "dim"), pairs,
+            ("   1–9 increment · space all stop · m mode · enter hold here", "dim"),
+            ("\n1–9   ", "dim"), f"duty ±1…9 % a press · hold-to-move 10…{HOLD_DUTY_MAX:g} % · "
+            f"position steps {steps}")
