@@ -41,6 +41,8 @@ from app.widgets.limit_bar import LimitBar
 from app.widgets.live_text import LiveText
 from control.client import ControlClient
 from control.layout import Mode, Status
+from hw.machine import Joint
+from hw.transmission import output_min_pwm
 
 JOG_KEYS = (("a", "z"), ("s", "x"), ("d", "c"), ("f", "v"), ("g", "b"), ("h", "n"))
 MODES = ("duty", "hold-to-move", "position")
@@ -65,6 +67,16 @@ MODE_HELP = {
                     "its key is held, then holds where it stopped",
     "position": "closed loop: each press moves the joint's hold target by the step",
 }
+
+
+def below_min_pwm(joint: Joint, duty: float) -> float | None:
+    """The minimum PWM (%) of ``joint`` in the sense of ``duty`` (the controller output's,
+    ``hw.transmission.output_min_pwm``) if a non-zero open-loop ``duty`` is below it: the
+    valve will not open enough to move the joint (section 5.4.1). Else None."""
+    if duty == 0.0:
+        return None
+    least = output_min_pwm(joint)[0 if duty > 0 else 1]
+    return least if abs(duty) < least else None
 
 
 @dataclass
@@ -328,6 +340,7 @@ class JogTab(TabPage):
     def compose(self) -> ComposeResult:
         yield JogPad(tuple(j.unit for j in self.machine.joints), id="jog-pad")
         yield LiveText(id="jog-table")
+        yield LiveText(id="jog-dead-band")
         yield Static(self._keys_help(), id="jog-help")
 
     def on_mount(self) -> None:
@@ -389,25 +402,47 @@ class JogTab(TabPage):
             self._was_manual = manual
         self.pad.refresh()
         self.query_one("#jog-table", LiveText).show(self._table(status))
+        self.query_one("#jog-dead-band", LiveText).show(self._dead_band_note())
+
+    def _command(self, j: int) -> Text:
+        """Joint ``j``'s commanded duty, marked when its valve will not open at it."""
+        command = self.pad.duty[j]
+        if below_min_pwm(self.machine.joints[j], command) is not None:
+            return Text(f"{command:+.0f} ⚠", "bold yellow")
+        return Text(f"{command:+.0f}", "bold" if command else "dim")
+
+    def _dead_band_note(self) -> Text:
+        """What a marked duty means, naming each joint it marks."""
+        parts = []
+        for j, joint in enumerate(self.machine.joints):
+            least = below_min_pwm(joint, self.pad.duty[j])
+            if least is not None:
+                parts.append(f"{joint.name} {self.pad.duty[j]:+.0f} % (needs {least:g} %)")
+        if not parts:
+            return Text("min PWM: the least duty that moves the joint, each way (section "
+                        "5.4.1); a command below it is marked ⚠", "dim")
+        return Text.assemble(("⚠ below the minimum PWM, will not move: ", "bold yellow"),
+                             ", ".join(parts))
 
     def _table(self, status: Status | None) -> Table:
         table = Table(expand=True, box=None, padding=(0, 1), header_style="bold")
         for name, justify in (("keys", "center"), ("joint", "left"), ("command %", "right"),
-                              ("controller %", "right"), ("valve %", "right"),
-                              ("position", "right"), ("target", "right")):
+                              ("min PWM +/−", "right"), ("controller %", "right"),
+                              ("valve %", "right"), ("position", "right"), ("target", "right")):
             table.add_column(name, justify=justify, no_wrap=True)
         table.add_column("within limits", ratio=1, no_wrap=True)
         rig = self.machine.n_joints == 1
         for j, joint in enumerate(self.machine.joints):
             keys = "↑/↓  a/z" if rig else "/".join(JOG_KEYS[j])
-            command = self.pad.duty[j]
+            up, down = output_min_pwm(joint)
+            least = Text(f"{up:g} / {down:g}", "dim")
             if status is None:
-                table.add_row(keys, joint.name, f"{command:+.0f}", "–", "–", "–", "–", "")
+                table.add_row(keys, joint.name, self._command(j), least, "–", "–", "–", "–", "")
                 continue
             q, d = status.position[j], status.desired[j]
             table.add_row(
-                keys, joint.name, Text(f"{command:+.0f}", "bold" if command else "dim"),
-                f"{status.duty[j]:+6.1f}", f"{status.valve[j]:+6.1f}",
+                keys, joint.name, self._command(j), least, f"{status.duty[j]:+6.1f}",
+                f"{status.valve[j]:+6.1f}",
                 f"{q:9.2f} {joint.symbol}", "–" if d != d else f"{d:9.2f} {joint.symbol}",
                 LimitBar(q, joint.lower, joint.upper, d))
         return table

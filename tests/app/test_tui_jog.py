@@ -159,3 +159,40 @@ def test_key_repeat_learns_the_terminal_and_sees_the_release() -> None:
     assert repeat.released(t + repeat.repeat_timeout + 0.001) == [2]
     assert not repeat.held
     assert repeat.press(2, t + 1.0) is True  # a new press after the release
+
+
+def test_the_jog_table_shows_each_joints_minimum_pwm_and_marks_a_duty_below_it(tui) -> None:
+    """Section 5.4.1's minimum PWM per direction, in the controller output's sense
+    (``output_min_pwm``: Rotate's valve sides need 22 and 18 %, polarity −1, so +18 / −22):
+    a commanded +5 % is below its 18 % and marked, +23 % is not; −4 % is below the 22 % of
+    that way, −22 % is not."""
+    async def scenario() -> None:
+        app = tui.app()
+        async with app.run_test(size=SIZE) as pilot:
+            await tui.ready(app, pilot)
+            table, note = app.query_one("#jog-table"), app.query_one("#jog-dead-band")
+            assert "min PWM +/−" in tui.text(table)
+            assert "18 / 22" in row(tui.text(table), "Rotate")
+            assert "26 / 14" in row(tui.text(table), "Up/Down")
+            await pilot.press("5", "s")
+            await tui.until(lambda: "⚠" in row(tui.text(table), "Rotate"),
+                            what="Rotate's +5 % marked")
+            assert "Rotate +5 % (needs 18 %)" in tui.text(note)
+            await pilot.press("9", "s", "s")  # +23 %: the valve opens
+            await tui.until(lambda: "+23" in row(tui.text(table), "Rotate"))
+            assert "⚠" not in row(tui.text(table), "Rotate")
+            assert "will not move" not in tui.text(note)
+            await pilot.press("x", "x", "x")  # −4 %: the other way needs 22 %
+            await tui.until(lambda: "-4 ⚠" in row(tui.text(table), "Rotate"),
+                            what="Rotate's −4 % marked")
+            assert "Rotate -4 % (needs 22 %)" in tui.text(note)
+            await pilot.press("x", "x")  # −22 %: as much as it needs
+            await tui.until(lambda: "-22" in row(tui.text(table), "Rotate"))
+            assert "⚠" not in row(tui.text(table), "Rotate")
+
+    asyncio.run(scenario())
+
+
+def row(text: str, joint: str) -> str:
+    """The line of ``text`` that names ``joint``."""
+    return next(line for line in text.splitlines() if f" {joint} " in line)
