@@ -148,6 +148,8 @@ def test_a_set_the_gain_check_refuses_is_shown_and_applies_nothing(tui) -> None:
             await tui.until(lambda: any("refused" in m for m in seen), what=lambda: str(seen))
             (shown,) = [m for m in seen if "refused" in m]
             assert "In/Out: unstable on the nominal model: negative gain" in shown, shown
+            in_tab = str(app.query_one("#tuning-outcome").render())  # not only in a toast
+            assert "In/Out: unstable on the nominal model: negative gain" in in_tab, in_tab
             assert app.client.coefficients["track"] == before
             assert table.get_row_at(0)[1] == "20"
 
