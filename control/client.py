@@ -63,7 +63,7 @@ from control.layout import (
 from control.motion import form_plans
 from control.motion.acceptance import accept
 from control.motion.moves import StepSummary
-from control.motion.plan import MovePlan, summaries
+from control.motion.plan import MovePlan, moving_joints, summaries
 from control.recorder import Run, RunFiles, coefficients_record, default_data_dir, save_run
 from control.recovery import recover_runs
 from control.runs import encode_meta, run_from_segment, segment_meta
@@ -588,6 +588,27 @@ class ControlClient:
         plan = form_plans.go_to(self.machine, np.array(self.status().position), q, speed,
                                 dt=self.dt)
         return self.run(replace(plan, meta={**plan.meta, **(meta or {})}))
+
+    def jog_cartesian(self, displacement: Sequence[float], frame: str = "world",
+                      speed: float = 1.0, *, stop_short: bool = False) -> MoveHandle:
+        """Move the tool by ``displacement`` ``[dx, dy, dz (mm), dγ, dβ, dα (deg)]`` along a
+        straight line in ``frame`` (``world`` or ``tool``) at ``speed`` (0 < speed ≤ 1) of
+        the machine's Cartesian jog speed, on the branch the arm is on; returns the move's
+        handle as soon as it is sent (``control.motion.cartesian_jog``).
+
+        ``Unreachable`` (a ValueError), nothing sent, when the line leaves the workspace,
+        needs a joint past its limit or comes near a singularity: the reason names which.
+        ``stop_short`` instead jogs as far as the line allows and says why in the handle's
+        ``meta["stopped"]``. ValueError for bad input or a machine without kinematics."""
+        from control.motion.cartesian_jog import plan_jog  # scipy (cartesian): on first use
+
+        jog = plan_jog(self.status().position, displacement, self.machine, frame=frame,
+                       dt=self.dt, speed=speed, stop_short=stop_short)
+        meta = {"displacement": jog.displacement.tolist(), "frame": frame, "speed": speed,
+                "asked": [float(v) for v in displacement], "stopped": jog.stopped,
+                "start_pose": jog.poses[0].tolist(), "end_pose": jog.poses[-1].tolist()}
+        return self.run(MovePlan("cartesian_jog", f"Cartesian jog ({frame})", jog.q, meta=meta,
+                                 moving=moving_joints(jog.q)))
 
     def run(self, plan: MovePlan) -> MoveHandle:
         """Run a planned move (``control.motion.plan``): its path, with an approach from where

@@ -52,6 +52,7 @@ SLOW_PATHS = (
     "tests/control/test_client.py",    # the control subprocess, for real
     "tests/control/test_timing.py",    # the thesis's timing on the control subprocess
     "tests/control/test_feed.py",      # feed override and hold on the control subprocess
+    "tests/control/test_client_cartesian_jog.py",  # Cartesian jogs on it
     "tests/control/test_process.py",   # the control subprocess's imports
 )
 # Fixtures that start one, with the file that defines them (they are visible in its folder
@@ -80,6 +81,9 @@ SLOW_TESTS = (
     "tests/faults/test_bad_input.py::test_tsv_path_files_deeply",
     "tests/faults/test_bad_input.py::test_csv_path_files_deeply",
     "tests/faults/test_bad_input.py::test_pose_files_deeply",
+    # 1,000 Cartesian jogs planned and checked sample by sample, about 10 s
+    "tests/control/motion/test_cartesian_jog.py::"
+    "test_random_jogs_keep_the_branch_and_the_line_or_are_refused_with_a_reason",
     # 10,000 machine files changed and run on a controller, about a minute
     "tests/hw/test_machine_fuzz.py::"
     "test_ten_thousand_changed_machine_files_load_and_run_or_name_their_key",
