@@ -16,8 +16,25 @@ Three modes, cycled with ``m``:
   step chosen with 1–9, from its unit's table (``POSITION_STEPS``: 0.05 … 20 mm,
   0.01 … 5°).
 
+Cartesian jog (``w`` cycles the frame joint → world → tool; the Unimate only, the
+rig is a single axis): the same six key pairs move the tool along x, y, z or
+turn it about x, y, z (γ, β, α) of the world or the tool frame, on a straight
+line, on the branch the arm is on (``control.motion.cartesian_jog``).
+
+- **position** — each press jogs the tool by the step (mm or °, as above) at
+  the machine's Cartesian jog speed; a step the arm cannot make (a joint
+  limit, out of reach, the wrist singularity) moves nothing and says why.
+- **hold-to-move** — while a key is held the tool moves along the axis at the
+  chosen fraction of the Cartesian jog speed (``CARTESIAN_SPEEDS``, keys 1–9);
+  on release the arm holds where it is. The jog is planned ``HOLD_REACH_S``
+  ahead and ends before a joint limit or a singularity, saying which.
+
+Duty mode has no Cartesian meaning: the Cartesian frames cycle position and
+hold-to-move. The live pose (x, y, z, γ, β, α) is shown under the pad.
+
 The keys belong to ``JogPad``, which posts what they ask for (``DutyChanged``,
-``TargetStepped``, ``Stopped``); ``JogTab`` sends it to the controller.
+``TargetStepped``, ``CartesianJogged``, ``Stopped``); ``JogTab`` sends it to the
+controller.
 """
 
 from __future__ import annotations
@@ -41,11 +58,19 @@ from app.widgets.limit_bar import LimitBar
 from app.widgets.live_text import LiveText
 from control.client import ControlClient
 from control.layout import Mode, Status
+from control.motion.cartesian_jog import AXES
 from hw.machine import Joint
 from hw.transmission import output_min_pwm
 
 JOG_KEYS = (("a", "z"), ("s", "x"), ("d", "c"), ("f", "v"), ("g", "b"), ("h", "n"))
 MODES = ("duty", "hold-to-move", "position")
+FRAMES = ("joint", "world", "tool")  # w cycles them; world and tool are Cartesian jogs
+CARTESIAN_MODES = ("hold-to-move", "position")
+# Hold-to-move Cartesian speed, keys 1-9: a fraction of the machine's cartesian_jog_speed.
+CARTESIAN_SPEEDS = (0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.8, 1.0)
+HOLD_REACH_S = 4.0  # a held Cartesian key plans this far ahead (s at the chosen speed)
+NO_CARTESIAN = ("no Cartesian jog on this machine: {name} has no closed-form kinematics "
+                "(a single axis), only joint jog")
 RIG_ARROW_STEP = 10.0  # function.c Manual(): each arrow press changes the duty by 10 %
 HOLD_DUTY_PER_STEP = 10.0  # hold-to-move duty is 10 × increment %,
 HOLD_DUTY_MAX = 50.0  # at most this: a held key is for placing a joint, not for speed
@@ -66,6 +91,10 @@ MODE_HELP = {
     "hold-to-move": f"a joint moves at 10 × increment % (≤ {HOLD_DUTY_MAX:g} %) only while "
                     "its key is held, then holds where it stopped",
     "position": "closed loop: each press moves the joint's hold target by the step",
+}
+CARTESIAN_HELP = {
+    "hold-to-move": "the tool moves along the axis while the key is held, then holds",
+    "position": "each press moves the tool by the step along the axis, on a straight line",
 }
 
 
@@ -164,11 +193,13 @@ class JogPad(Widget, can_focus=True):
         Binding("down", "arrow(-1)", "rig −10 %", key_display="↓"),
         Binding("space", "stop_all", "all duties 0", key_display="space"),
         Binding("m", "mode", "mode"),
+        Binding("w", "frame", "frame joint/world/tool"),
         Binding("enter", "hold_here", "hold here"),
     ]
 
     mode: reactive[str] = reactive("duty")
     increment: reactive[int] = reactive(5)
+    frame: reactive[str] = reactive("joint")
 
     @dataclass
     class DutyChanged(Message):
@@ -184,14 +215,31 @@ class JogPad(Widget, can_focus=True):
         step: float
 
     @dataclass
+    class CartesianJogged(Message):
+        """Jog the tool by ``displacement`` [dx, dy, dz (mm), dγ, dβ, dα (°)] in ``frame``
+        at ``speed`` of the Cartesian jog speed; ``held``: a hold-to-move jog, planned as
+        far as the line allows (it ends on release)."""
+
+        displacement: tuple[float, ...]
+        frame: str
+        speed: float
+        held: bool
+
+    @dataclass
     class Stopped(Message):
         """Every duty is zero: leave manual actuation for closed-loop hold (the thesis's
         default mode); ``hold`` asks for the hold even when not in manual."""
 
         hold: bool
 
-    def __init__(self, units: tuple[str, ...], *, id: str | None = None) -> None:
+    def __init__(self, units: tuple[str, ...], *,
+                 cartesian_speed: tuple[float, float] | None = None, machine_name: str = "",
+                 id: str | None = None) -> None:
         super().__init__(id=id)
+        # the machine's cartesian_jog_speed (mm/s, °/s) if it has kinematics (world and tool
+        # frames), else None
+        self.cartesian_speeds = cartesian_speed
+        self.machine_name = machine_name
         self.units = units  # each joint's unit, "mm" or "deg": its position steps
         self.n = len(units)
         self.duty = [0.0] * self.n
@@ -208,13 +256,17 @@ class JogPad(Widget, can_focus=True):
         if self.latched:
             return Text.assemble(("E-STOP latched", "bold red"), ("  ·  ", "dim"),
                                  "jog keys do nothing until ^R releases it")
-        steps = " · ".join(f"{self.step(unit):g}{SYMBOLS[unit]}"
-                           for unit in POSITION_STEPS if unit in self.units)
-        amount = {"duty": f"increment {self.increment} %",
-                  "hold-to-move": f"duty {self.hold_duty:g} % while held",
+        units = POSITION_STEPS if self.frame != "joint" else [
+            unit for unit in POSITION_STEPS if unit in self.units]
+        steps = " · ".join(f"{self.step(unit):g}{SYMBOLS[unit]}" for unit in units)
+        held = (f"{self.cartesian_speed:.0%} of the jog speed while held"
+                if self.frame != "joint" else f"duty {self.hold_duty:g} % while held")
+        amount = {"duty": f"increment {self.increment} %", "hold-to-move": held,
                   "position": f"step {steps} a press"}[self.mode]
-        return Text.assemble(("mode ", "dim"), (self.mode, "bold"), ("  ·  ", "dim"),
-                             (amount, "bold"), ("  ·  ", "dim"), MODE_HELP[self.mode])
+        helps = MODE_HELP if self.frame == "joint" else CARTESIAN_HELP
+        return Text.assemble(("frame ", "dim"), (self.frame, "bold"), ("  ·  mode ", "dim"),
+                             (self.mode, "bold"), ("  ·  ", "dim"), (amount, "bold"),
+                             ("  ·  ", "dim"), helps[self.mode])
 
     def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
         if not self.armed:
@@ -230,6 +282,12 @@ class JogPad(Widget, can_focus=True):
         return POSITION_STEPS[unit][self.increment - 1]
 
     @property
+    def cartesian_speed(self) -> float:
+        """The hold-to-move Cartesian speed of the chosen increment, a fraction of the
+        machine's cartesian_jog_speed."""
+        return CARTESIAN_SPEEDS[self.increment - 1]
+
+    @property
     def hold_duty(self) -> float:
         """The hold-to-move duty of the chosen increment (%), capped at HOLD_DUTY_MAX."""
         return min(HOLD_DUTY_MAX, HOLD_DUTY_PER_STEP * self.increment)
@@ -239,7 +297,18 @@ class JogPad(Widget, can_focus=True):
 
     def action_mode(self) -> None:
         self.stop(hold=False)
-        self.mode = MODES[(MODES.index(self.mode) + 1) % len(MODES)]
+        modes = MODES if self.frame == "joint" else CARTESIAN_MODES
+        self.mode = modes[(modes.index(self.mode) + 1) % len(modes)]
+
+    def action_frame(self) -> None:
+        """Cycle joint → world → tool jog; a machine without kinematics says it has none."""
+        if self.cartesian_speeds is None:
+            self.notify(NO_CARTESIAN.format(name=self.machine_name), severity="warning")
+            return
+        self.stop(hold=False)
+        self.frame = FRAMES[(FRAMES.index(self.frame) + 1) % len(FRAMES)]
+        if self.frame != "joint" and self.mode == "duty":
+            self.mode = "position"  # a duty has no Cartesian meaning
 
     def refused_while_latched(self) -> bool:
         """True while the E-stop is latched; then say why (not at every key of a burst)."""
@@ -252,6 +321,9 @@ class JogPad(Widget, can_focus=True):
         return True
 
     def action_jog(self, joint: int, sign: int) -> None:
+        if self.frame != "joint":
+            self.jog_tool(joint, sign)
+            return
         if joint >= self.n or self.refused_while_latched():
             return
         if self.mode == "duty":
@@ -261,6 +333,26 @@ class JogPad(Widget, can_focus=True):
             self.hold_key(joint, sign * self.hold_duty)
         else:
             self.post_message(self.TargetStepped(joint, sign * self.step(self.units[joint])))
+
+    def jog_tool(self, axis: int, sign: int) -> None:
+        """A Cartesian jog key: ``axis`` 0-5 is x, y, z, γ, β, α of the frame."""
+        if self.refused_while_latched():
+            return
+        unit = "mm" if axis < 3 else "deg"
+        d = [0.0] * 6
+        if self.mode == "position":
+            d[axis] = sign * self.step(unit)
+            self.post_message(self.CartesianJogged(tuple(d), self.frame, 1.0, held=False))
+            return
+        if self.repeat.press(axis, time.monotonic()):  # a new hold, not a repeat of one
+            self.repeat.forget()
+            self.repeat.press(axis, time.monotonic())
+            assert self.cartesian_speeds is not None  # the frame is joint without them
+            full = self.cartesian_speeds[0 if unit == "mm" else 1]
+            d[axis] = sign * HOLD_REACH_S * self.cartesian_speed * full
+            self.post_message(self.CartesianJogged(tuple(d), self.frame, self.cartesian_speed,
+                                                   held=True))
+        self._release_timer.resume()
 
     def action_arrow(self, sign: int) -> None:
         if self.refused_while_latched():
@@ -293,6 +385,11 @@ class JogPad(Widget, can_focus=True):
         """Every RELEASE_CHECK_S while a key is held: stop the joints let go; when the last
         is let go, hold every joint where it stopped (at zero duty a joint would sag)."""
         gone = self.repeat.released(time.monotonic())
+        if self.frame != "joint":  # one Cartesian axis at a time: its release holds the arm
+            if gone and not self.repeat.held:
+                self._release_timer.pause()
+                self.stop(hold=True)
+            return
         if not self.repeat.held:
             self._release_timer.pause()
             if gone:
@@ -331,14 +428,19 @@ class JogPad(Widget, can_focus=True):
 
 
 class JogTab(TabPage):
-    """Manual control of every joint from the keyboard."""
+    """Manual control of every joint, and of the tool in a Cartesian frame, from the keyboard."""
 
     REFRESH_HZ = 10.0
     TITLE = "Jog"
     _was_manual = False
+    cartesian_note = Text("")  # why the last Cartesian jog was refused or ends early
 
     def compose(self) -> ComposeResult:
-        yield JogPad(tuple(j.unit for j in self.machine.joints), id="jog-pad")
+        speed = self.machine.cartesian_jog_speed if self.model is not None else None
+        yield JogPad(tuple(j.unit for j in self.machine.joints), cartesian_speed=speed,
+                     machine_name=self.machine.name, id="jog-pad")
+        yield LiveText(id="jog-pose")
+        yield LiveText(id="jog-cartesian-note")
         yield LiveText(id="jog-table")
         yield LiveText(id="jog-dead-band")
         yield Static(self._keys_help(), id="jog-help")
@@ -382,6 +484,28 @@ class JogTab(TabPage):
                      lambda client: client.jog_position(message.joint, message.step))
         self.refresh_live()
 
+    def on_jog_pad_cartesian_jogged(self, message: JogPad.CartesianJogged) -> None:
+        if not self.visible_now or self.pad.latched:
+            return
+        self.cartesian_note = Text("")
+        self.command("Cartesian jog", lambda client: self._jog_tool(client, message))
+        self.refresh_live()
+
+    def _jog_tool(self, client: ControlClient, message: JogPad.CartesianJogged) -> None:
+        """Send the jog; a jog the arm cannot make (or a held one that ends early) says why
+        under the pad, as well as in the notification ``command`` shows for a refusal."""
+        try:
+            handle = client.jog_cartesian(message.displacement, message.frame, message.speed,
+                                          stop_short=message.held)
+        except ValueError as exc:
+            self.cartesian_note = Text.assemble(("jog refused: ", "bold yellow"), str(exc))
+            raise
+        stopped = handle.meta.get("stopped", "")
+        if stopped:
+            self.cartesian_note = Text.assemble(("the jog stops early: ", "bold yellow"),
+                                                str(stopped))
+            self.notify(f"Cartesian jog stops early: {stopped}", severity="warning")
+
     def on_jog_pad_stopped(self, message: JogPad.Stopped) -> None:
         self._leave_manual(message.hold)
 
@@ -401,8 +525,27 @@ class JogTab(TabPage):
                 self.pad.forget_duties()
             self._was_manual = manual
         self.pad.refresh()
+        self.query_one("#jog-pose", LiveText).show(self._pose(status))
+        self.query_one("#jog-cartesian-note", LiveText).show(self.cartesian_note)
         self.query_one("#jog-table", LiveText).show(self._table(status))
         self.query_one("#jog-dead-band", LiveText).show(self._dead_band_note())
+
+    def _pose(self, status: Status | None) -> Text:
+        """The tool's live pose and, in a Cartesian frame, which keys move it along what."""
+        if self.model is None:
+            return Text("no tool pose: a single axis (Cartesian jog needs the Unimate's "
+                        "kinematics)", "dim")
+        if status is None:
+            return Text("tool pose  –", "dim")
+        x, y, z, g, b, a = self.model.pose(status.position)
+        parts: list[str | tuple[str, str]] = [
+            ("tool  ", "dim"), f"x {x:8.1f}  y {y:8.1f}  z {z:8.1f} mm   ",
+            f"γ {g:7.2f}°  β {b:7.2f}°  α {a:7.2f}°"]
+        if self.pad.frame != "joint":
+            keys = "  ".join(f"{p}/{m} {axis}" for (p, m), axis in zip(JOG_KEYS, AXES,
+                                                                     strict=True))
+            parts += [("   keys (", "dim"), (self.pad.frame, "bold"), (" frame) ", "dim"), keys]
+        return Text.assemble(*parts)
 
     def _command(self, j: int) -> Text:
         """Joint ``j``'s commanded duty, marked when its valve will not open at it."""
@@ -456,8 +599,21 @@ class JogTab(TabPage):
         units = {j.unit for j in self.machine.joints}
         steps = "  ".join(" ".join(f"{v:g}" for v in table) + SYMBOLS[unit]
                           for unit, table in POSITION_STEPS.items() if unit in units)
+        frames = " · w frame joint/world/tool" if self.model is not None else ""
         return Text.assemble(
             ("keys  ", "dim"), pairs,
-            ("   1–9 increment · space all stop · m mode · enter hold here", "dim"),
+            (f"   1–9 increment · space all stop · m mode · enter hold here{frames}", "dim"),
             ("\n1–9   ", "dim"), f"duty ±1…9 % a press · hold-to-move 10…{HOLD_DUTY_MAX:g} % · "
-            f"position steps {steps}")
+            f"position steps {steps}", self._cartesian_help())
+
+    def _cartesian_help(self) -> Text:
+        if self.model is None:
+            return Text("")
+        keys = "  ".join(f"{p}/{m} {axis}" for (p, m), axis in zip(JOG_KEYS, AXES, strict=True))
+        mm, deg = self.machine.cartesian_jog_speed
+        speeds = f"{CARTESIAN_SPEEDS[0]:.0%}…{CARTESIAN_SPEEDS[-1]:.0%}"
+        return Text.assemble(
+            ("\nworld/tool  ", "dim"), keys,
+            ("   position: the step a press, on a straight line · hold-to-move: ", "dim"),
+            f"{speeds} of {mm:g} mm/s, {deg:g}°/s", (" · stops before a limit or a singularity",
+                                                    "dim"))
