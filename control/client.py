@@ -62,6 +62,7 @@ from control.layout import (
 )
 from control.motion import form_plans
 from control.motion.acceptance import accept
+from control.motion.cartesian_jog import plan_jog
 from control.motion.moves import StepSummary
 from control.motion.plan import MovePlan, moving_joints, summaries
 from control.recorder import Run, RunFiles, coefficients_record, default_data_dir, save_run
@@ -600,8 +601,6 @@ class ControlClient:
         needs a joint past its limit or comes near a singularity: the reason names which.
         ``stop_short`` instead jogs as far as the line allows and says why in the handle's
         ``meta["stopped"]``. ValueError for bad input or a machine without kinematics."""
-        from control.motion.cartesian_jog import plan_jog  # scipy (cartesian): on first use
-
         jog = plan_jog(self.status().position, displacement, self.machine, frame=frame,
                        dt=self.dt, speed=speed, stop_short=stop_short)
         meta = {"displacement": jog.displacement.tolist(), "frame": frame, "speed": speed,

@@ -61,7 +61,6 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.interpolate import CubicSpline
 
 from control.motion.file_fields import csv_lines, field_number, move_file_bound, read_text_file
 from control.motion.path_files import MAX_MOVE_S
@@ -163,6 +162,8 @@ def cartesian_path(start: ArrayLike, points: ArrayLike, machine: Machine, *,
     joints' ``max_speed`` and ``max_accel`` times ``speed_fraction`` allow.
     Raises ValueError naming the first bad point and why.
     """
+    from scipy.interpolate import CubicSpline  # on first use: a Cartesian jog never needs it
+
     model = unimate_model(machine)
     q0 = _start(start, machine)
     xyz = _via_xyz(points)
