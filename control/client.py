@@ -57,11 +57,12 @@ from control.layout import (
     HEARTBEAT_WORD,
     ControlLayout,
     LatencyHistogram,
+    Mode,
     MoveLayout,
     Status,
 )
 from control.motion import form_plans
-from control.motion.acceptance import accept
+from control.motion.acceptance import accept, starts_here
 from control.motion.cartesian_jog import plan_jog
 from control.motion.moves import StepSummary
 from control.motion.plan import MovePlan, moving_joints, summaries
@@ -595,14 +596,22 @@ class ControlClient:
         """Move the tool by ``displacement`` ``[dx, dy, dz (mm), dγ, dβ, dα (deg)]`` along a
         straight line in ``frame`` (``world`` or ``tool``) at ``speed`` (0 < speed ≤ 1) of
         the machine's Cartesian jog speed, on the branch the arm is on; returns the move's
-        handle as soon as it is sent (``control.motion.cartesian_jog``).
+        handle as soon as it is sent (``control.motion.cartesian_jog``). It starts from the
+        hold target while the arm holds within its tolerance of it (so steps add up exactly
+        and the desired position never jumps), else from where the joints are.
 
         ``Unreachable`` (a ValueError), nothing sent, when the line leaves the workspace,
         needs a joint past its limit or comes near a singularity: the reason names which.
         ``stop_short`` instead jogs as far as the line allows and says why in the handle's
         ``meta["stopped"]``. ValueError for bad input or a machine without kinematics."""
-        jog = plan_jog(self.status().position, displacement, self.machine, frame=frame,
-                       dt=self.dt, speed=speed, stop_short=stop_short)
+        status = self.status()
+        start = np.array(status.position)
+        target = np.array(status.desired)
+        if (status.mode == Mode.HOLD and np.isfinite(target).all()
+                and starts_here(start, target, self.machine)):
+            start = target
+        jog = plan_jog(start, displacement, self.machine, frame=frame, dt=self.dt, speed=speed,
+                       stop_short=stop_short)
         meta = {"displacement": jog.displacement.tolist(), "frame": frame, "speed": speed,
                 "asked": [float(v) for v in displacement], "stopped": jog.stopped,
                 "start_pose": jog.poses[0].tolist(), "end_pose": jog.poses[-1].tolist()}

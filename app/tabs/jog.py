@@ -56,7 +56,7 @@ from textual.widgets import Static
 from app.tabs.tab import TabPage
 from app.widgets.limit_bar import LimitBar
 from app.widgets.live_text import LiveText
-from control.client import ControlClient
+from control.client import ControlClient, MoveHandle
 from control.layout import Mode, Status
 from control.motion.cartesian_jog import AXES
 from hw.machine import Joint
@@ -96,6 +96,12 @@ CARTESIAN_HELP = {
     "hold-to-move": "the tool moves along the axis while the key is held, then holds",
     "position": "each press moves the tool by the step along the axis, on a straight line",
 }
+
+
+def _shown(displacement: tuple[float, ...]) -> str:
+    """A Cartesian displacement as the axes it moves: 'x +2 mm, γ −0.5°'."""
+    return ", ".join(f"{axis} {v:+g}{' mm' if k < 3 else '°'}"
+                     for k, (axis, v) in enumerate(zip(AXES, displacement, strict=True)) if v)
 
 
 def below_min_pwm(joint: Joint, duty: float) -> float | None:
@@ -403,9 +409,16 @@ class JogPad(Widget, can_focus=True):
         self.post_message(self.DutyChanged(tuple(self.duty)))
 
     def stop(self, hold: bool) -> None:
-        """Let go and ask for closed-loop hold (see ``Stopped``)."""
+        """Let go and ask for closed-loop hold (see ``Stopped``); always when a Cartesian key
+        was held: its jog is running, and letting go must end it."""
+        hold = hold or self.moving_tool
         self.let_go()
         self.post_message(self.Stopped(hold))
+
+    @property
+    def moving_tool(self) -> bool:
+        """A Cartesian hold-to-move key is held: its jog runs until it is let go."""
+        return self.frame != "joint" and self.repeat.held
 
     def let_go(self) -> None:
         """Forget every held key and zero every duty; the tab decides about the hold."""
@@ -434,6 +447,8 @@ class JogTab(TabPage):
     TITLE = "Jog"
     _was_manual = False
     cartesian_note = Text("")  # why the last Cartesian jog was refused or ends early
+    _jog: MoveHandle | None = None  # the last Cartesian jog sent
+    _queued: JogPad.CartesianJogged | None = None  # steps pressed while it ran, summed
 
     def compose(self) -> ComposeResult:
         speed = self.machine.cartesian_jog_speed if self.model is not None else None
@@ -462,11 +477,14 @@ class JogTab(TabPage):
     def hidden(self) -> None:
         super().hidden()
         self.pad.armed = False
+        moving_tool = self.pad.moving_tool
         self.pad.let_go()  # leaving the tab must not leave a joint moving: decided now
-        self._leave_manual(hold=False)
+        self._queued = None
+        self._leave_manual(hold=moving_tool)
 
     def estop(self, latched: bool) -> None:
         self.pad.estop(latched)
+        self._queued = None
         self.refresh_live()
 
     def on_jog_pad_duty_changed(self, message: JogPad.DutyChanged) -> None:
@@ -487,9 +505,29 @@ class JogTab(TabPage):
     def on_jog_pad_cartesian_jogged(self, message: JogPad.CartesianJogged) -> None:
         if not self.visible_now or self.pad.latched:
             return
+        running = self._jog is not None and not self._jog.done.is_set()
+        if running and not message.held:
+            self._queue(message)  # a new move now would start from rest while the arm moves
+        else:
+            self._queued = None
+            self._send_jog(message)
+        self.refresh_live()
+
+    def _queue(self, message: JogPad.CartesianJogged) -> None:
+        """Add a step pressed while a step runs to the ones waiting for it to end."""
+        queued = self._queued
+        if queued is not None and queued.frame == message.frame and not queued.held:
+            total = tuple(a + b for a, b in zip(queued.displacement, message.displacement,
+                                                strict=True))
+            message = JogPad.CartesianJogged(total, message.frame, message.speed, False)
+        self._queued = message
+        self.cartesian_note = Text.assemble(("next: ", "dim"), _shown(message.displacement),
+                                            (f" ({message.frame} frame), when this step ends",
+                                             "dim"))
+
+    def _send_jog(self, message: JogPad.CartesianJogged) -> None:
         self.cartesian_note = Text("")
         self.command("Cartesian jog", lambda client: self._jog_tool(client, message))
-        self.refresh_live()
 
     def _jog_tool(self, client: ControlClient, message: JogPad.CartesianJogged) -> None:
         """Send the jog; a jog the arm cannot make (or a held one that ends early) says why
@@ -500,6 +538,7 @@ class JogTab(TabPage):
         except ValueError as exc:
             self.cartesian_note = Text.assemble(("jog refused: ", "bold yellow"), str(exc))
             raise
+        self._jog = handle
         stopped = handle.meta.get("stopped", "")
         if stopped:
             self.cartesian_note = Text.assemble(("the jog stops early: ", "bold yellow"),
@@ -516,6 +555,11 @@ class JogTab(TabPage):
             self.command("hold", ControlClient.hold)
 
     def refresh_live(self) -> None:
+        queued = self._queued
+        if queued is not None and (self._jog is None or self._jog.done.is_set()):
+            self._queued = None
+            if self.visible_now and not self.pad.latched:
+                self._send_jog(queued)
         status = self.status()
         if status is not None:
             if status.estop and not self.pad.latched:  # latched before its event arrived
