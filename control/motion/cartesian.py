@@ -165,9 +165,9 @@ def cartesian_path(start: ArrayLike, points: ArrayLike, machine: Machine, *,
     from scipy.interpolate import CubicSpline  # on first use: a Cartesian jog never needs it
 
     model = unimate_model(machine)
-    q0 = _start(start, machine)
+    q0 = start_joints(start, machine)
     xyz = _via_xyz(points)
-    step = machine.sample_time_s if dt is None else _positive(dt, "dt")
+    step = machine.sample_time_s if dt is None else positive_seconds(dt, "dt")
     if not 0.0 < speed_fraction <= 1.0:
         raise ValueError(f"speed_fraction must be in (0, 1], got {speed_fraction}")
     frame = arm_frame(q0, model)
@@ -207,7 +207,7 @@ def path_from_poses(points: PosePoints, start: ArrayLike, machine: Machine, *,
                     dt: float | None = None, speed_fraction: float = 1.0) -> CartesianPath:
     """``cartesian_path`` from a pose file's points, after checking its orientation columns."""
     model = unimate_model(machine)
-    q0 = _start(start, machine)
+    q0 = start_joints(start, machine)
     if len(points.xyz) < 2:
         raise PoseFileError(f"{points.source}: {len(points.xyz)} via point(s): a path needs an "
                             "intermediate point and an end point (section 6.4)")
@@ -370,7 +370,7 @@ def _knots(xyz: np.ndarray, times: ArrayLike | None) -> np.ndarray:
     return knots
 
 
-def _start(start: ArrayLike, machine: Machine) -> np.ndarray:
+def start_joints(start: ArrayLike, machine: Machine) -> np.ndarray:
     q0 = np.asarray(start, dtype=float)
     if q0.shape != (machine.n_joints,) or not np.isfinite(q0).all():
         raise ValueError(f"start must be {machine.n_joints} finite joint values, got {q0}")
@@ -392,7 +392,7 @@ def _via_xyz(points: ArrayLike) -> np.ndarray:
     return xyz
 
 
-def _positive(value: float, name: str) -> float:
+def positive_seconds(value: float, name: str) -> float:
     if not (math.isfinite(value) and value > 0):
         raise ValueError(f"{name} must be a positive number of seconds, got {value}")
     return float(value)

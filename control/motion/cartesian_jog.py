@@ -140,8 +140,8 @@ def plan_jog(start: ArrayLike, displacement: ArrayLike, machine: Machine, *,
     followed, unless ``stop_short`` (module docstring).
     """
     model = unimate_model(machine)
-    q0 = cartesian._start(start, machine)
-    step = machine.sample_time_s if dt is None else cartesian._positive(dt, "dt")
+    q0 = cartesian.start_joints(start, machine)
+    step = machine.sample_time_s if dt is None else cartesian.positive_seconds(dt, "dt")
     wanted = _displacement(displacement)
     if frame not in FRAMES:
         raise ValueError(f"frame must be one of {', '.join(FRAMES)}, got {frame!r}")
@@ -279,7 +279,7 @@ def _first_problem(q: np.ndarray, s: np.ndarray, valid: np.ndarray, slot: int,
     if reasons["slot"][k]:
         why = _slot_reason(model, poses[k], slot, valid[k], q[k - 1] if k else q0, machine)
     elif reasons["jump"][k]:
-        why = cartesian.jump_reason(q, k, machine)
+        why = _jump_reason(q, k, machine)
     elif reasons["wrist"][k]:
         why = (f"wrist singularity: Yaw would come within {WRIST_MARGIN_DEG:g}° of 0° "
                f"({q[k, YAW]:.2f}°), where Bend and Swivel line up and no joint motion keeps "
@@ -317,6 +317,18 @@ def _slot_reason(model: Unimate2000B, pose: np.ndarray, slot: int, valid: np.nda
     return cartesian.branch_reason(model, pose, slot, valid, previous)
 
 
+def _jump_reason(q: np.ndarray, k: int, machine: Machine) -> str:
+    """A joint whose solution wraps between samples k − 1 and k: it would pass a limit."""
+    j = int(np.argmax(np.abs(q[k] - q[k - 1]) / np.where(
+        [jt.kind == "prismatic" for jt in machine.joints], cartesian.JUMP_MM,
+        cartesian.JUMP_DEG)))
+    joint = machine.joints[j]
+    limit = joint.upper if q[k - 1, j] > q[k, j] else joint.lower
+    return (f"joint limit: {joint.name} would pass its limit {limit:g}{joint.symbol} (from "
+            f"{q[k - 1, j]:.2f}{joint.symbol} it would have to wrap to {q[k, j]:.2f}"
+            f"{joint.symbol})")
+
+
 def _line(t0: np.ndarray, displacement: np.ndarray, tool: bool) -> _Line:
     r0, p0 = t0[:3, :3], t0[:3, 3]
     d, omega = displacement[:3], np.radians(displacement[3:])
@@ -329,7 +341,7 @@ def _where(line: _Line, at: float) -> str:
         return "at the start: "
     p, _ = line.at(np.array([at]))
     x, y, z = p[0]
-    return f"stops at {at:.0%} of the way (x y z = {x:.1f} {y:.1f} {z:.1f} mm): "
+    return f"at {at:.0%} of the way (x y z = {x:.1f} {y:.1f} {z:.1f} mm): "
 
 
 def _shown(d: np.ndarray, frame: str) -> str:
