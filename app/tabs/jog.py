@@ -26,7 +26,8 @@ line, on the branch the arm is on (``control.motion.cartesian_jog``).
   limit, out of reach, the wrist singularity) moves nothing and says why.
 - **hold-to-move** — while a key is held the tool moves along the axis at the
   chosen fraction of the Cartesian jog speed (``CARTESIAN_SPEEDS``, keys 1–9);
-  on release the arm holds where it is. The jog is planned ``HOLD_REACH_S``
+  on release a feed hold stops it along its line within the joints'
+  acceleration, then the arm holds there. The jog is planned ``HOLD_REACH_S``
   ahead and ends before a joint limit or a singularity, saying which.
 
 Duty mode has no Cartesian meaning: the Cartesian frames cycle position and
@@ -234,9 +235,11 @@ class JogPad(Widget, can_focus=True):
     @dataclass
     class Stopped(Message):
         """Every duty is zero: leave manual actuation for closed-loop hold (the thesis's
-        default mode); ``hold`` asks for the hold even when not in manual."""
+        default mode); ``hold`` asks for the hold even when not in manual; ``tool``: a held
+        Cartesian jog was let go, to be stopped along its line first."""
 
         hold: bool
+        tool: bool = False
 
     def __init__(self, units: tuple[str, ...], *,
                  cartesian_speed: tuple[float, float] | None = None, machine_name: str = "",
@@ -391,10 +394,10 @@ class JogPad(Widget, can_focus=True):
         """Every RELEASE_CHECK_S while a key is held: stop the joints let go; when the last
         is let go, hold every joint where it stopped (at zero duty a joint would sag)."""
         gone = self.repeat.released(time.monotonic())
-        if self.frame != "joint":  # one Cartesian axis at a time: its release holds the arm
+        if self.frame != "joint":  # one Cartesian axis at a time: its release stops the jog
             if gone and not self.repeat.held:
-                self._release_timer.pause()
-                self.stop(hold=True)
+                self.let_go()
+                self.post_message(self.Stopped(True, tool=True))
             return
         if not self.repeat.held:
             self._release_timer.pause()
@@ -411,9 +414,9 @@ class JogPad(Widget, can_focus=True):
     def stop(self, hold: bool) -> None:
         """Let go and ask for closed-loop hold (see ``Stopped``); always when a Cartesian key
         was held: its jog is running, and letting go must end it."""
-        hold = hold or self.moving_tool
+        tool = self.moving_tool
         self.let_go()
-        self.post_message(self.Stopped(hold))
+        self.post_message(self.Stopped(hold or tool, tool))
 
     @property
     def moving_tool(self) -> bool:
@@ -449,6 +452,7 @@ class JogTab(TabPage):
     cartesian_note = Text("")  # why the last Cartesian jog was refused or ends early
     _jog: MoveHandle | None = None  # the last Cartesian jog sent
     _queued: JogPad.CartesianJogged | None = None  # steps pressed while it ran, summed
+    _stopping = False  # a let-go held jog is decelerating (feed hold) before the hold
 
     def compose(self) -> ComposeResult:
         speed = self.machine.cartesian_jog_speed if self.model is not None else None
@@ -477,14 +481,16 @@ class JogTab(TabPage):
     def hidden(self) -> None:
         super().hidden()
         self.pad.armed = False
-        moving_tool = self.pad.moving_tool
+        moving_tool = self.pad.moving_tool or self._stopping
         self.pad.let_go()  # leaving the tab must not leave a joint moving: decided now
         self._queued = None
+        self._stopping = False
         self._leave_manual(hold=moving_tool)
 
     def estop(self, latched: bool) -> None:
         self.pad.estop(latched)
         self._queued = None
+        self._stopping = False
         self.refresh_live()
 
     def on_jog_pad_duty_changed(self, message: JogPad.DutyChanged) -> None:
@@ -546,7 +552,23 @@ class JogTab(TabPage):
             self.notify(f"Cartesian jog stops early: {stopped}", severity="warning")
 
     def on_jog_pad_stopped(self, message: JogPad.Stopped) -> None:
+        if message.tool and self.visible_now:
+            # feed hold: the jog decelerates along its line within the joints' limits; the
+            # hold follows once it stands (refresh_live), rather than stopping it dead
+            self._stopping = self.command("stop the jog", ControlClient.pause)
+            if self._stopping:
+                return
         self._leave_manual(message.hold)
+
+    def _hold_when_stopped(self) -> None:
+        """A let-go Cartesian jog has stopped along its line (or ended): hold there."""
+        status = self.status()
+        if not self._stopping or status is None:
+            return
+        if status.mode != Mode.FOLLOW_TRACK or (status.paused and status.feed_rate == 0.0):
+            self._stopping = False
+            if status.mode == Mode.FOLLOW_TRACK:
+                self.command("hold", ControlClient.hold)
 
     def _leave_manual(self, hold: bool) -> None:
         """Hold, the thesis's default mode, if asked to or if the controller is in manual."""
@@ -555,6 +577,7 @@ class JogTab(TabPage):
             self.command("hold", ControlClient.hold)
 
     def refresh_live(self) -> None:
+        self._hold_when_stopped()
         queued = self._queued
         if queued is not None and (self._jog is None or self._jog.done.is_set()):
             self._queued = None

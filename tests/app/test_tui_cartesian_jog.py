@@ -133,6 +133,9 @@ def test_hold_to_move_moves_the_tool_while_held_and_holds_on_release(tui) -> Non
             tui.post_key(app, "d")  # z up, held
             await tui.until(lambda: client.status().mode == Mode.FOLLOW_TRACK, timeout=5,
                             what="the tool moving while held")
+            # let go: a feed hold stops the jog along its line, then the arm holds there
+            await tui.until(lambda: client.status().paused, timeout=5,
+                            what="the jog decelerating in a feed hold after the release")
             await tui.until(lambda: client.status().mode == Mode.HOLD, timeout=5,
                             what="hold after the release")
             status = client.status()
