@@ -42,6 +42,7 @@ VALVE_RESOLUTION_PCT = (0.01, 10.0)  # the I/O board's protocol carries it in 0.
 ENCODER_BITS = (1, 32)
 SETTLE_MS = 65.0  # the I/O board's protocol carries it in µs, 16 bits
 GRAY_SETTLE_MS = 0.001  # a multiplexed encoder's lamp needs time to light: at least 1 µs
+ENCODER_THRESHOLD = (0.01, 0.99)  # a lit cell's line switches between dark and full light
 GRADIENT = (1e-6, 10.0)  # |joint units per count|
 COUPLING = 10.0  # |coupling|
 DOWN_SCALE = (0.01, 1.0)
@@ -214,6 +215,7 @@ class Machine:
     park: tuple[float, ...] | None = None  # (J,) mm, deg: where it rests, power off
     cartesian_jog_speed: tuple[float, float] = CARTESIAN_JOG_SPEED  # mm/s, deg/s
     cartesian_jog_accel: tuple[float, float] = CARTESIAN_JOG_ACCEL  # mm/s², deg/s²
+    encoder_threshold: float = 0.5
 
     @property
     def n_joints(self) -> int:
@@ -457,7 +459,7 @@ class _Reader:
         valve = self.table(doc, "", "valve")
         self.only(valve, "valve", {"period_us", "resolution_pct"})
         enc = self.table(doc, "", "encoder")
-        self.only(enc, "encoder", {"kind", "bits", "settle_ms"})
+        self.only(enc, "encoder", {"kind", "bits", "settle_ms", "threshold"})
         raw_joints = doc.get("joints")
         if not isinstance(raw_joints, list) or not raw_joints:
             raise self.fail("joints", "missing: at least one [[joints]] table is required")
@@ -488,6 +490,7 @@ class _Reader:
             encoder_settle_s=self.number(enc, "encoder", "settle_ms", 0.0,
                                          GRAY_SETTLE_MS if encoder_kind == "gray" else 0.0,
                                          SETTLE_MS) / 1e3,
+            encoder_threshold=self.number(enc, "encoder", "threshold", 0.5, *ENCODER_THRESHOLD),
             joints=joints,
             coefficients=self.coefficient_sets(doc, len(joints)),
             kinematics_model=self.kinematics_model(doc),
