@@ -64,7 +64,7 @@ def test_wrong_readings_are_rejected_counted_and_never_reach_the_valves(
     """At 1 ms, six encoders a tick, the lamp model's own rate (about 1 %): every joint
     counts rejected readings, no recorded reading jumps further than the joint can move,
     and no valve command exceeds the clean run's peak by more than 15 % (an accepted
-    high-bit dropout would be a jump of tens of degrees and a saturated valve)."""
+    wrong high bit would be a jump of tens of degrees and a saturated valve)."""
     clean, clean_glitches = run_sine(controller, 0.0)
     glitchy, glitches = run_sine(controller, GLITCH_SCALE)
 
