@@ -34,7 +34,7 @@ spikes of Figure 6.1, and a joint whose word has fewer clear tracks risks fewer.
 
 One set of numbers (docs/simulator.md): with the thesis's timing, 1 ms per
 joint (each encoder every 6 ms), the light at the latch is 0.85 of full and
-the weakest cells fail now and then, about two readings a joint in 2000
+the weakest cells fail now and then, about two or three readings a joint in 2000
 samples; at 6 ms per joint it is 0.97 and none fail; servodesk's own scan (all
 six every 1 ms, 1/6 ms each) latches at 0.81 and fails more often. The board
 draws the gap to the next reading dim enough to fail the weakest cell
