@@ -164,6 +164,10 @@ def test_wrong_readings_at_the_default_scan_and_none_scanning_slowly() -> None:
 
     assert wrong() > 5
     assert wrong(scan_period_s=6 * UNIMATE.encoder_settle_s) == 0
+    assert wrong(scan_period_s=6e-3, select_to_latch_s=1e-3) > 5  # thesis: 1 ms per joint
+    assert wrong(scan_period_s=36e-3, select_to_latch_s=6e-3) == 0  # 6 ms per joint
+    with pytest.raises(ValueError, match="select_to_latch_s"):
+        SimBackend(UNIMATE, lockstep=True, scan_period_s=6e-3, select_to_latch_s=1.5e-3)
 
 
 def test_a_long_pause_is_caught_up_in_bounded_time() -> None:
