@@ -146,6 +146,11 @@ class SimBackend:
         """Always healthy: the simulated link cannot fail."""
         return ""
 
+    @property
+    def supply_mpa(self) -> float:
+        """The supply pressure now, MPa: the pump and accumulator's (``hw.sim.supply``)."""
+        return self.plant.supply.pressure / 1e6
+
     # -- simulator inputs and probes ---------------------------------------------------------
 
     def press_estop(self, pressed: bool) -> None:

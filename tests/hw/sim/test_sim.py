@@ -185,4 +185,4 @@ def test_the_oil_holds_the_rig_load() -> None:
     (pa, pb), = sim.chamber_pressures()
     area_a, area_b = RIG.joints[0].plant["area_a_m2"], RIG.joints[0].plant["area_b_m2"]
     assert pa * area_a - pb * area_b == pytest.approx(312.0 * 9.81, abs=100.0)
-    assert sim.joint_velocities() == [0.0]
+    assert -1.0 < sim.joint_velocities()[0] < 0.0  # creeping down on the valve's tare flow
