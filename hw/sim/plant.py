@@ -14,8 +14,9 @@ Every joint is the same physical model with its own numbers (the machine file's
   ``V = V_dead + D * stroke used``. ``D`` is the piston area (prismatic, m^3/m)
   or the displacement per radian of a rack-and-pinion, lever or motor drive
   (revolute, m^3/rad).
-* The load: ``M dv/dt = p_a D_a - p_b D_b + F_gravity - F_viscous - F_coulomb``
-  with stiction at rest. Gravity is ``-m g sin(incline)`` on a prismatic joint
+* The load: ``M dv/dt = p_a D_a - p_b D_b + F_gravity - F_viscous - F_friction``,
+  Stribeck friction: stiction at rest (breakaway), falling to Coulomb with speed.
+  Gravity is ``-m g sin(incline)`` on a prismatic joint
   (the rig's vertical ram: ``-(m_ram + load) g``) and ``-G cos(q + phase)`` on a
   revolute one (Up/Down lifting the arm). Hard end stops at the joint limits
   stop the load dead.
@@ -55,8 +56,11 @@ the overlaps: 0.0056/0.64 = 0.875 % up, 0.0056/1.19 = 0.471 % down.
 * The up slope 0.64 m/s then fixes K_a = 3.63e-7 m^3/(s sqrt(Pa)): port a
   rated 40.7 L/min at 7 MPa, port b 81.4 L/min.
 
-The null leakage (0.02 L/min) moves the lines by less than 0.5 % above 5 %
-duty; the bounce damping (``column_loss``) does not move them at all.
+The valve's tare flow (0.1 L/min, with pressure gain across the overlap) is
+gone beyond twice the overlap, so it does not move the lines above 2 % duty;
+the bounce damping (``column_loss``) does not move them at all. The supply
+(:mod:`hw.sim.supply`) is the pump and accumulator's, read by every chamber
+each step; each actuator adds up the oil it draws for the plant to hand on.
 """
 
 from __future__ import annotations
