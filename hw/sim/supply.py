@@ -77,6 +77,8 @@ class Supply:
         if p > 0.0 and pump.power_w < flow * p:
             flow = pump.power_w / p
             slope = flow / p
+        if demand <= flow and p >= self.nominal:
+            return  # the compensator holds the nominal pressure
         if demand > 0.0 and p > 0.0:
             slope += demand / (2.0 * p)
         p += h * (flow - demand) / (pump.capacitance(p) + h * slope)
