@@ -70,6 +70,7 @@ def test_status_shows_joints_pose_loop_and_link(tui) -> None:
             assert "end effector" in pose and abs(shown - x) < 1.0  # eq. 4.11 of the reading
             loop = tui.text(app.query_one("#status-loop", LiveText))
             assert "sample" in loop and "lateness" in loop and "HOLD" in loop
+            assert re.search(r"supply +6\.90 MPa", loop)  # the simulator's pump, section 4.6.1
             assert "crc errors" in tui.text(app.query_one("#status-link", LiveText))
 
     asyncio.run(scenario())
