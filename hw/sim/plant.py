@@ -562,7 +562,9 @@ def _friction_step(v: float, force: float, h: float, mass: float, coulomb: float
         return h * (force - math.copysign(level, force)) / (mass + h * viscous)
     level = coulomb
     if stribeck > 0.0:
-        level += (stiction - coulomb) * math.exp(-(v / stribeck) ** 2)
+        r = v / stribeck
+        if -6.0 < r < 6.0:  # beyond, exp(-r^2) < 1e-15
+            level += (stiction - coulomb) * math.exp(-r * r)
     v1 = (mass * v + h * (force - math.copysign(level, v))) / (mass + h * viscous)
     return 0.0 if v1 * v < 0.0 else v1
 
