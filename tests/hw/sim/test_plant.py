@@ -238,3 +238,12 @@ def test_load_and_supply_options_are_checked() -> None:
         Plant(RIG, load_kg=400.0)
     with pytest.raises(ValueError, match=r"Ram cannot hold its load: it needs more than 3\.\d MPa"):
         Plant(RIG, supply_mpa=3.0)
+
+
+def test_pump_keys_need_the_pump() -> None:
+    with pytest.raises(MachineError, match=r"unimate2000b.toml: plant.pump_efficiency: needs "
+                                           r"pump_kw \(without it the supply is ideal\)"):
+        edited("unimate2000b.toml", "pump_kw = 7.5\n", "")
+    with pytest.raises(MachineError, match=r"rig.toml: joints\[0\].plant.pressure_gain: must be "
+                                           r"0 or 1, got 0.5"):
+        edited("rig.toml", "pressure_gain = 1 ", "pressure_gain = 0.5 ")
