@@ -83,7 +83,7 @@ MIN_STEP_S = 10e-6  # an oil column stiffer than this would take 100 steps a mil
 MACHINE_KEYS = {"supply_mpa", "relief_mpa", "bulk_modulus_mpa", "column_loss_ms",
                 "spool_time_ms", "valve_rated_drop_mpa", "pump_kw", "pump_efficiency",
                 "pump_max_lpm", "accumulator_l", "precharge_mpa", "gas_exponent", "line_volume_l",
-                "lamp_cool_ms", "lamp_ripple", "photocell_spread", "lamp_dropouts_per_s"}
+                "lamp_cool_ms", "lamp_ripple", "photocell_spread"}
 COMMON_KEYS = {"dead_volume_a_m3", "dead_volume_b_m3", "valve_rated_lpm", "valve_b_ratio",
                "null_leak_lpm", "overlap_pos_pct", "overlap_neg_pct", "b_at_supply",
                "pressure_gain"}
@@ -104,7 +104,6 @@ RANGES = {
     "accumulator_l": (0.01, 1000.0), "precharge_mpa": (0.1, 35.0), "gas_exponent": (1.0, 1.4),
     "line_volume_l": (0.01, 100.0),
     "lamp_cool_ms": (1.0, 1000.0), "lamp_ripple": (0.001, 0.5), "photocell_spread": (0.0, 0.9),
-    "lamp_dropouts_per_s": (0.0, 100.0),
     "dead_volume_a_m3": (1e-6, 0.1), "dead_volume_b_m3": (1e-6, 0.1),
     "valve_rated_lpm": (0.1, 1000.0), "valve_b_ratio": (0.1, 10.0), "null_leak_lpm": (0.0, 10.0),
     "overlap_pos_pct": (0.0, 99.0), "overlap_neg_pct": (0.0, 99.0), "b_at_supply": (0.0, 1.0),
