@@ -77,12 +77,16 @@ def dump_coefficients(sets: Mapping[str, Coefficients], machine: Machine) -> str
     return "\n".join(lines)
 
 
+def coefficient_path(path: str | Path) -> Path:
+    """Where ``save_coefficients`` writes ``path``: ``~`` expanded, ``.toml`` added if missing."""
+    path = Path(path).expanduser()
+    return path if path.suffix == SUFFIX else path.with_name(path.name + SUFFIX)
+
+
 def save_coefficients(path: str | Path, sets: Mapping[str, Coefficients],
                       machine: Machine) -> Path:
     """Write ``sets`` to ``path`` atomically (temporary file, then rename); return the path."""
-    path = Path(path).expanduser()
-    if path.suffix != SUFFIX:
-        path = path.with_name(path.name + SUFFIX)
+    path = coefficient_path(path)
     text = dump_coefficients(sets, machine)
     parse_coefficients(text, machine, str(path))  # what we write must load back
     try:
@@ -94,6 +98,36 @@ def save_coefficients(path: str | Path, sets: Mapping[str, Coefficients],
     except OSError as exc:
         raise CoefficientFileError(f"{path}: cannot write: {exc.strerror or exc}") from None
     return path
+
+
+def coefficient_changes(before: Coefficients, after: Coefficients, machine: Machine
+                        ) -> list[tuple[str, str, str, str]]:
+    """What replacing ``before`` with ``after`` changes, as ``(joint or "all joints", key,
+    before, after)`` rows in the machine file's keys (taps newest first, ``–`` for none)."""
+    rows = []
+    for j, joint in enumerate(machine.joints):
+        for key in ("kp", "ki", "kd", "w", "kv"):
+            old, new = _entry(before, key, j), _entry(after, key, j)
+            if old != new:
+                rows.append((joint.name, key, old, new))
+    for key in ("filter", "filter_divisor", "integral_limit", "duty_limit"):
+        old, new = _shown(getattr(before, key)), _shown(getattr(after, key))
+        if old != new:
+            rows.append(("all joints", key, old, new))
+    return rows
+
+
+def _entry(c: Coefficients, key: str, j: int) -> str:
+    values = getattr(c, key)
+    if key == "kv" and not values:
+        return "0"  # a set without feed-forward has none: kv 0
+    return _shown(values[j])
+
+
+def _shown(value: float | tuple[float, ...]) -> str:
+    if isinstance(value, tuple):
+        return ", ".join(f"{v:g}" for v in value) or "–"
+    return f"{value:g}"
 
 
 def _check_taps(c: Coefficients, where: str) -> None:

@@ -275,9 +275,11 @@ class ServodeskApp(App[None]):
             return
         match message.event.record:
             case EStop(latched=True, reason=reason):
+                self._estop_tabs(latched=True)
                 self._fault("estop", f"E-STOP latched: {reason}. "
                                      f"{estop_advice(reason, self.port)}")
             case EStop(latched=False):
+                self._estop_tabs(latched=False)
                 self._link(estop_sent=False)
                 if self.fault_kind == "estop":
                     self.action_dismiss_fault()
@@ -394,11 +396,13 @@ class ServodeskApp(App[None]):
         """Latch every valve closed, now. Works on every screen, dialogs included."""
         self._send_estop()
         self._link(estop_sent=True)
-        jog = self.tab("jog")
-        if isinstance(jog, JogTab):
-            jog.forget_duties()
+        self._estop_tabs(latched=True)
         while isinstance(self.screen, ModalScreen):
             self.pop_screen()
+
+    def _estop_tabs(self, latched: bool) -> None:
+        for tab in self.tabs.values():
+            tab.estop(latched)
 
     def _send_estop(self) -> None:
         client = self.client

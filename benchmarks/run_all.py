@@ -6,7 +6,8 @@ Reliability sections, and docs/reliability.md, from what they measured.
     python benchmarks/run_all.py --no-faults  # benchmarks only; Reliability left as it is
 
 Calls the ``measure``-style functions of ``loop.py``, ``kinematics.py``,
-``law.py``, ``hw.py`` and ``serial_rtt.py``; runs ``ui.py`` and ``tracking.py``
+``law.py``, ``hw.py`` and ``serial_rtt.py``; runs ``ui.py``, ``tracking.py`` and
+``cartesian_jog.py``
 (``python -m benchmarks.NAME``) and reads their printed figures; runs ``pytest tests/faults`` with
 ``SERVODESK_FAULT_REPORT`` set, so every fault case reports what it proved
 (its docstring), its outcome and the latencies it measured. A benchmark that
@@ -169,6 +170,19 @@ def parse_ui(text: str) -> dict:
     }
 
 
+def parse_cartesian_jog(text: str) -> dict:
+    """The figures ``cartesian_jog.py`` prints: (median, p95, max) per line, None if missing."""
+    labels = {"ik_single_us": "IK per jog point, one pose",
+              "ik_batch_us": "IK per jog sample, in a plan", "plan_ms": "plan of a",
+              "api_ms": "API call → first motion", "key_ms": "key → first motion"}
+    out: dict[str, tuple[float, float, float] | None] = {}
+    for key, label in labels.items():
+        match = re.search(re.escape(label) + r".*?median\s+([\d.]+).*?p95\s+([\d.]+).*?max\s+"
+                          r"([\d.]+)", text)
+        out[key] = tuple(float(v) for v in match.groups()) if match else None  # type: ignore
+    return out
+
+
 def parse_tracking(text: str) -> dict:
     """``tracking.py``'s error table: column names and rows of (joint, cells)."""
     lines = text.splitlines()
@@ -252,6 +266,7 @@ def performance_section(r: dict, when: str, machine: str, quick: bool) -> str:
             f"python -m benchmarks.ui{' --quick' if quick else ''}"
             "                      # Scope frame time, key to valve",
             "python -m benchmarks.tracking",
+            "python -m benchmarks.cartesian_jog       # IK per jog step, key → first motion",
             "```"]
     return "\n".join(out)
 
@@ -357,8 +372,24 @@ def latency_part(r: dict) -> list[str]:
                      f"{rtts[len(rtts) // 2]:.0f} µs",
                      f"p99 {rtts[min(len(rtts) - 1, int(0.99 * len(rtts)))]:.0f} µs",
                      f"{rtts[-1]:.0f} µs ({late} of {len(rtts):,} later than a tick)"])
-    problems = [v for v in (ui, loop, serial) if isinstance(v, str)]
-    return ["### Key to valve", "", *table(["path", "median", "tail", "max"], rows),
+    jog = r.get("cartesian_jog")
+    if isinstance(jog, dict):
+        for key, path in (("key_ms", "Cartesian jog key (Jog tab, world frame, 1 mm) → first "
+                                     "tick of the jog"),
+                          ("api_ms", "`robot.jog_cartesian` (1 mm) → first tick of the jog")):
+            if jog[key] is not None:
+                median, p95, worst = jog[key]
+                rows.append([path, f"{median:.2f} ms", f"p95 {p95:.2f} ms", f"{worst:.2f} ms"])
+    problems = [v for v in (ui, loop, serial, jog) if isinstance(v, str)]
+    ik = []
+    if isinstance(jog, dict) and None not in (jog["ik_single_us"], jog["ik_batch_us"],
+                                              jog["plan_ms"]):
+        ik = ["", f"Inverse kinematics per Cartesian jog step (`benchmarks/cartesian_jog.py`): "
+              f"{jog['ik_single_us'][0]:.1f} µs one pose (median, p95 "
+              f"{jog['ik_single_us'][1]:.1f} µs), {jog['ik_batch_us'][0]:.1f} µs a sample in "
+              f"a planned jog (median, p95 {jog['ik_batch_us'][1]:.1f} µs); a whole 1 mm step "
+              f"planned in {jog['plan_ms'][0]:.2f} ms (median, p95 {jog['plan_ms'][1]:.2f} ms)."]
+    return ["### Key to valve", "", *table(["path", "median", "tail", "max"], rows), *ik,
             *(["", "Not measured: " + "; ".join(problems)] if problems else []), ""]
 
 
@@ -548,6 +579,8 @@ def main(argv: list[str] | None = None) -> int:
             3.0 if quick else 10.0)),
         "ui": attempt("ui.py", lambda: parse_ui(script("ui", *(["--quick"] if quick else [])))),
         "tracking": attempt("tracking.py", lambda: parse_tracking(script("tracking"))),
+        "cartesian_jog": attempt("cartesian_jog.py", lambda: parse_cartesian_jog(script(
+            "cartesian_jog", *(["--jogs", "20"] if quick else [])))),
     }
     rewrite(args.readme, "performance", performance_section(r, when, machine, quick))
     print(f"rewrote the Performance section of {args.readme}")

@@ -51,18 +51,20 @@ from control.commands import (
     finite,
     joint_index,
 )
-from control.events import ControllerEvent, Crash, Died, Fault, MoveDone, Notice, Ready
+from control.events import ControllerEvent, Crash, Died, EStop, Fault, MoveDone, Notice, Ready
 from control.layout import (
     ESTOP_WORD,
     HEARTBEAT_WORD,
     ControlLayout,
     LatencyHistogram,
+    Mode,
     MoveLayout,
     Status,
 )
 from control.motion import form_plans
-from control.motion.acceptance import accept
-from control.motion.plan import MovePlan, Summary, result_records, summaries
+from control.motion.acceptance import accept, starts_here
+from control.motion.cartesian_jog import plan_jog
+from control.motion.plan import MovePlan, Summary, moving_joints, result_records, summaries
 from control.recorder import Run, RunFiles, coefficients_record, default_data_dir, save_run
 from control.recovery import recover_runs
 from control.runs import encode_meta, run_from_segment, segment_meta
@@ -184,7 +186,8 @@ class ControlClient:
         self._outgoing: queue.Queue[Command] = queue.Queue(OUTGOING)
         self._closing = threading.Event()
         self._stopping = False
-        self._manual = [0.0] * self.machine.n_joints
+        self._manual = [0.0] * self.machine.n_joints  # the duties jog_joint keeps for the others
+        self._latched = False  # an E-stop sent or reported, until the controller releases it
         self.coefficients = {"hold": self.machine.hold, "track": self.machine.track}
         # what the gain check said of each set in use, saved with every run (control.identify.gains)
         self.coefficient_checks: dict[str, dict[str, object]] = {
@@ -382,7 +385,10 @@ class ControlClient:
 
     def _dispatch(self, event: Event) -> None:
         record = event.record
-        if isinstance(record, MoveDone):
+        if isinstance(record, EStop):
+            self._latched = record.latched
+            self._forget_manual()
+        elif isinstance(record, MoveDone):
             handle = self._moves.get(record.move_id)
             if handle is not None:
                 self._finish(handle, record.status, record.saved, record.timeline)
@@ -448,20 +454,39 @@ class ControlClient:
             raise ControllerError(f"the controller has not taken the last {OUTGOING} commands "
                                   "(frozen or overloaded): E-stop still works") from None
 
+    def _forget_manual(self) -> None:
+        """The controller left manual actuation (E-stop, hold, a move): a later ``jog_joint``
+        starts from zero duty on every other joint, never from duties set before."""
+        self._manual = [0.0] * self.machine.n_joints
+
     def hold(self) -> None:
         """Abort any move and hold every joint where it is (the thesis's default mode)."""
         self._send(Hold())
+        self._forget_manual()
 
     def estop(self) -> None:
         """Latch every valve closed until ``reset``. Never waits: the E-stop count in shared
         memory reaches the controller on its next tick whatever the channel holds; the message
         behind it is best effort."""
         self._words[ESTOP_WORD] += 1
+        self._latched = True
+        self._forget_manual()
         with contextlib.suppress(ControllerError):
             self._send(EmergencyStop())
 
+    @property
+    def latched(self) -> bool:
+        """The E-stop is latched, or was sent and the controller has not released it since."""
+        if self._latched:
+            return True
+        try:
+            return self.status().estop
+        except (ControllerError, TimeoutError, ValueError):
+            return False
+
     def reset(self) -> None:
-        """Release a latched E-stop (refused while the E-stop input is pressed)."""
+        """Release a latched E-stop (refused while the E-stop input is pressed); every joint
+        then holds where it is: nothing moves until a new command."""
         self._send(Reset())
 
     def initialise(self) -> None:
@@ -475,10 +500,13 @@ class ControlClient:
     def jog(self, duty: Sequence[float]) -> None:
         """Manual actuation: open-loop duty per joint in %, in each joint's positive sense.
 
-        Raises ValueError (nothing sent) unless there is one finite duty per joint."""
+        Raises ValueError (nothing sent) unless there is one finite duty per joint. While the
+        E-stop is latched the controller refuses it (a ``refused`` event) and the duty is not
+        remembered: nothing set then moves a joint after the release."""
         command = Manual.of(self.machine, duty)
         self._send(command)
-        self._manual = list(command.duty)
+        if not self.latched:
+            self._manual = list(command.duty)
 
     def jog_joint(self, joint: int | str, duty: float) -> None:
         """Set one joint's manual duty (joint by index or name), keeping the others'."""
@@ -572,6 +600,33 @@ class ControlClient:
                                 dt=self.dt)
         return self.run(replace(plan, meta={**plan.meta, **(meta or {})}))
 
+    def jog_cartesian(self, displacement: Sequence[float], frame: str = "world",
+                      speed: float = 1.0, *, stop_short: bool = False) -> MoveHandle:
+        """Move the tool by ``displacement`` ``[dx, dy, dz (mm), dγ, dβ, dα (deg)]`` along a
+        straight line in ``frame`` (``world`` or ``tool``) at ``speed`` (0 < speed ≤ 1) of
+        the machine's Cartesian jog speed, on the branch the arm is on; returns the move's
+        handle as soon as it is sent (``control.motion.cartesian_jog``). It starts from the
+        hold target while the arm holds within its tolerance of it (so steps add up exactly
+        and the desired position never jumps), else from where the joints are.
+
+        ``Unreachable`` (a ValueError), nothing sent, when the line leaves the workspace,
+        needs a joint past its limit or comes near a singularity: the reason names which.
+        ``stop_short`` instead jogs as far as the line allows and says why in the handle's
+        ``meta["stopped"]``. ValueError for bad input or a machine without kinematics."""
+        status = self.status()
+        start = np.array(status.position)
+        target = np.array(status.desired)
+        if (status.mode == Mode.HOLD and np.isfinite(target).all()
+                and starts_here(start, target, self.machine)):
+            start = target
+        jog = plan_jog(start, displacement, self.machine, frame=frame, dt=self.dt, speed=speed,
+                       stop_short=stop_short)
+        meta = {"displacement": jog.displacement.tolist(), "frame": frame, "speed": speed,
+                "asked": [float(v) for v in displacement], "stopped": jog.stopped,
+                "start_pose": jog.poses[0].tolist(), "end_pose": jog.poses[-1].tolist()}
+        return self.run(MovePlan("cartesian_jog", f"Cartesian jog ({frame})", jog.q, meta=meta,
+                                 moving=moving_joints(jog.q)))
+
     def run(self, plan: MovePlan) -> MoveHandle:
         """Run a planned move (``control.motion.plan``): its path, with an approach from where
         the joints are now when it starts elsewhere, or its duty profile. The acceptance rules
@@ -624,6 +679,7 @@ class ControlClient:
             self._moves.pop(move_id, None)
             shm.release(segment, unlink=True)
             raise
+        self._forget_manual()  # the move ends manual actuation
         return handle
 
     def wait(self, handle: MoveHandle, timeout: float | None = None) -> MoveResult:

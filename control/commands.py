@@ -24,7 +24,7 @@ COEFFICIENT_SETS = ("hold", "track")
 # jump, as the thesis's step inputs did (function.c SingleStep, MultiStep), but every row is
 # finite and inside the limits; a duty kind plays open-loop duty, finite and in -100…100 %.
 SMOOTH_KINDS = frozenset({"path", "ramp", "sine", "cartesian", "via_points", "end_point",
-                          "go_to"})
+                          "go_to", "cartesian_jog"})
 STEP_KINDS = frozenset({"step", "multi_step"})
 DUTY_KINDS = frozenset({"tracking_actuate", "set_pulse"})
 MOVE_KINDS = SMOOTH_KINDS | STEP_KINDS | DUTY_KINDS

@@ -64,10 +64,12 @@ class MoveDone(ControllerEvent):
     gaps: tuple[tuple[float, float], ...] = ()  # (t s, length s): controller stalls in the run
     feed: tuple[tuple[float, float], ...] = ()  # (t s, override): the feed override as set
     pauses: tuple[tuple[float, float], ...] = ()  # (t s, length s): feed holds
+    supply: tuple[tuple[float, float], ...] = ()  # (t s, MPa): the supply pressure every 0.1 s
 
     @property
     def timeline(self) -> dict[str, tuple[tuple[float, float], ...]]:
-        return {"gaps": self.gaps, "feed": self.feed, "pauses": self.pauses}
+        return {"gaps": self.gaps, "feed": self.feed, "pauses": self.pauses,
+                "supply": self.supply}
 
     @property
     def message(self) -> str:

@@ -91,6 +91,7 @@ class Status:
     io_total_s: float
     feed_override: float  # the operator's feed override, 0…1 (control/feed.py)
     feed_rate: float  # the rate the path advances at now: ramps to the override, 0 in a hold
+    supply_mpa: float  # hydraulic supply pressure, MPa; NaN when the backend cannot measure it
     position: tuple[float, ...]
     desired: tuple[float, ...]
     duty: tuple[float, ...]
@@ -123,14 +124,15 @@ class StatusLayout:
     def __init__(self, n: int) -> None:
         self.n = n
         self.struct = struct.Struct(
-            f"<qqqiiqqqqqqqqqqdd{n}d{n}d{n}d{n}d{n}q{n}q{len(LINK_FIELDS)}q{FAULT_TEXT}s"
+            f"<qqqiiqqqqqqqqqqddd{n}d{n}d{n}d{n}d{n}q{n}q{len(LINK_FIELDS)}q{FAULT_TEXT}s"
         )
         self._link = attrgetter(*LINK_FIELDS)
         self._fault = ("", b"")  # the last fault text and its bytes: it rarely changes
 
     def encode(self, tick: int, time_ns: int, wall_ns: int, mode: int, flags: int,
                move_id: int, move_done: int, move_total: int, latency: LatencyStats,
-               feed: tuple[float, float], position: list[float], desired: list[float],
+               feed: tuple[float, float], supply_mpa: float, position: list[float],
+               desired: list[float],
                duty: list[float], valve: list[float], raw: list[int], glitches: list[int],
                link: LinkCounters, fault: str) -> tuple:
         """The values of one record in struct order (the loop's ``publish``, every tick)."""
@@ -139,6 +141,7 @@ class StatusLayout:
         return (tick, time_ns, wall_ns, mode, flags, move_id, move_done, move_total,
                 latency.late_ns, latency.late_max_ns, latency.overruns, latency.compute_ns,
                 latency.compute_max_ns, latency.compute_total_ns, latency.io_total_ns, *feed,
+                supply_mpa,
                 *position, *desired, *duty, *valve, *raw, *glitches, *self._link(link),
                 self._fault[1])
 
@@ -146,9 +149,9 @@ class StatusLayout:
         n = self.n
         (tick, time_ns, wall_ns, mode, flags, move_id, done, total,
          late_last, late_max, overruns, comp_last, comp_max, comp_total, io_total,
-         feed_override, feed_rate) = values[:17]
-        arrays = values[17:17 + 6 * n]
-        link = values[17 + 6 * n:17 + 6 * n + len(LINK_FIELDS)]
+         feed_override, feed_rate, supply_mpa) = values[:18]
+        arrays = values[18:18 + 6 * n]
+        link = values[18 + 6 * n:18 + 6 * n + len(LINK_FIELDS)]
         fault = values[-1].rstrip(b"\0").decode("utf-8", "replace")
         return Status(
             tick=tick, time_s=time_ns / 1e9, wall_ns=wall_ns, mode=Mode(mode), flags=Flag(flags),
@@ -156,7 +159,7 @@ class StatusLayout:
             late_last_us=late_last / 1e3, late_max_us=late_max / 1e3, overruns=overruns,
             compute_last_us=comp_last / 1e3, compute_max_us=comp_max / 1e3,
             compute_total_s=comp_total / 1e9, io_total_s=io_total / 1e9,
-            feed_override=feed_override, feed_rate=feed_rate,
+            feed_override=feed_override, feed_rate=feed_rate, supply_mpa=supply_mpa,
             position=arrays[0:n], desired=arrays[n:2 * n], duty=arrays[2 * n:3 * n],
             valve=arrays[3 * n:4 * n], raw=arrays[4 * n:5 * n], glitches=arrays[5 * n:6 * n],
             link=dict(zip(LINK_FIELDS, link, strict=True)), fault=fault,

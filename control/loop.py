@@ -138,7 +138,7 @@ class Controller:
         self.modes.control(self.guards.latched, woke)
         self.guard(woke)
         if (self.modes.move is not None and self.modes.sample_end
-                and self.modes.record(self.clock.now_ns())):
+                and self.modes.record(self.clock.now_ns(), self.backend.supply_mpa)):
             self.finish_move()
         self.write()
         self.latency.computed(self.clock.now_ns() - woke)

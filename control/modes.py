@@ -33,6 +33,7 @@ from hw.machine import Coefficients, Machine
 from hw.transmission import Transmission
 
 MS = 1_000_000
+SUPPLY_EVERY_S = 0.1  # the run lists the supply pressure this often (meta "supply")
 
 
 @dataclass
@@ -54,6 +55,7 @@ class ActiveMove:
     gaps: list[tuple[float, float]] = field(default_factory=list)  # (t s, length s) stalls
     feed: list[tuple[float, float]] = field(default_factory=list)  # (t s, override) as set
     pauses: list[tuple[float, float]] = field(default_factory=list)  # (t s, length s) holds
+    supply: list[tuple[float, float]] = field(default_factory=list)  # (t s, MPa) every 0.1 s
 
     @classmethod
     def attach(cls, command: StartMove, now: int) -> ActiveMove:
@@ -67,7 +69,8 @@ class ActiveMove:
 
     def timeline(self) -> dict[str, tuple[tuple[float, float], ...]]:
         """Its stalls and feed changes, as the run lists them."""
-        return {"gaps": tuple(self.gaps), "feed": tuple(self.feed), "pauses": tuple(self.pauses)}
+        return {"gaps": tuple(self.gaps), "feed": tuple(self.feed), "pauses": tuple(self.pauses),
+                "supply": tuple(self.supply)}
 
 
 @dataclass(frozen=True)
@@ -345,11 +348,13 @@ class ModeMachine:
         else:
             run.reference_q, run.reference_ns = self.position[0], now
 
-    def record(self, now: int) -> bool:
+    def record(self, now: int, supply_mpa: float) -> bool:
         """Append a row to the move's record once the move reaches the next row of its path
         (every tick at full feed; the duty is what the valves get, after the guards), then
         advance the phase by the feed's rate; True after its last row. A gap longer than
-        ``stall_s`` between two ticks of the move is a controller stall, listed in ``gaps``."""
+        ``stall_s`` between two ticks of the move is a controller stall, listed in ``gaps``.
+        Every ``SUPPLY_EVERY_S`` the supply pressure (when the backend knows it) goes into
+        ``supply``."""
         move = self.move
         layout = move.layout
         rate = 1.0 if move.tracking else self.feed.rate
@@ -361,6 +366,8 @@ class ModeMachine:
                                    f"{move.move_id} at t = {t - gap:.2f} s: the run lists the "
                                    "gap"))
         move.last_tick_ns = now
+        if supply_mpa == supply_mpa and t >= SUPPLY_EVERY_S * len(move.supply):
+            move.supply.append((round(t, 4), round(supply_mpa, 4)))
         if move.phase >= move.index:
             layout.row.pack_into(move.segment.buf,
                                  layout.record_offset + move.index * layout.row.size,

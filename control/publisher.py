@@ -45,8 +45,8 @@ class Publisher:
             tick, now - self.started_ns, time.monotonic_ns(), modes.mode, flags,
             move.move_id if move else 0, move.index if move else 0,
             move.layout.samples if move else 0, latency, (feed.override, feed.rate),
-            modes.position, modes.desired, modes.duty, valve, encoders.raw, encoders.glitches,
-            backend.counters, guards.reason))
+            backend.supply_mpa, modes.position, modes.desired, modes.duty, valve, encoders.raw,
+            encoders.glitches, backend.counters, guards.reason))
 
     def release(self) -> None:
         self.writer.release()

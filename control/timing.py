@@ -61,8 +61,13 @@ class Timing:
 
     def sim_options(self, machine: Machine) -> dict[str, float]:
         """The simulated board scans its encoders as the controller reads them: in the
-        thesis's timing one encoder per interrupt (section 6.2's wrong readings follow)."""
-        return {"scan_period_s": self.sample_time_s(machine)} if self.name == "thesis" else {}
+        thesis's timing, each encoder selected at the end of the interrupt before the one that
+        reads it (section 6.2's wrong readings follow from that one interrupt of light)."""
+        if self.name == "servodesk":
+            return {}
+        tick = self.tick_s(machine)
+        return {"scan_period_s": self.sample_time_s(machine), "select_to_latch_s": tick,
+                "scan_lead_s": tick}
 
     def describe(self, machine: Machine) -> str:
         if self.name == "servodesk":

@@ -93,6 +93,9 @@ class Backend(Protocol):
     counters: LinkCounters
     sample_ns: int
     """When the words the last ``read`` returned were sampled, on ``clock``."""
+    supply_mpa: float
+    """The hydraulic supply pressure at the last ``read``, MPa; NaN when the backend cannot
+    measure it (the I/O board has no pressure input; the simulator knows it)."""
 
     def open(self) -> None:
         """Connect and bring every valve to closed (0 % duty)."""

@@ -42,6 +42,7 @@ VALVE_RESOLUTION_PCT = (0.01, 10.0)  # the I/O board's protocol carries it in 0.
 ENCODER_BITS = (1, 32)
 SETTLE_MS = 65.0  # the I/O board's protocol carries it in µs, 16 bits
 GRAY_SETTLE_MS = 0.001  # a multiplexed encoder's lamp needs time to light: at least 1 µs
+ENCODER_THRESHOLD = (0.01, 0.99)  # a lit cell's line switches between dark and full light
 GRADIENT = (1e-6, 10.0)  # |joint units per count|
 COUPLING = 10.0  # |coupling|
 DOWN_SCALE = (0.01, 1.0)
@@ -50,6 +51,12 @@ COEFFICIENT = 1e6  # |any gain, weight, tap or limit of eq. 5.1|
 FILTER_DIVISOR = (1e-3, 1e6)
 DH_LENGTHS = (-10_000.0, 10_000.0)  # a and d, mm
 DH_ANGLES = (-360.0, 360.0)  # alpha and theta, degrees
+# Cartesian jog (control/motion/cartesian_jog.py), [mm, deg] per s and per s²: defaults an
+# operator can follow by eye, and the ranges a hand-guided tool could need.
+CARTESIAN_JOG_SPEED = (25.0, 10.0)
+CARTESIAN_JOG_ACCEL = (100.0, 40.0)
+CARTESIAN_JOG_SPEED_RANGE = (0.1, 1000.0)
+CARTESIAN_JOG_ACCEL_RANGE = (1.0, 10_000.0)
 
 
 @dataclass(frozen=True)
@@ -206,6 +213,9 @@ class Machine:
     supervision: Supervision = field(default_factory=Supervision)
     home: tuple[float, ...] | None = None  # (J,) mm, deg: where the machine works from
     park: tuple[float, ...] | None = None  # (J,) mm, deg: where it rests, power off
+    cartesian_jog_speed: tuple[float, float] = CARTESIAN_JOG_SPEED  # mm/s, deg/s
+    cartesian_jog_accel: tuple[float, float] = CARTESIAN_JOG_ACCEL  # mm/s², deg/s²
+    encoder_threshold: float = 0.5
 
     @property
     def n_joints(self) -> int:
@@ -449,7 +459,7 @@ class _Reader:
         valve = self.table(doc, "", "valve")
         self.only(valve, "valve", {"period_us", "resolution_pct"})
         enc = self.table(doc, "", "encoder")
-        self.only(enc, "encoder", {"kind", "bits", "settle_ms"})
+        self.only(enc, "encoder", {"kind", "bits", "settle_ms", "threshold"})
         raw_joints = doc.get("joints")
         if not isinstance(raw_joints, list) or not raw_joints:
             raise self.fail("joints", "missing: at least one [[joints]] table is required")
@@ -480,6 +490,7 @@ class _Reader:
             encoder_settle_s=self.number(enc, "encoder", "settle_ms", 0.0,
                                          GRAY_SETTLE_MS if encoder_kind == "gray" else 0.0,
                                          SETTLE_MS) / 1e3,
+            encoder_threshold=self.number(enc, "encoder", "threshold", 0.5, *ENCODER_THRESHOLD),
             joints=joints,
             coefficients=self.coefficient_sets(doc, len(joints)),
             kinematics_model=self.kinematics_model(doc),
@@ -488,6 +499,10 @@ class _Reader:
             supervision=self.supervision(doc),
             home=self.joint_vector(head, "home", joints),
             park=self.joint_vector(head, "park", joints),
+            cartesian_jog_speed=self.jog_pair(doc, "cartesian_jog_speed", CARTESIAN_JOG_SPEED,
+                                              CARTESIAN_JOG_SPEED_RANGE),
+            cartesian_jog_accel=self.jog_pair(doc, "cartesian_jog_accel", CARTESIAN_JOG_ACCEL,
+                                              CARTESIAN_JOG_ACCEL_RANGE),
         )
 
     def joint_vector(self, head: Mapping[str, Any], name: str, joints: tuple[Joint, ...]
@@ -676,10 +691,20 @@ class _Reader:
 
     def kinematics_model(self, doc: Mapping[str, Any]) -> str | None:
         kin = self.table(doc, "", "kinematics", optional=True)
-        self.only(kin, "kinematics", {"model", "dh"})
+        self.only(kin, "kinematics", {"model", "dh", "cartesian_jog_speed",
+                                      "cartesian_jog_accel"})
         if "model" not in kin:
             return None
         return self.string(kin, "kinematics", "model", choices=KINEMATICS_MODELS)
+
+    def jog_pair(self, doc: Mapping[str, Any], name: str, default: tuple[float, float],
+                 bounds: tuple[float, float]) -> tuple[float, float]:
+        """``[kinematics] name = [mm, deg]``: the Cartesian jog's translation and rotation."""
+        kin = self.table(doc, "", "kinematics", optional=True)
+        if name not in kin:
+            return default
+        mm, deg = self.numbers(kin[name], f"kinematics.{name}", 2, *bounds)
+        return mm, deg
 
     def dh(self, doc: Mapping[str, Any], keys: list[str]) -> tuple[DHRow, ...]:
         rows = self.table(doc, "", "kinematics", optional=True).get("dh", [])

@@ -52,6 +52,7 @@ SLOW_PATHS = (
     "tests/control/test_client.py",    # the control subprocess, for real
     "tests/control/test_timing.py",    # the thesis's timing on the control subprocess
     "tests/control/test_feed.py",      # feed override and hold on the control subprocess
+    "tests/control/test_client_cartesian_jog.py",  # Cartesian jogs on it
     "tests/control/test_process.py",   # the control subprocess's imports
 )
 # Fixtures that start one, with the file that defines them (they are visible in its folder
@@ -60,6 +61,8 @@ SLOW_FIXTURES = {
     "emulator": "tests/conftest.py",                   # servodesk emulate
     "controller": "tests/faults/conftest.py",          # ControlClient
     "tui": "tests/app/conftest.py",                    # the TUI under Pilot, and its controller
+    "lockstep": "tests/control/conftest.py",           # ControlClient, lockstep
+    "realtime": "tests/control/conftest.py",           # ControlClient, real time
     "runs": "tests/control/identify/test_sysid.py",    # ControlClient's excitation runs
     "robot": "tests/control/identify/test_tuning.py",  # ControlClient
 }
@@ -67,6 +70,7 @@ SLOW_FIXTURES = {
 SLOW_TESTS = (
     "tests/control/test_seqlock.py::test_reader_never_sees_a_torn_record",  # spawned writer
     "tests/control/test_shm.py::test_orphan_of_a_killed_process_is_cleaned_up",
+    "tests/control/test_recorder.py::test_a_read_only_directory_raises_and_leaves_nothing",
     "tests/control/motion/test_positions.py::"
     "test_a_writer_killed_between_temporary_and_rename_leaves_the_old_file",  # a killed writer
     # files at their size bound: 600,001 points parsed, 2-4 s each
@@ -77,6 +81,9 @@ SLOW_TESTS = (
     "tests/faults/test_bad_input.py::test_tsv_path_files_deeply",
     "tests/faults/test_bad_input.py::test_csv_path_files_deeply",
     "tests/faults/test_bad_input.py::test_pose_files_deeply",
+    # 1,000 Cartesian jogs planned and checked sample by sample, about 10 s
+    "tests/control/motion/test_cartesian_jog.py::"
+    "test_random_jogs_keep_the_branch_and_the_line_or_are_refused_with_a_reason",
     # 10,000 machine files changed and run on a controller, about a minute
     "tests/hw/test_machine_fuzz.py::"
     "test_ten_thousand_changed_machine_files_load_and_run_or_name_their_key",

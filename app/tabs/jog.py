@@ -6,19 +6,41 @@ Three modes, cycled with ``m``:
   (1–9 %) from the duty of In/Out, Rotate, Up/Down, Bend, Yaw, Swivel; the
   joint keeps moving until its duty is changed back or space zeroes all. On
   the rig, as function.c Manual(): Up/Down arrows ±10 %, space closes the valve.
-- **hold-to-move** — a joint moves at 10 × increment % only while its key is
-  held. Terminals send no key-up event, so a held key is recognised by its
-  auto-repeat and a release by the silence after it (``KeyRepeat``), the way
-  keyboard teleop tools do it.
+- **hold-to-move** — a joint moves at 10 × increment % (at most
+  ``HOLD_DUTY_MAX``, 50 %) only while its key is held. Terminals send no key-up
+  event, so a held key is recognised by its auto-repeat and a release by the
+  silence after it (``KeyRepeat``), the way keyboard teleop tools do it. When
+  the last held key is let go the joints hold where they stopped (closed loop),
+  rather than sag at zero duty in manual actuation.
 - **position** — closed loop: each press moves the joint's hold target by the
-  step chosen with 1–9 (0.1 … 50 mm or degrees).
+  step chosen with 1–9, from its unit's table (``POSITION_STEPS``: 0.05 … 20 mm,
+  0.01 … 5°).
+
+Cartesian jog (``w`` cycles the frame joint → world → tool; the Unimate only, the
+rig is a single axis): the same six key pairs move the tool along x, y, z or
+turn it about x, y, z (γ, β, α) of the world or the tool frame, on a straight
+line, on the branch the arm is on (``control.motion.cartesian_jog``).
+
+- **position** — each press jogs the tool by the step (mm or °, as above) at
+  the machine's Cartesian jog speed; a step the arm cannot make (a joint
+  limit, out of reach, the wrist singularity) moves nothing and says why.
+- **hold-to-move** — while a key is held the tool moves along the axis at the
+  chosen fraction of the Cartesian jog speed (``CARTESIAN_SPEEDS``, keys 1–9);
+  on release a feed hold stops it along its line within the joints'
+  acceleration, then the arm holds there. The jog is planned ``HOLD_REACH_S``
+  ahead and ends before a joint limit or a singularity, saying which.
+
+Duty mode has no Cartesian meaning: the Cartesian frames cycle position and
+hold-to-move. The live pose (x, y, z, γ, β, α) is shown under the pad.
 
 The keys belong to ``JogPad``, which posts what they ask for (``DutyChanged``,
-``TargetStepped``, ``Stopped``); ``JogTab`` sends it to the controller.
+``TargetStepped``, ``CartesianJogged``, ``Stopped``); ``JogTab`` sends it to the
+controller.
 """
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 from typing import ClassVar
@@ -35,20 +57,62 @@ from textual.widgets import Static
 from app.tabs.tab import TabPage
 from app.widgets.limit_bar import LimitBar
 from app.widgets.live_text import LiveText
-from control.client import ControlClient
+from control.client import ControlClient, MoveHandle
 from control.layout import Mode, Status
+from control.motion.cartesian_jog import AXES
+from hw.machine import Joint
+from hw.transmission import output_min_pwm
 
 JOG_KEYS = (("a", "z"), ("s", "x"), ("d", "c"), ("f", "v"), ("g", "b"), ("h", "n"))
 MODES = ("duty", "hold-to-move", "position")
+FRAMES = ("joint", "world", "tool")  # w cycles them; world and tool are Cartesian jogs
+CARTESIAN_MODES = ("hold-to-move", "position")
+# Hold-to-move Cartesian speed, keys 1-9: a fraction of the machine's cartesian_jog_speed.
+CARTESIAN_SPEEDS = (0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.8, 1.0)
+HOLD_REACH_S = 4.0  # a held Cartesian key plans this far ahead (s at the chosen speed)
+NO_CARTESIAN = ("no Cartesian jog on this machine: {name} has no closed-form kinematics "
+                "(a single axis), only joint jog")
 RIG_ARROW_STEP = 10.0  # function.c Manual(): each arrow press changes the duty by 10 %
-HOLD_DUTY_PER_STEP = 10.0  # hold-to-move duty is 10 × increment %
-POSITION_STEPS = (0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0)  # mm or deg, keys 1-9
+HOLD_DUTY_PER_STEP = 10.0  # hold-to-move duty is 10 × increment %,
+HOLD_DUTY_MAX = 50.0  # at most this: a held key is for placing a joint, not for speed
+# Position-jog steps, keys 1-9, per unit: the same 1-2-5 ladder, up to 20 mm or 5° a press
+# (a Unimate joint's range is 57° to 1,065 mm). The first steps are finer than one encoder
+# count on some joints (In/Out 0.26 mm, Bend 0.06°): the hold target adds them up.
+POSITION_STEPS = {
+    "mm": (0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0),
+    "deg": (0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0),
+}
+SYMBOLS = {"mm": " mm", "deg": "°"}  # after a number
 RELEASE_CHECK_S = 0.01
+LATCHED_NOTICE_S = 3.0  # while latched, a jog key says why at most this often
+LATCHED = ("E-stop latched: the jog keys do nothing until you release it (^R); the joints "
+           "then hold where they are")
 MODE_HELP = {
     "duty": "each press adds ± increment % to the joint's duty; space zeroes all (option.c)",
-    "hold-to-move": "a joint moves at 10 × increment % only while its key is held",
+    "hold-to-move": f"a joint moves at 10 × increment % (≤ {HOLD_DUTY_MAX:g} %) only while "
+                    "its key is held, then holds where it stopped",
     "position": "closed loop: each press moves the joint's hold target by the step",
 }
+CARTESIAN_HELP = {
+    "hold-to-move": "the tool moves along the axis while the key is held, then holds",
+    "position": "each press moves the tool by the step along the axis, on a straight line",
+}
+
+
+def _shown(displacement: tuple[float, ...]) -> str:
+    """A Cartesian displacement as the axes it moves: 'x +2 mm, γ −0.5°'."""
+    return ", ".join(f"{axis} {v:+g}{' mm' if k < 3 else '°'}"
+                     for k, (axis, v) in enumerate(zip(AXES, displacement, strict=True)) if v)
+
+
+def below_min_pwm(joint: Joint, duty: float) -> float | None:
+    """The minimum PWM (%) of ``joint`` in the sense of ``duty`` (the controller output's,
+    ``hw.transmission.output_min_pwm``) if a non-zero open-loop ``duty`` is below it: the
+    valve will not open enough to move the joint (section 5.4.1). Else None."""
+    if duty == 0.0:
+        return None
+    least = output_min_pwm(joint)[0 if duty > 0 else 1]
+    return least if abs(duty) < least else None
 
 
 @dataclass
@@ -117,7 +181,8 @@ def _jog_bindings() -> list[Binding]:
                            show=first, key_display="a/z…h/n" if first else None))
         out.append(Binding(minus, f"jog({j}, -1)", f"joint {j} −", show=False))
     for k in range(1, 10):
-        out.append(Binding(str(k), f"increment({k})", "increment" if k == 1 else f"step {k}",
+        out.append(Binding(str(k), f"increment({k})", "increment / step" if k == 1
+                           else f"increment {k}",
                            show=k == 1, key_display="1-9" if k == 1 else None))
     return out
 
@@ -125,7 +190,8 @@ def _jog_bindings() -> list[Binding]:
 class JogPad(Widget, can_focus=True):
     """The focusable part of the Jog tab: its keys set the duties and steps it posts up.
 
-    ``armed`` is set by the tab: True only while the tab is the visible one.
+    ``armed`` is set by the tab: True only while the tab is the visible one. ``latched``
+    too: while the E-stop is latched a jog key changes nothing and says why.
     """
 
     BINDINGS: ClassVar = [
@@ -134,11 +200,13 @@ class JogPad(Widget, can_focus=True):
         Binding("down", "arrow(-1)", "rig −10 %", key_display="↓"),
         Binding("space", "stop_all", "all duties 0", key_display="space"),
         Binding("m", "mode", "mode"),
+        Binding("w", "frame", "frame joint/world/tool"),
         Binding("enter", "hold_here", "hold here"),
     ]
 
     mode: reactive[str] = reactive("duty")
     increment: reactive[int] = reactive(5)
+    frame: reactive[str] = reactive("joint")
 
     @dataclass
     class DutyChanged(Message):
@@ -154,30 +222,60 @@ class JogPad(Widget, can_focus=True):
         step: float
 
     @dataclass
+    class CartesianJogged(Message):
+        """Jog the tool by ``displacement`` [dx, dy, dz (mm), dγ, dβ, dα (°)] in ``frame``
+        at ``speed`` of the Cartesian jog speed; ``held``: a hold-to-move jog, planned as
+        far as the line allows (it ends on release)."""
+
+        displacement: tuple[float, ...]
+        frame: str
+        speed: float
+        held: bool
+
+    @dataclass
     class Stopped(Message):
         """Every duty is zero: leave manual actuation for closed-loop hold (the thesis's
-        default mode); ``hold`` asks for the hold even when not in manual."""
+        default mode); ``hold`` asks for the hold even when not in manual; ``tool``: a held
+        Cartesian jog was let go, to be stopped along its line first."""
 
         hold: bool
+        tool: bool = False
 
-    def __init__(self, n_joints: int, *, id: str | None = None) -> None:
+    def __init__(self, units: tuple[str, ...], *,
+                 cartesian_speed: tuple[float, float] | None = None, machine_name: str = "",
+                 id: str | None = None) -> None:
         super().__init__(id=id)
-        self.n = n_joints
-        self.duty = [0.0] * n_joints
+        # the machine's cartesian_jog_speed (mm/s, °/s) if it has kinematics (world and tool
+        # frames), else None
+        self.cartesian_speeds = cartesian_speed
+        self.machine_name = machine_name
+        self.units = units  # each joint's unit, "mm" or "deg": its position steps
+        self.n = len(units)
+        self.duty = [0.0] * self.n
         self.repeat = KeyRepeat()
         self.armed = False
+        self.latched = False
+        self._told_latched = -math.inf
 
     def on_mount(self) -> None:
         self._release_timer = self.set_interval(RELEASE_CHECK_S, self._check_release,
                                                 pause=True)
 
     def render(self) -> Text:
-        step = POSITION_STEPS[self.increment - 1]
-        amount = {"duty": f"increment {self.increment} %",
-                  "hold-to-move": f"duty {HOLD_DUTY_PER_STEP * self.increment:g} % while held",
-                  "position": f"step {step:g} mm or °"}[self.mode]
-        return Text.assemble(("mode ", "dim"), (self.mode, "bold"), ("  ·  ", "dim"),
-                             (amount, "bold"), ("  ·  ", "dim"), MODE_HELP[self.mode])
+        if self.latched:
+            return Text.assemble(("E-STOP latched", "bold red"), ("  ·  ", "dim"),
+                                 "jog keys do nothing until ^R releases it")
+        units = POSITION_STEPS if self.frame != "joint" else [
+            unit for unit in POSITION_STEPS if unit in self.units]
+        steps = " · ".join(f"{self.step(unit):g}{SYMBOLS[unit]}" for unit in units)
+        held = (f"{self.cartesian_speed:.0%} of the jog speed while held"
+                if self.frame != "joint" else f"duty {self.hold_duty:g} % while held")
+        amount = {"duty": f"increment {self.increment} %", "hold-to-move": held,
+                  "position": f"step {steps} a press"}[self.mode]
+        helps = MODE_HELP if self.frame == "joint" else CARTESIAN_HELP
+        return Text.assemble(("frame ", "dim"), (self.frame, "bold"), ("  ·  mode ", "dim"),
+                             (self.mode, "bold"), ("  ·  ", "dim"), (amount, "bold"),
+                             ("  ·  ", "dim"), helps[self.mode])
 
     def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
         if not self.armed:
@@ -188,25 +286,86 @@ class JogPad(Widget, can_focus=True):
             return self.n == 1
         return True
 
+    def step(self, unit: str) -> float:
+        """The position-jog step of the chosen increment in ``unit`` (mm or deg)."""
+        return POSITION_STEPS[unit][self.increment - 1]
+
+    @property
+    def cartesian_speed(self) -> float:
+        """The hold-to-move Cartesian speed of the chosen increment, a fraction of the
+        machine's cartesian_jog_speed."""
+        return CARTESIAN_SPEEDS[self.increment - 1]
+
+    @property
+    def hold_duty(self) -> float:
+        """The hold-to-move duty of the chosen increment (%), capped at HOLD_DUTY_MAX."""
+        return min(HOLD_DUTY_MAX, HOLD_DUTY_PER_STEP * self.increment)
+
     def action_increment(self, k: int) -> None:
         self.increment = k
 
     def action_mode(self) -> None:
         self.stop(hold=False)
-        self.mode = MODES[(MODES.index(self.mode) + 1) % len(MODES)]
+        modes = MODES if self.frame == "joint" else CARTESIAN_MODES
+        self.mode = modes[(modes.index(self.mode) + 1) % len(modes)]
+
+    def action_frame(self) -> None:
+        """Cycle joint → world → tool jog; a machine without kinematics says it has none."""
+        if self.cartesian_speeds is None:
+            self.notify(NO_CARTESIAN.format(name=self.machine_name), severity="warning")
+            return
+        self.stop(hold=False)
+        self.frame = FRAMES[(FRAMES.index(self.frame) + 1) % len(FRAMES)]
+        if self.frame != "joint" and self.mode == "duty":
+            self.mode = "position"  # a duty has no Cartesian meaning
+
+    def refused_while_latched(self) -> bool:
+        """True while the E-stop is latched; then say why (not at every key of a burst)."""
+        if not self.latched:
+            return False
+        now = time.monotonic()
+        if now - self._told_latched > LATCHED_NOTICE_S:
+            self._told_latched = now
+            self.notify(LATCHED, severity="warning")
+        return True
 
     def action_jog(self, joint: int, sign: int) -> None:
-        if joint >= self.n:
+        if self.frame != "joint":
+            self.jog_tool(joint, sign)
+            return
+        if joint >= self.n or self.refused_while_latched():
             return
         if self.mode == "duty":
             self.duty[joint] = max(-100.0, min(100.0, self.duty[joint] + sign * self.increment))
             self.send()
         elif self.mode == "hold-to-move":
-            self.hold_key(joint, sign * HOLD_DUTY_PER_STEP * self.increment)
+            self.hold_key(joint, sign * self.hold_duty)
         else:
-            self.post_message(self.TargetStepped(joint, sign * POSITION_STEPS[self.increment - 1]))
+            self.post_message(self.TargetStepped(joint, sign * self.step(self.units[joint])))
+
+    def jog_tool(self, axis: int, sign: int) -> None:
+        """A Cartesian jog key: ``axis`` 0-5 is x, y, z, γ, β, α of the frame."""
+        if self.refused_while_latched():
+            return
+        unit = "mm" if axis < 3 else "deg"
+        d = [0.0] * 6
+        if self.mode == "position":
+            d[axis] = sign * self.step(unit)
+            self.post_message(self.CartesianJogged(tuple(d), self.frame, 1.0, held=False))
+            return
+        if self.repeat.press(axis, time.monotonic()):  # a new hold, not a repeat of one
+            self.repeat.forget()
+            self.repeat.press(axis, time.monotonic())
+            assert self.cartesian_speeds is not None  # the frame is joint without them
+            full = self.cartesian_speeds[0 if unit == "mm" else 1]
+            d[axis] = sign * HOLD_REACH_S * self.cartesian_speed * full
+            self.post_message(self.CartesianJogged(tuple(d), self.frame, self.cartesian_speed,
+                                                   held=True))
+        self._release_timer.resume()
 
     def action_arrow(self, sign: int) -> None:
+        if self.refused_while_latched():
+            return
         if self.mode == "duty":
             self.duty[0] = max(-100.0, min(100.0, self.duty[0] + sign * RIG_ARROW_STEP))
             self.send()
@@ -214,11 +373,15 @@ class JogPad(Widget, can_focus=True):
             self.action_jog(0, sign)
 
     def action_stop_all(self) -> None:
+        if self.refused_while_latched():
+            return
         self.repeat.forget()
         self.duty = [0.0] * self.n
         self.send()
 
     def action_hold_here(self) -> None:
+        if self.refused_while_latched():
+            return
         self.stop(hold=True)
 
     def hold_key(self, joint: int, duty: float) -> None:
@@ -228,22 +391,37 @@ class JogPad(Widget, can_focus=True):
         self._release_timer.resume()
 
     def _check_release(self) -> None:
-        """Every RELEASE_CHECK_S while a key is held: stop the joints let go."""
+        """Every RELEASE_CHECK_S while a key is held: stop the joints let go; when the last
+        is let go, hold every joint where it stopped (at zero duty a joint would sag)."""
         gone = self.repeat.released(time.monotonic())
-        if gone:
+        if self.frame != "joint":  # one Cartesian axis at a time: its release stops the jog
+            if gone and not self.repeat.held:
+                self.let_go()
+                self.post_message(self.Stopped(True, tool=True))
+            return
+        if not self.repeat.held:
+            self._release_timer.pause()
+            if gone:
+                self.stop(hold=True)
+        elif gone:
             for j in gone:
                 self.duty[j] = 0.0
             self.send()
-        if not self.repeat.held:
-            self._release_timer.pause()
 
     def send(self) -> None:
         self.post_message(self.DutyChanged(tuple(self.duty)))
 
     def stop(self, hold: bool) -> None:
-        """Let go and ask for closed-loop hold (see ``Stopped``)."""
+        """Let go and ask for closed-loop hold (see ``Stopped``); always when a Cartesian key
+        was held: its jog is running, and letting go must end it."""
+        tool = self.moving_tool
         self.let_go()
-        self.post_message(self.Stopped(hold))
+        self.post_message(self.Stopped(hold or tool, tool))
+
+    @property
+    def moving_tool(self) -> bool:
+        """A Cartesian hold-to-move key is held: its jog runs until it is let go."""
+        return self.frame != "joint" and self.repeat.held
 
     def let_go(self) -> None:
         """Forget every held key and zero every duty; the tab decides about the hold."""
@@ -252,22 +430,38 @@ class JogPad(Widget, can_focus=True):
         self.duty = [0.0] * self.n
 
     def forget_duties(self) -> None:
-        """The controller left manual mode (E-stop, a move, hold): start again from zero."""
+        """The controller left manual mode (a move, hold): start again from zero."""
         if any(self.duty):
             self.repeat.forget()
             self.duty = [0.0] * self.n
 
+    def estop(self, latched: bool) -> None:
+        """The E-stop latched (every duty and held key forgotten) or was released (the pad
+        starts from zero: a release never starts motion by itself)."""
+        self.let_go()
+        self.latched = latched
+        self.refresh()
+
 
 class JogTab(TabPage):
-    """Manual control of every joint from the keyboard."""
+    """Manual control of every joint, and of the tool in a Cartesian frame, from the keyboard."""
 
     REFRESH_HZ = 10.0
     TITLE = "Jog"
     _was_manual = False
+    cartesian_note = Text("")  # why the last Cartesian jog was refused or ends early
+    _jog: MoveHandle | None = None  # the last Cartesian jog sent
+    _queued: JogPad.CartesianJogged | None = None  # steps pressed while it ran, summed
+    _stopping = False  # a let-go held jog is decelerating (feed hold) before the hold
 
     def compose(self) -> ComposeResult:
-        yield JogPad(self.machine.n_joints, id="jog-pad")
+        speed = self.machine.cartesian_jog_speed if self.model is not None else None
+        yield JogPad(tuple(j.unit for j in self.machine.joints), cartesian_speed=speed,
+                     machine_name=self.machine.name, id="jog-pad")
+        yield LiveText(id="jog-pose")
+        yield LiveText(id="jog-cartesian-note")
         yield LiveText(id="jog-table")
+        yield LiveText(id="jog-dead-band")
         yield Static(self._keys_help(), id="jog-help")
 
     def on_mount(self) -> None:
@@ -287,30 +481,94 @@ class JogTab(TabPage):
     def hidden(self) -> None:
         super().hidden()
         self.pad.armed = False
+        moving_tool = self.pad.moving_tool or self._stopping
         self.pad.let_go()  # leaving the tab must not leave a joint moving: decided now
-        self._leave_manual(hold=False)
+        self._queued = None
+        self._stopping = False
+        self._leave_manual(hold=moving_tool)
 
-    def forget_duties(self) -> None:
-        """The E-stop closed every valve: the pad starts again from zero."""
-        self.pad.forget_duties()
+    def estop(self, latched: bool) -> None:
+        self.pad.estop(latched)
+        self._queued = None
+        self._stopping = False
+        self.refresh_live()
 
     def on_jog_pad_duty_changed(self, message: JogPad.DutyChanged) -> None:
         # A duty the pad has moved on from (a later key, or let go since: the tab was left,
         # the E-stop) is not sent: a later message carries the pad's duties, or none should.
-        if not self.visible_now or message.duty != tuple(self.pad.duty):
+        if not self.visible_now or self.pad.latched or message.duty != tuple(self.pad.duty):
             return
         self.command("jog", lambda client: client.jog(list(message.duty)))
         self.refresh_live()
 
     def on_jog_pad_target_stepped(self, message: JogPad.TargetStepped) -> None:
-        if not self.visible_now:  # pressed just before the tab was left
+        if not self.visible_now or self.pad.latched:  # pressed just before the tab was left
             return
         self.command("position jog",
                      lambda client: client.jog_position(message.joint, message.step))
         self.refresh_live()
 
+    def on_jog_pad_cartesian_jogged(self, message: JogPad.CartesianJogged) -> None:
+        if not self.visible_now or self.pad.latched:
+            return
+        running = self._jog is not None and not self._jog.done.is_set()
+        if running and not message.held:
+            self._queue(message)  # a new move now would start from rest while the arm moves
+        else:
+            self._queued = None
+            self._send_jog(message)
+        self.refresh_live()
+
+    def _queue(self, message: JogPad.CartesianJogged) -> None:
+        """Add a step pressed while a step runs to the ones waiting for it to end."""
+        queued = self._queued
+        if queued is not None and queued.frame == message.frame and not queued.held:
+            total = tuple(a + b for a, b in zip(queued.displacement, message.displacement,
+                                                strict=True))
+            message = JogPad.CartesianJogged(total, message.frame, message.speed, False)
+        self._queued = message
+        self.cartesian_note = Text.assemble(("next: ", "dim"), _shown(message.displacement),
+                                            (f" ({message.frame} frame), when this step ends",
+                                             "dim"))
+
+    def _send_jog(self, message: JogPad.CartesianJogged) -> None:
+        self.cartesian_note = Text("")
+        self.command("Cartesian jog", lambda client: self._jog_tool(client, message))
+
+    def _jog_tool(self, client: ControlClient, message: JogPad.CartesianJogged) -> None:
+        """Send the jog; a jog the arm cannot make (or a held one that ends early) says why
+        under the pad, as well as in the notification ``command`` shows for a refusal."""
+        try:
+            handle = client.jog_cartesian(message.displacement, message.frame, message.speed,
+                                          stop_short=message.held)
+        except ValueError as exc:
+            self.cartesian_note = Text.assemble(("jog refused: ", "bold yellow"), str(exc))
+            raise
+        self._jog = handle
+        stopped = handle.meta.get("stopped", "")
+        if stopped:
+            self.cartesian_note = Text.assemble(("the jog stops early: ", "bold yellow"),
+                                                str(stopped))
+            self.notify(f"Cartesian jog stops early: {stopped}", severity="warning")
+
     def on_jog_pad_stopped(self, message: JogPad.Stopped) -> None:
+        if message.tool and self.visible_now:
+            # feed hold: the jog decelerates along its line within the joints' limits; the
+            # hold follows once it stands (refresh_live), rather than stopping it dead
+            self._stopping = self.command("stop the jog", ControlClient.pause)
+            if self._stopping:
+                return
         self._leave_manual(message.hold)
+
+    def _hold_when_stopped(self) -> None:
+        """A let-go Cartesian jog has stopped along its line (or ended): hold there."""
+        status = self.status()
+        if not self._stopping or status is None:
+            return
+        if status.mode != Mode.FOLLOW_TRACK or (status.paused and status.feed_rate == 0.0):
+            self._stopping = False
+            if status.mode == Mode.FOLLOW_TRACK:
+                self.command("hold", ControlClient.hold)
 
     def _leave_manual(self, hold: bool) -> None:
         """Hold, the thesis's default mode, if asked to or if the controller is in manual."""
@@ -319,33 +577,82 @@ class JogTab(TabPage):
             self.command("hold", ControlClient.hold)
 
     def refresh_live(self) -> None:
+        self._hold_when_stopped()
+        queued = self._queued
+        if queued is not None and (self._jog is None or self._jog.done.is_set()):
+            self._queued = None
+            if self.visible_now and not self.pad.latched:
+                self._send_jog(queued)
         status = self.status()
         if status is not None:
+            if status.estop and not self.pad.latched:  # latched before its event arrived
+                self.pad.estop(True)
             manual = status.mode == Mode.MANUAL_ACTUATE
             if self._was_manual and not manual:  # E-stop, hold or a move ended manual mode
                 self.pad.forget_duties()
             self._was_manual = manual
         self.pad.refresh()
+        self.query_one("#jog-pose", LiveText).show(self._pose(status))
+        self.query_one("#jog-cartesian-note", LiveText).show(self.cartesian_note)
         self.query_one("#jog-table", LiveText).show(self._table(status))
+        self.query_one("#jog-dead-band", LiveText).show(self._dead_band_note())
+
+    def _pose(self, status: Status | None) -> Text:
+        """The tool's live pose and, in a Cartesian frame, which keys move it along what."""
+        if self.model is None:
+            return Text("no tool pose: a single axis (Cartesian jog needs the Unimate's "
+                        "kinematics)", "dim")
+        if status is None:
+            return Text("tool pose  –", "dim")
+        x, y, z, g, b, a = self.model.pose(status.position)
+        parts: list[str | tuple[str, str]] = [
+            ("tool  ", "dim"), f"x {x:8.1f}  y {y:8.1f}  z {z:8.1f} mm   ",
+            f"γ {g:7.2f}°  β {b:7.2f}°  α {a:7.2f}°"]
+        if self.pad.frame != "joint":
+            keys = "  ".join(f"{p}/{m} {axis}" for (p, m), axis in zip(JOG_KEYS, AXES,
+                                                                     strict=True))
+            parts += [("   keys (", "dim"), (self.pad.frame, "bold"), (" frame) ", "dim"), keys]
+        return Text.assemble(*parts)
+
+    def _command(self, j: int) -> Text:
+        """Joint ``j``'s commanded duty, marked when its valve will not open at it."""
+        command = self.pad.duty[j]
+        if below_min_pwm(self.machine.joints[j], command) is not None:
+            return Text(f"{command:+.0f} ⚠", "bold yellow")
+        return Text(f"{command:+.0f}", "bold" if command else "dim")
+
+    def _dead_band_note(self) -> Text:
+        """What a marked duty means, naming each joint it marks."""
+        parts = []
+        for j, joint in enumerate(self.machine.joints):
+            least = below_min_pwm(joint, self.pad.duty[j])
+            if least is not None:
+                parts.append(f"{joint.name} {self.pad.duty[j]:+.0f} % (needs {least:g} %)")
+        if not parts:
+            return Text("min PWM: the least duty that moves the joint, each way (section "
+                        "5.4.1); a command below it is marked ⚠", "dim")
+        return Text.assemble(("⚠ below the minimum PWM, will not move: ", "bold yellow"),
+                             ", ".join(parts))
 
     def _table(self, status: Status | None) -> Table:
         table = Table(expand=True, box=None, padding=(0, 1), header_style="bold")
         for name, justify in (("keys", "center"), ("joint", "left"), ("command %", "right"),
-                              ("controller %", "right"), ("valve %", "right"),
-                              ("position", "right"), ("target", "right")):
+                              ("min PWM +/−", "right"), ("controller %", "right"),
+                              ("valve %", "right"), ("position", "right"), ("target", "right")):
             table.add_column(name, justify=justify, no_wrap=True)
         table.add_column("within limits", ratio=1, no_wrap=True)
         rig = self.machine.n_joints == 1
         for j, joint in enumerate(self.machine.joints):
             keys = "↑/↓  a/z" if rig else "/".join(JOG_KEYS[j])
-            command = self.pad.duty[j]
+            up, down = output_min_pwm(joint)
+            least = Text(f"{up:g} / {down:g}", "dim")
             if status is None:
-                table.add_row(keys, joint.name, f"{command:+.0f}", "–", "–", "–", "–", "")
+                table.add_row(keys, joint.name, self._command(j), least, "–", "–", "–", "–", "")
                 continue
             q, d = status.position[j], status.desired[j]
             table.add_row(
-                keys, joint.name, Text(f"{command:+.0f}", "bold" if command else "dim"),
-                f"{status.duty[j]:+6.1f}", f"{status.valve[j]:+6.1f}",
+                keys, joint.name, self._command(j), least, f"{status.duty[j]:+6.1f}",
+                f"{status.valve[j]:+6.1f}",
                 f"{q:9.2f} {joint.symbol}", "–" if d != d else f"{d:9.2f} {joint.symbol}",
                 LimitBar(q, joint.lower, joint.upper, d))
         return table
@@ -356,6 +663,24 @@ class JogTab(TabPage):
         else:
             pairs = "  ".join(f"{p}/{m} {j.name}" for (p, m), j in
                               zip(JOG_KEYS, self.machine.joints, strict=False))
-        return Text.assemble(("keys  ", "dim"), pairs,
-                             ("   1–9 increment · space all stop · m mode · enter hold here",
-                              "dim"))
+        units = {j.unit for j in self.machine.joints}
+        steps = "  ".join(" ".join(f"{v:g}" for v in table) + SYMBOLS[unit]
+                          for unit, table in POSITION_STEPS.items() if unit in units)
+        frames = " · w frame joint/world/tool" if self.model is not None else ""
+        return Text.assemble(
+            ("keys  ", "dim"), pairs,
+            (f"   1–9 increment · space all stop · m mode · enter hold here{frames}", "dim"),
+            ("\n1–9   ", "dim"), f"duty ±1…9 % a press · hold-to-move 10…{HOLD_DUTY_MAX:g} % · "
+            f"position steps {steps}", self._cartesian_help())
+
+    def _cartesian_help(self) -> Text:
+        if self.model is None:
+            return Text("")
+        keys = "  ".join(f"{p}/{m} {axis}" for (p, m), axis in zip(JOG_KEYS, AXES, strict=True))
+        mm, deg = self.machine.cartesian_jog_speed
+        speeds = f"{CARTESIAN_SPEEDS[0]:.0%}…{CARTESIAN_SPEEDS[-1]:.0%}"
+        return Text.assemble(
+            ("\nworld/tool  ", "dim"), keys,
+            ("   position: the step a press, on a straight line · hold-to-move: ", "dim"),
+            f"{speeds} of {mm:g} mm/s, {deg:g}°/s", (" · stops before a limit or a singularity",
+                                                    "dim"))

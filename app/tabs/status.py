@@ -1,7 +1,8 @@
 """Status: the thesis's ``visual`` printer, better (section 5.1: position and PWM of each
 joint every 300 interrupts). Here every joint's position, desired, error, duty, valve,
 raw encoder word, glitch count and a limit bar; the end-effector pose from the forward
-kinematics; the loop's sample number, mode, lateness and the link counters.
+kinematics; the loop's sample number, mode, lateness, the hydraulic supply pressure and
+the link counters.
 
 Under ``FULL_WIDTH`` columns (an 80-column terminal) the joints' table leaves out the raw
 word and the glitch count and shortens its numbers, so names, values and limit bars stay
@@ -23,6 +24,7 @@ from app.widgets.header import MODE_NAMES
 from app.widgets.limit_bar import LimitBar
 from app.widgets.live_text import LiveText
 from control.layout import Flag, Status
+from hw.machine import Machine
 
 POSE_LABELS = (("x", "mm"), ("y", "mm"), ("z", "mm"), ("γ", "°"), ("β", "°"), ("α", "°"))
 FULL_WIDTH = 100  # columns the joints' table needs for every column
@@ -125,6 +127,7 @@ class StatusTab(TabPage):
             ("compute", f"{status.compute_last_us:.1f} µs (max {status.compute_max_us:.1f})"),
             ("loop CPU", _share(status.compute_total_s, status.tick * self.machine.sample_time_s)),
             ("overruns", f"{status.overruns}"),
+            ("supply", _supply(status.supply_mpa, self.machine)),
             ("flags", flags),
             ("fault", status.fault or "–"),
         ):
@@ -144,6 +147,15 @@ class StatusTab(TabPage):
 def _share(busy_s: float, elapsed_s: float) -> str:
     """The share of the period the loop's work takes (the thesis: under half the CPU at 1 ms)."""
     return f"{100.0 * busy_s / elapsed_s:.1f} % of the period" if elapsed_s > 0 else "–"
+
+
+def _supply(mpa: float, machine: Machine) -> Text:
+    """The hydraulic supply pressure, yellow once it has sagged 5 % below the nominal."""
+    if not math.isfinite(mpa):
+        return Text("not measured", "dim")
+    nominal = machine.plant.get("supply_mpa", math.nan)
+    sagged = math.isfinite(nominal) and mpa < 0.95 * nominal
+    return Text(f"{mpa:.2f} MPa", "bold yellow" if sagged else "")
 
 
 def _num(value: float, unit: str, spec: str = "10.3f") -> str:

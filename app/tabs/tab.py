@@ -95,6 +95,10 @@ class TabPage(Container):
         """The controller is up (called once, by the app)."""
         self.connection = client
 
+    def estop(self, latched: bool) -> None:
+        """The E-stop latched (sent by the operator, or reported by the controller), or was
+        released: a tab forgets whatever the operator had asked for before the latch."""
+
     def client_down(self, problem: str) -> None:
         """The controller did not start, or died: ``problem`` says what to do."""
         self.client_problem = problem

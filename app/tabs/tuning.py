@@ -4,6 +4,12 @@ The controller copies a set from shared memory at its next tick, even during a
 move (section 6.3), so an edit here changes the loop within a millisecond.
 Presets are the machine file's extra sets (the P.I. gains of section 5.4.2,
 the rig's observer controller of section 3.6.2) and any loaded from a file.
+
+With care: every apply goes through the client's gain check, and a set it
+refuses is shown with the reason in the tab, nothing applied; Load shows what
+the file's sets would change in the live ones and applies them only when
+confirmed (all or none); Save asks before replacing a file; ctrl+z puts back
+the set in use before the last apply.
 """
 
 from __future__ import annotations
@@ -12,18 +18,27 @@ import math
 from dataclasses import dataclass, replace
 from functools import partial
 from pathlib import Path
+from typing import ClassVar
 
 from rich.text import Text
 from textual import work
 from textual.app import ComposeResult
+from textual.binding import Binding
 from textual.containers import Horizontal
 from textual.message import Message
 from textual.widgets import Button, DataTable, Input, Label, RadioButton, RadioSet, Select, Static
 
-from app.coefficient_files import CoefficientFileError, load_coefficients, save_coefficients
+from app.coefficient_files import (
+    CoefficientFileError,
+    coefficient_changes,
+    coefficient_path,
+    load_coefficients,
+    save_coefficients,
+)
 from app.desk import Desk
 from app.tabs.tab import TabPage
-from app.widgets.dialogs import EditValueScreen
+from app.widgets.dialogs import ConfirmScreen, EditValueScreen, ReviewScreen
+from control.client import ControlClient, ControllerError
 from control.layout import MAX_TAPS, Mode
 from hw.machine import COEFFICIENT, FILTER_DIVISOR, Coefficients
 
@@ -74,11 +89,24 @@ def _taps_text(taps: tuple[float, ...]) -> str:
     return ", ".join(f"{t:g}" for t in taps) or "–"
 
 
+@dataclass(frozen=True)
+class Applied:
+    """One apply, for undo: the set ``which`` held before (and what its gain check said of
+    it), and the set the apply put in its place."""
+
+    which: str
+    before: Coefficients
+    before_check: dict[str, object]
+    applied: Coefficients
+    what: str
+
+
 class TuningTab(TabPage):
     """Hold and track sets in a table; Enter on a cell edits it and applies it live."""
 
     TITLE = "Tuning"
     REFRESH_HZ = 2.0
+    BINDINGS: ClassVar = [Binding("ctrl+z", "undo", "undo last apply", key_display="^Z")]
 
     @dataclass
     class Loaded(Message, bubble=False):
@@ -87,10 +115,17 @@ class TuningTab(TabPage):
         path: Path
         sets: dict[str, Coefficients]
 
+    @dataclass
+    class OverwriteAsked(Message, bubble=False):
+        """Saving would replace the file at ``path`` (from the file worker)."""
+
+        path: Path
+
     def __init__(self, desk: Desk, *, id: str | None = None) -> None:
         super().__init__(desk, id=id)
         self.which = "track"
         self.presets: dict[str, Coefficients] = {}
+        self.undo_stack: list[Applied] = []
 
     def compose(self) -> ComposeResult:
         self.presets = {name: c for name, c in self.machine.coefficients.items()}
@@ -103,6 +138,7 @@ class TuningTab(TabPage):
                          allow_blank=False, value="track", compact=True)
             yield Button("Apply preset", id="tuning-apply-preset", variant="warning")
         yield Static(id="tuning-state")
+        yield Static(id="tuning-outcome")
         yield DataTable(id="tuning-joints", cursor_type="cell", zebra_stripes=True)
         yield DataTable(id="tuning-common", cursor_type="cell")
         with Horizontal(id="tuning-files"):
@@ -165,7 +201,8 @@ class TuningTab(TabPage):
         c = self.current
         self.query_one("#tuning-state", Static).update(Text.assemble(
             (f"{self.which} set ", "bold"), f"({c.name}: {c.note})", (in_use, "green"),
-            ("   Enter on a cell edits it; the change applies at the next tick", "dim")))
+            ("   Enter on a cell edits it; the change applies at the next tick; ^Z undoes the "
+             "last apply", "dim")))
 
     def on_radio_set_changed(self, event: RadioSet.Changed) -> None:
         event.stop()
@@ -177,17 +214,88 @@ class TuningTab(TabPage):
         if event.button.id == "tuning-apply-preset":
             name = self.query_one("#tuning-preset", Select).value
             if isinstance(name, str) and name in self.presets:
-                self.apply(replace(self.presets[name]), f"preset {name}")
+                self.apply({self.which: replace(self.presets[name])}, f"preset {name}")
         elif event.button.id == "tuning-load":
             self.load(self.query_one("#tuning-path", Input).value)
         elif event.button.id == "tuning-save":
             self.save(self.query_one("#tuning-path", Input).value)
 
-    def apply(self, coefficients: Coefficients, what: str) -> None:
-        if self.command(f"apply {what}",
-                        lambda client: client.set_coefficients(self.which, coefficients)):
-            self.notify(f"{what} applied to the {self.which} set")
+    # -- applying, and undoing ----------------------------------------------------------------
+
+    def apply(self, sets: dict[str, Coefficients], what: str) -> bool:
+        """Apply ``sets`` (hold and/or track) through the client's gain check: all of them,
+        or, if the check refuses one, none, with the reason shown in the tab."""
+        client = self.client
+        if client is None:
+            self.notify(f"apply {what}: the controller is not running — "
+                        + (self.client_problem or "wait for it to start"), severity="error")
+            return False
+        applied: list[Applied] = []
+        try:
+            if len(sets) > 1:
+                self._check_all(client, sets)
+            for which, c in sets.items():
+                before = Applied(which, client.coefficients[which],
+                                 client.coefficient_checks[which], c, what)
+                client.set_coefficients(which, c)
+                applied.append(before)
+        except (ControllerError, ValueError, OSError) as exc:
+            self.undo_stack.extend(applied)  # only a dying controller stops after the first
+            self._outcome(Text.assemble((f"{what}: ", "bold"), (str(exc), "bold red")))
+            self.notify(f"apply {what}: {exc}", severity="error", timeout=10)
+            self._fill()
+            return False
+        self.undo_stack.extend(applied)
+        names = " and ".join(sets) + (" sets" if len(sets) > 1 else " set")
+        self._outcome(Text(f"{what} applied to the {names}; ^Z puts back the one before",
+                           "green"))
+        self.notify(f"{what} applied to the {names}")
         self._fill()
+        return True
+
+    def _check_all(self, client: ControlClient, sets: dict[str, Coefficients]) -> None:
+        """The client's gain check of every set before any is applied (GainError if one
+        fails): ``set_coefficients`` checks each again as it applies it."""
+        from control.identify import gains  # scipy: loaded on first use
+
+        for c in sets.values():
+            gains.check(c, self.machine, client.models, client.dt)
+
+    def action_undo(self) -> None:
+        """Put back the set in use before the last apply made here."""
+        client = self.client
+        if not self.undo_stack:
+            self.notify("undo: nothing applied from this tab to undo")
+            return
+        if client is None:
+            self.notify("undo: the controller is not running", severity="error")
+            return
+        last = self.undo_stack.pop()
+        if client.coefficients[last.which] != last.applied:
+            self._outcome(Text(f"undo: the {last.which} set has changed since {last.what} "
+                               f"(now {client.coefficients[last.which].name!r}); not undone",
+                               "bold red"))
+            self.notify(f"undo: the {last.which} set has changed since {last.what}; not undone",
+                        severity="warning")
+            return
+        override = None
+        if last.before_check.get("overridden"):
+            override = (f"undo: the set in use before, applied with an override "
+                        f"({last.before_check.get('override_reason')})")
+        try:
+            client.set_coefficients(last.which, last.before, override=override)
+        except (ControllerError, ValueError, OSError) as exc:
+            self.undo_stack.append(last)
+            self._outcome(Text.assemble(("undo: ", "bold"), (str(exc), "bold red")))
+            self.notify(f"undo: {exc}", severity="error", timeout=10)
+            return
+        self._outcome(Text(f"undone: {last.what}; the {last.which} set is "
+                           f"{last.before.name!r} again", "yellow"))
+        self.notify(f"undone: {last.what}")
+        self._fill()
+
+    def _outcome(self, text: Text) -> None:
+        self.query_one("#tuning-outcome", Static).update(text)
 
     # -- editing a cell ---------------------------------------------------------------------
 
@@ -216,7 +324,8 @@ class TuningTab(TabPage):
 
         def done(text: str | None) -> None:
             if text is not None:
-                self.apply(self._changed(c, table, row, column, text), f"{title} = {text}")
+                self.apply({self.which: self._changed(c, table, row, column, text)},
+                           f"{title} = {text}")
 
         self.app.push_screen(EditValueScreen(title, "" if value == "–" else str(value), parse,
                                              hint), done)
@@ -256,17 +365,71 @@ class TuningTab(TabPage):
         self.post_message(self.Loaded(Path(path), sets))
 
     def on_tuning_tab_loaded(self, message: Loaded) -> None:
+        """Offer the file's sets as presets, show what applying it would change, and apply
+        only if the operator confirms."""
         path, sets = message.path, message.sets
         for name, c in sets.items():
             self.presets[f"{path.stem}:{name}"] = c
         select = self.query_one("#tuning-preset", Select)
         select.set_options([(self._preset_label(n), n) for n in self.presets])
-        first = f"{path.stem}:{next(iter(sets))}"
-        select.value = first
-        self.notify(f"loaded {', '.join(sets)} from {path}; choose a preset and press Apply")
+        select.value = f"{path.stem}:{next(iter(sets))}"
+        assigned = {which: sets[name] for which, name in self._assign(sets).items()}
+        review, changes = self._review(path, sets, assigned)
+        if not changes:
+            self._outcome(Text(f"{path.name}: the same as the sets in use; nothing to apply",
+                               "green"))
+            return
+        targets = " and ".join(assigned) + (" sets" if len(assigned) > 1 else " set")
+
+        def answer(yes: bool | None) -> None:
+            if yes:
+                self.apply(assigned, path.name)
+            else:
+                self._outcome(Text(f"{path.name} not applied; its sets are offered as presets",
+                                   "yellow"))
+
+        self.app.push_screen(ReviewScreen(
+            f"Apply {path.name} to the {targets}?",
+            f"{changes} change(s) to the live set; the controller takes them at its next tick, "
+            "even during a move. ^Z undoes it afterwards.", review, "Apply"), answer)
+
+    def _assign(self, sets: dict[str, Coefficients]) -> dict[str, str]:
+        """Which of a file's sets replaces each live set: one named hold or track replaces
+        that set; a file with neither puts its first set in the set shown (the others are
+        presets only)."""
+        named = {which: which for which in ("hold", "track") if which in sets}
+        return named or {self.which: next(iter(sets))}
+
+    def _review(self, path: Path, sets: dict[str, Coefficients],
+                assigned: dict[str, Coefficients]) -> tuple[Text, int]:
+        """The differences between each assigned set and the live one, and how many."""
+        client = self.connection
+        text, count = Text(), 0
+        for which, c in assigned.items():
+            live = client.coefficients[which] if client is not None else \
+                self.machine.coefficients[which]
+            rows = coefficient_changes(live, c, self.machine)
+            count += len(rows)
+            text.append(f"{which} set ← {c.name!r} from {path.name}", "bold")
+            text.append(f"  (in use: {live.name!r})\n", "dim")
+            if not rows:
+                text.append("  the same as the set in use\n", "dim")
+            for joint, key, old, new in rows:
+                text.append(f"  {joint:<11} {key:<15} {old} → ", "")
+                text.append(f"{new}\n", "bold")
+        chosen = {c.name for c in assigned.values()}
+        others = [name for name in sets if name not in chosen]
+        if others:
+            text.append(f"also in the file, offered as presets only: {', '.join(others)}",
+                        "dim")
+        return text, count
 
     @work(thread=True, group="tuning-file")
-    def save(self, path: str) -> None:
+    def save(self, path: str, overwrite: bool = False) -> None:
+        target = coefficient_path(path)
+        if not overwrite and target.exists():
+            self.post_message(self.OverwriteAsked(target))
+            return
         client = self.connection
         sets = dict(client.coefficients) if client is not None else {
             "hold": self.machine.hold, "track": self.machine.track}
@@ -276,3 +439,15 @@ class TuningTab(TabPage):
             self.notify(f"{exc}. Choose another path.", severity="error", timeout=10)
             return
         self.notify(f"saved the hold and track sets to {written}")
+
+    def on_tuning_tab_overwrite_asked(self, message: OverwriteAsked) -> None:
+        def answer(yes: bool | None) -> None:
+            if yes:
+                self.save(str(message.path), overwrite=True)
+            else:
+                self.notify(f"not saved: {message.path} left as it was")
+
+        self.app.push_screen(ConfirmScreen(
+            f"Overwrite {message.path.name}?",
+            f"{message.path} exists. Saving replaces it with the hold and track sets in use "
+            "now.", "Overwrite"), answer)

@@ -9,9 +9,10 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import ClassVar, TypeVar
 
+from rich.console import RenderableType
 from textual.app import ComposeResult
 from textual.binding import Binding
-from textual.containers import Horizontal, Vertical
+from textual.containers import Horizontal, Vertical, VerticalScroll
 from textual.screen import ModalScreen
 from textual.validation import ValidationResult, Validator
 from textual.widgets import Button, Input, Label, Static
@@ -85,6 +86,37 @@ class ConfirmScreen(Dialog[bool]):
 
     def action_answer(self, yes: bool) -> None:
         self.dismiss(yes)
+
+
+class ReviewScreen(ConfirmScreen):
+    """A confirmation with a long detail (what a change would do, line by line): the
+    detail scrolls, the buttons stay in view."""
+
+    DEFAULT_CSS = """
+    ReviewScreen .dialog {
+        width: 96;
+        max-height: 90%;
+    }
+    ReviewScreen .dialog-review {
+        height: auto;
+        max-height: 24;
+    }
+    """
+
+    def __init__(self, question: str, detail: str, review: RenderableType,
+                 confirm: str = "Confirm") -> None:
+        super().__init__(question, detail, confirm)
+        self.review = review
+
+    def compose(self) -> ComposeResult:
+        with Vertical(classes="dialog"):
+            yield Label(self.question, classes="dialog-title")
+            yield Static(self.detail, classes="dialog-detail")
+            with VerticalScroll(classes="dialog-review"):
+                yield Static(self.review)
+            with Horizontal(classes="dialog-buttons"):
+                yield Button(f"{self.confirm} (y)", id="confirm", variant="error")
+                yield Button("Cancel (n)", id="cancel")
 
 
 class _Check(Validator):

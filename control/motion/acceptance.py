@@ -8,7 +8,8 @@ the control process can read them too.
 
 - **Every path** is ``(N, J)`` rows (mm, deg), each finite and inside every
   joint's limits.
-- **Smooth kinds** (path, ramp, sine, cartesian, via_points, end_point, go_to)
+- **Smooth kinds** (path, ramp, sine, cartesian, via_points, end_point, go_to,
+  cartesian_jog)
   keep each joint's ``max_speed`` and ``max_accel``, taken by differences at
   the sample time Δt: speed ``|q(k) − q(k−1)|/Δt``, acceleration
   ``|q(k+1) − 2q(k) + q(k−1)|/Δt²``. The joint rests on the first row before

@@ -61,7 +61,6 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.interpolate import CubicSpline
 
 from control.motion.file_fields import csv_lines, field_number, move_file_bound, read_text_file
 from control.motion.path_files import MAX_MOVE_S
@@ -163,10 +162,12 @@ def cartesian_path(start: ArrayLike, points: ArrayLike, machine: Machine, *,
     joints' ``max_speed`` and ``max_accel`` times ``speed_fraction`` allow.
     Raises ValueError naming the first bad point and why.
     """
+    from scipy.interpolate import CubicSpline  # on first use: a Cartesian jog never needs it
+
     model = unimate_model(machine)
-    q0 = _start(start, machine)
+    q0 = start_joints(start, machine)
     xyz = _via_xyz(points)
-    step = machine.sample_time_s if dt is None else _positive(dt, "dt")
+    step = machine.sample_time_s if dt is None else positive_seconds(dt, "dt")
     if not 0.0 < speed_fraction <= 1.0:
         raise ValueError(f"speed_fraction must be in (0, 1], got {speed_fraction}")
     frame = arm_frame(q0, model)
@@ -180,7 +181,7 @@ def cartesian_path(start: ArrayLike, points: ArrayLike, machine: Machine, *,
         u = np.linspace(0.0, float(knots[-1]), int(np.clip(length / FINE_SPACING_MM,
                                                              *FINE_SAMPLES)))
         q, _, _ = _solve(spline(u), _Where(u, knots, timed=False), frame, q0, machine, model)
-        scale = max(_limit_ratio(q, u[1] - u[0], vmax, amax), 1e-6)  # > 0: it is multiplied
+        scale = max(limit_ratio(q, u[1] - u[0], vmax, amax), 1e-6)  # > 0: it is multiplied
     else:
         scale = 1.0
     while True:
@@ -192,7 +193,7 @@ def cartesian_path(start: ArrayLike, points: ArrayLike, machine: Machine, *,
         t = np.arange(via_index[-1] + 1) * step
         q, poses, branch = _solve(spline(t), _Where(t, via_t, timed=True), frame, q0, machine,
                                   model)
-        ratio = _limit_ratio(q, step, vmax, amax)
+        ratio = limit_ratio(q, step, vmax, amax)
         if ratio <= 1.0 + 1e-9:
             break
         if times is not None:
@@ -206,7 +207,7 @@ def path_from_poses(points: PosePoints, start: ArrayLike, machine: Machine, *,
                     dt: float | None = None, speed_fraction: float = 1.0) -> CartesianPath:
     """``cartesian_path`` from a pose file's points, after checking its orientation columns."""
     model = unimate_model(machine)
-    q0 = _start(start, machine)
+    q0 = start_joints(start, machine)
     if len(points.xyz) < 2:
         raise PoseFileError(f"{points.source}: {len(points.xyz)} via point(s): a path needs an "
                             "intermediate point and an end point (section 6.4)")
@@ -246,21 +247,21 @@ def _solve(xyz: np.ndarray, where: _Where, frame: _ArmFrame, q0: np.ndarray,
                          "angle keeps the tool's orientation")
     poses = frame.poses(xyz, theta1)
     batch = model.inverse_batch(poses, near=q0)
-    slot = _start_branch(q0, batch.solutions[0], batch.valid[0])
+    slot = start_branch(q0, batch.solutions[0], batch.valid[0])
     q = batch.solutions[:, slot]
     ok = batch.valid[:, slot]
-    jump = _jumps(q, machine)
+    jump = jumps(q, machine)
     bad = np.flatnonzero(~ok | jump)
     if len(bad):
         k = int(bad[0])
-        why = (_jump_reason(q, k, machine) if ok[k]
-               else _branch_reason(model, poses[k], slot, batch.valid[k],
+        why = (jump_reason(q, k, machine) if ok[k]
+               else branch_reason(model, poses[k], slot, batch.valid[k],
                                    q[k - 1] if k else q0))
         raise ValueError(where(k, xyz) + ": " + why)
     return q, poses, slot
 
 
-def _start_branch(q0: np.ndarray, solutions: np.ndarray, valid: np.ndarray) -> int:
+def start_branch(q0: np.ndarray, solutions: np.ndarray, valid: np.ndarray) -> int:
     """The ``inverse_batch`` slot of the start joints ``q0``: of the start pose's
     ``solutions (8, 6)`` the valid one nearest ``q0``."""
     travel = np.where(valid, unimate.distance(solutions, q0), np.inf)
@@ -272,7 +273,7 @@ def _start_branch(q0: np.ndarray, solutions: np.ndarray, valid: np.ndarray) -> i
     return slot
 
 
-def _jumps(q: np.ndarray, machine: Machine) -> np.ndarray:
+def jumps(q: np.ndarray, machine: Machine) -> np.ndarray:
     """``(N,)`` True where a joint jumps from the previous sample (a wrap or branch flip)."""
     bound = np.array([JUMP_MM if j.kind == "prismatic" else JUMP_DEG for j in machine.joints])
     jump = np.zeros(len(q), dtype=bool)
@@ -280,7 +281,7 @@ def _jumps(q: np.ndarray, machine: Machine) -> np.ndarray:
     return jump
 
 
-def _jump_reason(q: np.ndarray, k: int, machine: Machine) -> str:
+def jump_reason(q: np.ndarray, k: int, machine: Machine) -> str:
     j = int(np.argmax(np.abs(q[k] - q[k - 1]) / np.array(
         [JUMP_MM if jt.kind == "prismatic" else JUMP_DEG for jt in machine.joints])))
     joint = machine.joints[j]
@@ -289,7 +290,7 @@ def _jump_reason(q: np.ndarray, k: int, machine: Machine) -> str:
             f"{joint.limit_text()} (or through a singularity); choose other points")
 
 
-def _branch_reason(model: Unimate2000B, pose: np.ndarray, slot: int, valid: np.ndarray,
+def branch_reason(model: Unimate2000B, pose: np.ndarray, slot: int, valid: np.ndarray,
                    previous: np.ndarray) -> str:
     """Why the path's branch has no valid solution at ``pose``."""
     if valid.any():
@@ -327,13 +328,13 @@ class _Where:
                 f"({when}x y z = {x:.1f} {y:.1f} {z:.1f} mm)")
 
 
-def _limit_ratio(q: np.ndarray, h: float, vmax: np.ndarray, amax: np.ndarray) -> float:
+def limit_ratio(q: np.ndarray, h: float, vmax: np.ndarray, amax: np.ndarray) -> float:
     """max over joints of max(|q̇|/vmax, √(|q̈|/amax)) from differences at spacing ``h`` (s)."""
-    return float(_joint_ratios(q, h, vmax, amax).max())
+    return float(joint_ratios(q, h, vmax, amax).max())
 
 
-def _joint_ratios(q: np.ndarray, h: float, vmax: np.ndarray, amax: np.ndarray) -> np.ndarray:
-    """Per joint ``(J,)`` the factor of _limit_ratio."""
+def joint_ratios(q: np.ndarray, h: float, vmax: np.ndarray, amax: np.ndarray) -> np.ndarray:
+    """Per joint ``(J,)`` the factor of limit_ratio."""
     if len(q) < 3:
         return np.zeros(q.shape[1])
     speed = np.abs(np.diff(q, axis=0)).max(axis=0) / h
@@ -343,7 +344,7 @@ def _joint_ratios(q: np.ndarray, h: float, vmax: np.ndarray, amax: np.ndarray) -
 
 def _too_fast(q: np.ndarray, h: float, vmax: np.ndarray, amax: np.ndarray, ratio: float,
               machine: Machine) -> str:
-    j = int(np.argmax(_joint_ratios(q, h, vmax, amax)))
+    j = int(np.argmax(joint_ratios(q, h, vmax, amax)))
     joint = machine.joints[j]
     return (f"the given times are too fast for {joint.name} (it would need {ratio:.3g} times "
             f"its max_speed or max_accel, {joint.max_speed:g} {joint.unit}/s, "
@@ -369,7 +370,7 @@ def _knots(xyz: np.ndarray, times: ArrayLike | None) -> np.ndarray:
     return knots
 
 
-def _start(start: ArrayLike, machine: Machine) -> np.ndarray:
+def start_joints(start: ArrayLike, machine: Machine) -> np.ndarray:
     q0 = np.asarray(start, dtype=float)
     if q0.shape != (machine.n_joints,) or not np.isfinite(q0).all():
         raise ValueError(f"start must be {machine.n_joints} finite joint values, got {q0}")
@@ -391,7 +392,7 @@ def _via_xyz(points: ArrayLike) -> np.ndarray:
     return xyz
 
 
-def _positive(value: float, name: str) -> float:
+def positive_seconds(value: float, name: str) -> float:
     if not (math.isfinite(value) and value > 0):
         raise ValueError(f"{name} must be a positive number of seconds, got {value}")
     return float(value)

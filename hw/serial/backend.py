@@ -122,6 +122,7 @@ class SerialBackend:
         self._n = n
         self._words: Sequence[int] = (0,) * n
         self.sample_ns = 0  # when the board latched the newest words, on the host clock
+        self.supply_mpa = math.nan  # the board has no pressure input
         self._board_clock = BoardClock()
         self._units = [0] * n
         self._port: serial.SerialBase | None = None

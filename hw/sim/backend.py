@@ -40,12 +40,21 @@ class SimBackend:
       glitch_scale: multiplies the encoders' wrong-reading rate; 0 turns wrong readings off.
       scan_period_s: time the I/O board takes to scan all Gray-code encoders once
         (default: the sample time, a full six-joint sample per tick).
+      select_to_latch_s: time from selecting an encoder (lighting its lamp) to latching its
+        word, at most its slot of ``scan_period_s / n`` (default: the whole slot). The
+        thesis's RT.o read one joint per interrupt: 1 ms per joint is ``scan_period_s=6e-3,
+        select_to_latch_s=1e-3``; 6 ms per joint is ``36e-3, 6e-3`` (section 6.2).
+      scan_lead_s: the scan began this long before the backend started. RT.o selected the
+        next joint's encoder at the end of each interrupt and read it at the start of the
+        next: with a lead of one slot, the word latched at each tick is the joint the thesis
+        timing's controller serves at that tick (``control/timing.py``).
     """
 
     def __init__(self, machine: Machine, seed: int = 0, lockstep: bool = False, *,
                  initial: Sequence[float] | None = None, load_kg: float | None = None,
                  supply_mpa: float | None = None, glitch_scale: float = 1.0,
-                 scan_period_s: float | None = None) -> None:
+                 scan_period_s: float | None = None,
+                 select_to_latch_s: float | None = None, scan_lead_s: float = 0.0) -> None:
         self.machine = machine
         self.clock: StepClock | RealClock = StepClock() if lockstep else RealClock()
         self.counters = LinkCounters()
@@ -70,7 +79,9 @@ class SimBackend:
         if machine.encoder_kind == "gray":
             self._board = GrayEncoderBoard(machine, self._a_now, seed=seed,
                                            glitch_scale=glitch_scale,
-                                           scan_period_s=scan_period_s, start_ns=self._t_ns)
+                                           scan_period_s=scan_period_s,
+                                           select_to_latch_s=select_to_latch_s,
+                                           start_ns=self._t_ns - round(scan_lead_s * 1e9))
         else:
             self._quadrature = tuple(QuadratureEncoder(j.encoder.gradient, a)
                                      for j, a in zip(machine.joints, self._a_now, strict=True))
@@ -134,6 +145,11 @@ class SimBackend:
     def fault(self) -> str:
         """Always healthy: the simulated link cannot fail."""
         return ""
+
+    @property
+    def supply_mpa(self) -> float:
+        """The supply pressure now, MPa: the pump and accumulator's (``hw.sim.supply``)."""
+        return self.plant.supply.pressure / 1e6
 
     # -- simulator inputs and probes ---------------------------------------------------------
 

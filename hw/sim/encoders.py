@@ -5,37 +5,43 @@ UPP card counts edges, so the count is relative to wherever the ram was at
 power-up; the rig's Initialise drives to the bottom and notes the count there.
 
 Unimate 2000B (sections 4.6.4, 5.3, 6.2): six absolute 13-bit Gray-code
-encoders on one shared bus. Selecting an encoder lights its lamp; 13
-photocells behind the slotted disk drive the bus lines. The simulated I/O
-board scans them round-robin on its own clock, one encoder per slot of
-``scan_period / 6``, and latches each word at the end of its slot; a read
-returns the latest latched word of every joint.
+encoders on one shared bus. Selecting an encoder lights its lamp; behind the
+slotted disk a photocell per track conducts where its track is clear and pulls
+its bus line low (0), so a dark encoder pulls no line and the six can share
+the wires; an opaque track leaves the line to its pull-up (1). The simulated
+I/O board scans the encoders round-robin on its own clock: encoder ``k`` is
+selected at the start of its slot of ``scan_period / n`` and latched
+``select_to_latch`` later (by default at the end of the slot); a read returns
+the latest latched word of every joint.
 
-Wrong readings (section 6.2, Figure 6.1). A lamp that was dark for the other
-five slots has cooled; lit again it warms with time constant ``settle / 3``
-(within 5 % of full light at the settle time, 6 ms) and cools with
-``lamp_cool_ms``. Scanned periodically, the light at the end of a slot settles
-to ``L = (1 - a) / (1 - a b)`` with ``a = exp(-slot / heat)``,
-``b = exp(-(period - slot) / cool)``: about 0.76 of full light at the default
-1 ms scan, 0.97 when each encoder gets 6 ms. The lamp's light also ripples
-from reading to reading (its 28 V supply feeds the six PWM amplifiers,
-section 4.6.3), a Gaussian of ``lamp_ripple``. A photocell whose light falls
-under the comparator threshold reads dark (0), whatever the disk shows; the
-photocells of one encoder differ in sensitivity by up to ``photocell_spread``,
-so a dim reading loses the weakest cell's bit first, then more. In Gray code
-one lost high bit is a large jump in the binary value: the isolated spikes of
-Figure 6.1, and only when the lost bit was lit.
+Wrong readings (section 6.2, Figure 6.1), from the lamp against the scan's
+timing. A lamp lit for its slot warms towards full light with time constant
+``settle / 3`` and, dark for the other slots, cools with ``lamp_cool_ms``;
+scanned periodically its light at the latch is
 
-Calibration: the threshold is set so that at the default scan each encoder's
-weakest cell drops out ``lamp_dropouts_per_s`` times a second on average. With
-0.35, and only lost lit bits counting, a 12 s move (2000 samples, rtshare.h)
-gives 2 to 3 wrong readings per joint, as Figure 6.1 shows. Everything else
-follows from the lamp: a slower scan lights the lamp longer and the wrong
-readings vanish; so does the thesis's own scan (1 ms per encoder), which in
-this model is clean too: the model cannot make a slot of 1/6 ms worse than
-one of 1 ms, so it is calibrated at servodesk's scan. ``glitch_scale``
-multiplies the default dropout rate (0 turns it off) for fault-injection tests.
-The draws come from a seeded generator, so a seed fixes every wrong reading.
+    L = 1 - (1 - L0) exp(-t_latch / heat),  L0 = b (1 - a) / (1 - a b),
+    a = exp(-slot / heat),  b = exp(-(period - slot) / cool)
+
+(L0: the light left at the select). The light also ripples from reading to
+reading, a Gaussian of relative ``lamp_ripple``: the lamps' 28 V supply feeds
+the six PWM amplifiers too (section 4.6.3). A clear track's cell pulls its line
+low only if its light reaches ``threshold`` of the brightest cell's at full
+light; the cells of one encoder differ in sensitivity by up to
+``photocell_spread`` (the weakest at the low end, the rest uniform, fixed by the
+seed). A dim reading therefore sets the bits of the weakest clear tracks: in
+Gray code one wrong high bit is a large jump in the binary value, the isolated
+spikes of Figure 6.1, and a joint whose word has fewer clear tracks risks fewer.
+
+One set of numbers (docs/simulator.md): with the thesis's timing, 1 ms per
+joint (each encoder every 6 ms), the light at the latch is 0.85 of full and
+the weakest cells fail now and then, about two or three readings a joint in 2000
+samples; at 6 ms per joint it is 0.97 and none fail; servodesk's own scan (all
+six every 1 ms, 1/6 ms each) latches at 0.81 and fails more often. The board
+draws the gap to the next reading dim enough to fail the weakest cell
+(geometric), then keeps it with the chance the word's weakest clear cell fails,
+so a scan costs one encode per slot. ``glitch_scale`` multiplies every failure
+chance (0 turns them off) for fault-injection tests. The draws come from a
+seeded generator, so a seed fixes every wrong reading.
 """
 
 from __future__ import annotations
@@ -74,17 +80,18 @@ class QuadratureEncoder:
 class Lamp:
     """Encoder lamp and photocells of the Unimate's absolute encoders (section 6.2).
 
-    heat_s, cool_s: filament time constants lit and dark, s.
+    heat_s, cool_s: time constants of the light, lamp lit and dark, s.
     ripple: relative standard deviation of the light from reading to reading.
     spread: photocell sensitivities lie within (1 - spread)..1 of the strongest.
-    dropouts_per_s: weakest-cell dropouts per encoder per second at the default scan.
+    threshold: light, relative to the strongest cell at full light, a clear
+      track's cell needs to pull its line low.
     """
 
     heat_s: float
     cool_s: float
     ripple: float
     spread: float
-    dropouts_per_s: float
+    threshold: float
 
     @classmethod
     def from_machine(cls, machine: Machine) -> Lamp:
@@ -94,14 +101,42 @@ class Lamp:
             cool_s=keys.number("lamp_cool_ms") / 1e3,
             ripple=keys.number("lamp_ripple"),
             spread=keys.number("photocell_spread"),
-            dropouts_per_s=keys.number("lamp_dropouts_per_s"),
+            threshold=machine.encoder_threshold,
         )
 
-    def light(self, slot_s: float, period_s: float) -> float:
-        """Light at the end of a slot when lit ``slot_s`` out of every ``period_s``, full = 1."""
+    def light(self, slot_s: float, period_s: float, latch_s: float | None = None) -> float:
+        """Light at the latch, full = 1, when lit for ``slot_s`` out of every ``period_s``
+        and latched ``latch_s`` after the select (default: at the end of the slot)."""
+        t = slot_s if latch_s is None else latch_s
         a = math.exp(-slot_s / self.heat_s)
         b = math.exp(-(period_s - slot_s) / self.cool_s)
-        return (1.0 - a) / (1.0 - a * b)
+        left = b * (1.0 - a) / (1.0 - a * b)
+        return 1.0 - (1.0 - left) * math.exp(-t / self.heat_s)
+
+    def fail_z(self, sensitivity: float, light: float) -> float:
+        """Standard-normal ripple below which a clear track's cell of ``sensitivity`` fails."""
+        return (self.threshold / (sensitivity * light) - 1.0) / self.ripple
+
+
+@dataclass(frozen=True)
+class Scan:
+    """The board's scan: ``period_s`` to read every encoder once, each latched
+    ``latch_s`` after its select, within its slot of ``period_s / n``."""
+
+    period_s: float
+    latch_s: float
+
+    @classmethod
+    def of(cls, n: int, period_s: float, latch_s: float | None) -> Scan:
+        if not period_s > 0.0:
+            raise ValueError(f"scan_period_s must be > 0, got {period_s:g}")
+        slot = period_s / n
+        if latch_s is None:
+            latch_s = slot
+        if not 0.0 < latch_s <= slot * (1.0 + 1e-9):
+            raise ValueError(f"select_to_latch_s must be in (0, {slot:g}] (the slot of a "
+                             f"{period_s:g} s scan of {n} encoders), got {latch_s:g}")
+        return cls(period_s, min(latch_s, slot))
 
 
 class GrayEncoderBoard:
@@ -111,58 +146,58 @@ class GrayEncoderBoard:
 
     ``update`` is called as the plant advances, with the actuator positions
     (joint units) at the start and end of the step; the board latches every slot
-    that ends in the step at the linearly interpolated position.
+    whose latch falls in the step at the linearly interpolated position.
     """
 
     def __init__(self, machine: Machine, positions: Sequence[float], *, seed: int = 0,
                  glitch_scale: float = 1.0, scan_period_s: float | None = None,
-                 start_ns: int = 0) -> None:
+                 select_to_latch_s: float | None = None, start_ns: int = 0) -> None:
         if glitch_scale < 0.0:
             raise ValueError(f"glitch_scale must be >= 0, got {glitch_scale:g}")
-        period_s = machine.sample_time_s if scan_period_s is None else scan_period_s
-        if not period_s > 0.0:
-            raise ValueError(f"scan_period_s must be > 0, got {period_s:g}")
         self.n = machine.n_joints
+        self.scan = Scan.of(self.n, machine.sample_time_s if scan_period_s is None
+                            else scan_period_s, select_to_latch_s)
         self.top = (1 << machine.encoder_bits) - 1
         self.transmission = Transmission(machine)
         self.lamp = Lamp.from_machine(machine)
-        self._period_ns = max(round(period_s * 1e9), self.n)
+        self.light = self.lamp.light(self.scan.period_s / self.n, self.scan.period_s,
+                                     self.scan.latch_s)
+        self._period_ns = max(round(self.scan.period_s * 1e9), self.n)
+        self._latch_ns = max(round(self.scan.latch_s * 1e9), 1)
         self._origin_ns = start_ns
         self._k = 0
-        self._next_ns = start_ns + self._period_ns // self.n
+        self._next_ns = self._latch_time(0)
         self._rng = random.Random(seed)
-        self._cells = [self._photocells(machine.encoder_bits) for _ in range(self.n)]
-        self._set_threshold(machine, glitch_scale, period_s)
-        self._gap = [self._draw_gap() for _ in range(self.n)]
+        # per joint: (sensitivity, bit mask, ripple z below which it fails, failure chance)
+        self._cells = [self._photocells(machine.encoder_bits, glitch_scale)
+                       for _ in range(self.n)]
+        self._p = [cells[0][3] for cells in self._cells]  # the weakest cell's chance
+        self._gap = [self._draw_gap(j) for j in range(self.n)]
         self.words = [self.encode(j, a) for j, a in enumerate(positions)]
         self.wrong_readings = [0] * self.n
 
-    def _photocells(self, bits: int) -> list[tuple[float, int]]:
-        """(sensitivity relative to the weakest cell, bit mask) per cell, weakest first."""
+    def _photocells(self, bits: int, scale: float) -> list[tuple[float, int, float, float]]:
+        """Cells weakest first: sensitivity (strongest = 1), bit, failing z and chance."""
         low = 1.0 - self.lamp.spread
         sens = [self._rng.uniform(low, 1.0) for _ in range(bits)]
         sens[self._rng.randrange(bits)] = low
-        return sorted((s / low, 1 << i) for i, s in enumerate(sens))
+        cells = []
+        for s, i in sorted((s, i) for i, s in enumerate(sens)):
+            z = self.lamp.fail_z(s, self.light)
+            cells.append((s, 1 << i, z, min(scale * STANDARD_NORMAL.cdf(z), 1.0)))
+        return cells
 
-    def _set_threshold(self, machine: Machine, scale: float, period_s: float) -> None:
-        """Threshold from the dropout rate at the default scan; dropout chance at this scan."""
-        lamp, n = self.lamp, self.n
-        self._light = lamp.light(period_s / n, period_s)
-        p_default = min(scale * lamp.dropouts_per_s * machine.sample_time_s, 0.5)
-        if p_default <= 0.0:
-            self._threshold, self._p = 0.0, 0.0
-            return
-        default_light = lamp.light(machine.sample_time_s / n, machine.sample_time_s)
-        self._threshold = default_light * (1.0 + lamp.ripple * STANDARD_NORMAL.inv_cdf(p_default))
-        self._p = STANDARD_NORMAL.cdf((self._threshold / self._light - 1.0) / lamp.ripple)
+    def _latch_time(self, k: int) -> int:
+        return self._origin_ns + k * self._period_ns // self.n + self._latch_ns
 
-    def _draw_gap(self) -> float:
-        """Readings until the weakest cell next drops out (geometric); inf if it never does."""
-        if self._p <= 0.0:
+    def _draw_gap(self, joint: int) -> float:
+        """Readings until the weakest cell next fails (geometric); inf if it never does."""
+        p = self._p[joint]
+        if p <= 0.0:
             return math.inf
-        if self._p >= 1.0:
+        if p >= 1.0:
             return 0.0
-        return float(math.floor(math.log1p(-self._rng.random()) / math.log1p(-self._p)))
+        return float(math.floor(math.log1p(-self._rng.random()) / math.log1p(-p)))
 
     def encode(self, joint: int, position: float) -> int:
         """Gray word the disk shows at actuator ``position`` (joint units), clipped to the disk."""
@@ -174,7 +209,7 @@ class GrayEncoderBoard:
         return binary_to_gray(b)
 
     def update(self, t0_ns: int, t1_ns: int, a0: Sequence[float], a1: Sequence[float]) -> None:
-        """Latch every slot ending in (t0, t1]; ``a0``/``a1`` are positions at t0 and t1."""
+        """Latch every slot whose latch falls in (t0, t1]; ``a0``/``a1`` are positions then."""
         if self._next_ns <= t0_ns:
             self._skip_to(t0_ns)
         span = t1_ns - t0_ns
@@ -184,33 +219,40 @@ class GrayEncoderBoard:
             frac = (self._next_ns - t0_ns) / span
             word = self.encode(j, a0[j] + (a1[j] - a0[j]) * frac)
             if self._gap[j] <= 0.0:
-                dimmed = self._dropout(j, word)
+                dimmed = self._dim(j, word)
                 if dimmed != word:
                     self.wrong_readings[j] += 1
                 word = dimmed
-                self._gap[j] = self._draw_gap()
+                self._gap[j] = self._draw_gap(j)
             else:
                 self._gap[j] -= 1.0
             self.words[j] = word
             self._k += 1
-            self._next_ns = self._origin_ns + (self._k + 1) * self._period_ns // n
+            self._next_ns = self._latch_time(self._k)
 
     def _skip_to(self, t_ns: int) -> None:
-        """Move the scan on to the first slot ending after ``t_ns`` (time jumped)."""
-        self._k = (t_ns - self._origin_ns) * self.n // self._period_ns
-        self._next_ns = self._origin_ns + (self._k + 1) * self._period_ns // self.n
+        """Move the scan on to the first latch after ``t_ns`` (time jumped)."""
+        self._k = max((t_ns - self._origin_ns - self._latch_ns) * self.n // self._period_ns, 0)
+        self._next_ns = self._latch_time(self._k)
         while self._next_ns <= t_ns:
             self._k += 1
-            self._next_ns = self._origin_ns + (self._k + 1) * self._period_ns // self.n
+            self._next_ns = self._latch_time(self._k)
 
-    def _dropout(self, joint: int, word: int) -> int:
-        """``word`` as read with the lamp dim enough to lose the weakest cell (and maybe more)."""
-        u = max(self._rng.random() * self._p, 1e-300)
-        light = self._light * (1.0 + self.lamp.ripple * STANDARD_NORMAL.inv_cdf(u))
-        cutoff = self._threshold / light if light > 0.0 else math.inf
-        dark = 0
-        for ratio, bit in self._cells[joint]:
-            if ratio >= cutoff:
+    def _dim(self, joint: int, word: int) -> int:
+        """``word`` as read when the ripple is low enough to fail the weakest cell: kept dim
+        with the chance the word's weakest clear track's cell fails, which then reads 1
+        with every clear track's cell that fails at the same light."""
+        cells = self._cells[joint]
+        weakest = next((c for c in cells if not word & c[1]), None)
+        if weakest is None:
+            return word  # every track opaque: no cell has to pull its line
+        _, _, z, p = weakest
+        rng = self._rng
+        if rng.random() * self._p[joint] >= p:
+            return word
+        ripple = STANDARD_NORMAL.inv_cdf(max(rng.random() * STANDARD_NORMAL.cdf(z), 1e-300))
+        for _, cell_bit, cell_z, _ in cells:
+            if cell_z <= ripple:
                 break
-            dark |= bit
-        return word & ~dark
+            word |= cell_bit
+        return word

@@ -14,8 +14,9 @@ Every joint is the same physical model with its own numbers (the machine file's
   ``V = V_dead + D * stroke used``. ``D`` is the piston area (prismatic, m^3/m)
   or the displacement per radian of a rack-and-pinion, lever or motor drive
   (revolute, m^3/rad).
-* The load: ``M dv/dt = p_a D_a - p_b D_b + F_gravity - F_viscous - F_coulomb``
-  with stiction at rest. Gravity is ``-m g sin(incline)`` on a prismatic joint
+* The load: ``M dv/dt = p_a D_a - p_b D_b + F_gravity - F_viscous - F_friction``,
+  Stribeck friction: stiction at rest (breakaway), falling to Coulomb with speed.
+  Gravity is ``-m g sin(incline)`` on a prismatic joint
   (the rig's vertical ram: ``-(m_ram + load) g``) and ``-G cos(q + phase)`` on a
   revolute one (Up/Down lifting the arm). Hard end stops at the joint limits
   stop the load dead.
@@ -55,8 +56,11 @@ the overlaps: 0.0056/0.64 = 0.875 % up, 0.0056/1.19 = 0.471 % down.
 * The up slope 0.64 m/s then fixes K_a = 3.63e-7 m^3/(s sqrt(Pa)): port a
   rated 40.7 L/min at 7 MPa, port b 81.4 L/min.
 
-The null leakage (0.02 L/min) moves the lines by less than 0.5 % above 5 %
-duty; the bounce damping (``column_loss``) does not move them at all.
+The valve's tare flow (0.1 L/min, with pressure gain across the overlap) is
+gone beyond twice the overlap, so it does not move the lines above 2 % duty;
+the bounce damping (``column_loss``) does not move them at all. The supply
+(:mod:`hw.sim.supply`) is the pump and accumulator's, read by every chamber
+each step; each actuator adds up the oil it draws for the plant to hand on.
 """
 
 from __future__ import annotations
@@ -66,7 +70,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 from hw.machine import Joint, Machine, MachineError
-from hw.sim.valve import Valve
+from hw.sim.supply import PumpParams, Supply
+from hw.sim.valve import LPM, Valve
 from hw.transmission import Transmission
 
 GRAVITY = 9.81  # m/s^2
@@ -76,14 +81,18 @@ MIN_STEP_S = 10e-6  # an oil column stiffer than this would take 100 steps a mil
 
 # machine-level [plant] keys; the lamp_* and photocell_* keys are read by hw.sim.encoders
 MACHINE_KEYS = {"supply_mpa", "relief_mpa", "bulk_modulus_mpa", "column_loss_ms",
-                "spool_time_ms", "valve_rated_drop_mpa",
-                "lamp_cool_ms", "lamp_ripple", "photocell_spread", "lamp_dropouts_per_s"}
+                "spool_time_ms", "valve_rated_drop_mpa", "pump_kw", "pump_efficiency",
+                "pump_max_lpm", "accumulator_l", "precharge_mpa", "gas_exponent", "line_volume_l",
+                "lamp_cool_ms", "lamp_ripple", "photocell_spread"}
 COMMON_KEYS = {"dead_volume_a_m3", "dead_volume_b_m3", "valve_rated_lpm", "valve_b_ratio",
-               "null_leak_lpm", "overlap_pos_pct", "overlap_neg_pct", "b_at_supply"}
+               "null_leak_lpm", "overlap_pos_pct", "overlap_neg_pct", "b_at_supply",
+               "pressure_gain"}
 PRISMATIC_KEYS = {"area_a_m2", "area_b_m2", "mass_kg", "load_kg", "load_min_kg", "load_max_kg",
-                  "incline_deg", "coulomb_n", "stiction_n", "viscous_n_s_per_m"}
+                  "incline_deg", "coulomb_n", "stiction_n", "viscous_n_s_per_m",
+                  "stribeck_mm_per_s"}
 REVOLUTE_KEYS = {"disp_a_m3_per_rad", "disp_b_m3_per_rad", "inertia_kgm2", "gravity_nm",
-                 "gravity_phase_deg", "coulomb_nm", "stiction_nm", "viscous_nm_s_per_rad"}
+                 "gravity_phase_deg", "coulomb_nm", "stiction_nm", "viscous_nm_s_per_rad",
+                 "stribeck_deg_per_s"}
 
 
 # The physical range of every key, in the key's units (docs/machines.md gives the reasons).
@@ -91,11 +100,14 @@ RANGES = {
     "supply_mpa": (1.0, 35.0), "relief_mpa": (1.0, 50.0), "bulk_modulus_mpa": (100.0, 2500.0),
     "column_loss_ms": (0.0, 100.0), "spool_time_ms": (0.1, 100.0),
     "valve_rated_drop_mpa": (0.5, 35.0),
+    "pump_kw": (0.1, 1000.0), "pump_efficiency": (0.1, 1.0), "pump_max_lpm": (0.1, 5000.0),
+    "accumulator_l": (0.01, 1000.0), "precharge_mpa": (0.1, 35.0), "gas_exponent": (1.0, 1.4),
+    "line_volume_l": (0.01, 100.0),
     "lamp_cool_ms": (1.0, 1000.0), "lamp_ripple": (0.001, 0.5), "photocell_spread": (0.0, 0.9),
-    "lamp_dropouts_per_s": (0.0, 100.0),
     "dead_volume_a_m3": (1e-6, 0.1), "dead_volume_b_m3": (1e-6, 0.1),
     "valve_rated_lpm": (0.1, 1000.0), "valve_b_ratio": (0.1, 10.0), "null_leak_lpm": (0.0, 10.0),
     "overlap_pos_pct": (0.0, 99.0), "overlap_neg_pct": (0.0, 99.0), "b_at_supply": (0.0, 1.0),
+    "pressure_gain": (0.0, 1.0), "stribeck_mm_per_s": (0.0, 1e4), "stribeck_deg_per_s": (0.0, 1e4),
     "area_a_m2": (1e-5, 1.0), "area_b_m2": (1e-5, 1.0), "mass_kg": (0.1, 1e5),
     "load_kg": (0.0, 1e5), "load_min_kg": (0.0, 1e5), "load_max_kg": (0.0, 1e5),
     "incline_deg": (-90.0, 90.0), "coulomb_n": (0.0, 1e6), "stiction_n": (0.0, 1e6),
@@ -146,6 +158,7 @@ class Hydraulics:
 
     relief_pa: relief valve setting; a chamber pressure never exceeds it.
     column_loss_s: Kelvin-Voigt loss of the oil columns (see ``Actuator.step``).
+    pump: the pump and accumulator (``hw.sim.supply``); None for an ideal supply.
     """
 
     supply_pa: float
@@ -154,6 +167,7 @@ class Hydraulics:
     column_loss_s: float
     spool_time_s: float
     rated_drop_pa: float
+    pump: PumpParams | None = None
     tank_pa: float = 0.0
 
     @classmethod
@@ -167,14 +181,35 @@ class Hydraulics:
                                  f"{high:g} MPa (machine {machine.name})")
             supply = supply_mpa
         relief = keys.number("relief_mpa", math.inf, at_least="supply_mpa", low=supply)
+        bulk = keys.number("bulk_modulus_mpa") * 1e6
         return cls(
             supply_pa=supply * 1e6,
             relief_pa=relief * 1e6,
-            bulk_modulus_pa=keys.number("bulk_modulus_mpa") * 1e6,
+            bulk_modulus_pa=bulk,
             column_loss_s=keys.number("column_loss_ms", 0.0) / 1e3,
             spool_time_s=keys.number("spool_time_ms") / 1e3,
             rated_drop_pa=keys.number("valve_rated_drop_mpa") * 1e6,
+            pump=_pump(keys, bulk),
         )
+
+
+def _pump(keys: PlantKeys, bulk_pa: float) -> PumpParams | None:
+    """The file's pump and accumulator; None (an ideal supply) without ``pump_kw``."""
+    pump_keys = ("pump_efficiency", "pump_max_lpm", "accumulator_l", "precharge_mpa",
+                 "gas_exponent", "line_volume_l")
+    if "pump_kw" not in keys.table:
+        given = [k for k in pump_keys if k in keys.table]
+        if given:
+            raise keys.fail(given[0], "needs pump_kw (without it the supply is ideal)")
+        return None
+    return PumpParams(
+        power_w=keys.number("pump_kw") * 1e3 * keys.number("pump_efficiency", 0.85),
+        max_flow=keys.number("pump_max_lpm") * LPM,
+        gas_volume=keys.number("accumulator_l") * 1e-3,
+        precharge_pa=keys.number("precharge_mpa") * 1e6,
+        gas_exponent=keys.number("gas_exponent", 1.4),
+        line_compliance=keys.number("line_volume_l", 2.0) * 1e-3 / bulk_pa,
+    )
 
 
 @dataclass(frozen=True, slots=True)
@@ -201,6 +236,8 @@ class ActuatorParams:
     coulomb: float
     stiction: float
     viscous: float
+    stribeck: float  # Stribeck velocity, m/s or rad/s; 0: friction drops to Coulomb at once
+    pressure_gain: bool  # the leakage swings across the overlap (Valve.edge_leaks)
     polarity: float  # the transmission's: which chamber positive valve duty feeds
     valve: Valve
 
@@ -222,7 +259,7 @@ class ActuatorParams:
             mass = bare + load
             incline = math.radians(keys.number("incline_deg", 0.0))
             gravity_const, gravity_cos, phase = -mass * GRAVITY * math.sin(incline), 0.0, 0.0
-            friction = ("coulomb_n", "stiction_n", "viscous_n_s_per_m")
+            friction = ("coulomb_n", "stiction_n", "viscous_n_s_per_m", "stribeck_mm_per_s")
         else:
             keys = PlantKeys(machine, where, joint.plant, COMMON_KEYS | REVOLUTE_KEYS)
             unit_si = math.pi / 180.0
@@ -232,11 +269,15 @@ class ActuatorParams:
             mass = bare
             gravity_const, gravity_cos = 0.0, -keys.number("gravity_nm", 0.0)
             phase = math.radians(keys.number("gravity_phase_deg", 0.0))
-            friction = ("coulomb_nm", "stiction_nm", "viscous_nm_s_per_rad")
+            friction = ("coulomb_nm", "stiction_nm", "viscous_nm_s_per_rad",
+                        "stribeck_deg_per_s")
         coulomb = keys.number(friction[0])
         b_at_supply = keys.number("b_at_supply", 0.0)
         if b_at_supply not in (0.0, 1.0):
             raise keys.fail("b_at_supply", f"must be 0 or 1, got {b_at_supply:g}")
+        pressure_gain = keys.number("pressure_gain", 0.0)
+        if pressure_gain not in (0.0, 1.0):
+            raise keys.fail("pressure_gain", f"must be 0 or 1, got {pressure_gain:g}")
         params = cls(
             unit_si=unit_si,
             lower=joint.lower * unit_si,
@@ -253,6 +294,8 @@ class ActuatorParams:
             coulomb=coulomb,
             stiction=keys.number(friction[1], coulomb, at_least=friction[0], low=coulomb),
             viscous=keys.number(friction[2], 0.0),
+            stribeck=keys.number(friction[3], 0.0) * unit_si,
+            pressure_gain=bool(pressure_gain),
             polarity=polarity,
             valve=_valve(keys, joint, machine, hyd),
         )
@@ -349,16 +392,20 @@ class Actuator:
     State: ``q`` position (m or rad), ``v`` velocity, ``pa``/``pb`` chamber
     pressures (Pa), ``spool`` in % of stroke (= duty). The spool follows
     ``target``; a new command waits ``switch_in`` seconds (the rest of the
-    current PWM period) before it becomes the target.
+    current PWM period) before it becomes the target. The valve is fed from
+    ``supply``; ``drawn`` adds up the oil it took from it (m^3) until the plant
+    collects it.
     """
 
-    __slots__ = ("_beta", "_decay", "_decay_h", "_force", "_loss", "_max_h", "_p", "_ps", "_pt",
-                 "_relief", "next_target", "pa", "pb", "q", "spool", "switch_in", "target",
-                 "v")
+    __slots__ = ("_beta", "_decay", "_decay_h", "_force", "_loss", "_max_h", "_p", "_pt",
+                 "_relief", "_supply", "drawn", "next_target", "pa", "pb", "q", "spool",
+                 "switch_in", "target", "v")
 
-    def __init__(self, params: ActuatorParams, hyd: Hydraulics, q: float) -> None:
+    def __init__(self, params: ActuatorParams, hyd: Hydraulics, q: float,
+                 supply: Supply | None = None) -> None:
         self._p = params
-        self._ps = hyd.supply_pa
+        self._supply = Supply(hyd.supply_pa, None) if supply is None else supply
+        self.drawn = 0.0
         self._pt = hyd.tank_pa
         self._relief = hyd.relief_pa
         self._beta = hyd.bulk_modulus_pa
@@ -377,7 +424,7 @@ class Actuator:
 
     def holding_pressures(self, q: float) -> tuple[float, float]:
         """Chamber pressures that hold the load still at ``q``, nearest to half supply each."""
-        p, ps = self._p, self._ps
+        p, ps = self._p, self._supply.nominal
         load = -p.gravity(q)
         if p.b_at_supply:
             return min(max((load + ps * p.disp_b) / p.disp_a, 0.0), ps), ps
@@ -413,31 +460,49 @@ class Actuator:
         state, so it leaves the velocity-vs-duty lines alone.
         """
         p = self._p
-        self._step_spool(h, p.valve.spool_time_s)
-        opening = p.valve.opening(self.spool) * p.polarity
+        valve = p.valve
+        self._step_spool(h, valve.spool_time_s)
+        opening = valve.opening(self.spool) * p.polarity
         open_fraction = abs(opening)
-        ps, pt, q, v = self._ps, self._pt, self.q, self.v
-        leak = p.valve.null_leak
+        ps, pt, q, v = self._supply.pressure, self._pt, self.q, self.v
+        leak = valve.null_leak
+        a_in = a_out = b_in = b_out = leak
+        if p.pressure_gain:
+            feed, drain = valve.edge_leaks(self.spool, p.polarity)
+            a_in, a_out, b_in, b_out = leak * feed, leak * drain, leak * drain, leak * feed
+        g_a = valve.flow_coeff * open_fraction
         pa = _chamber(self.pa, h * self._beta / (p.dead_a + p.disp_a * (q - p.lower)),
-                      leak, ps + pt, p.disp_a * v, p.valve.flow_coeff * open_fraction,
-                      ps if opening > 0.0 else pt)
-        self.pa = pa if pa < self._relief else self._relief
-        if not p.b_at_supply:
+                      a_in, a_out, ps, pt, p.disp_a * v, g_a, ps if opening > 0.0 else pt)
+        pa = pa if pa < self._relief else self._relief
+        drawn = a_in * (ps - pa)
+        if opening > 0.0:
+            drawn += math.copysign(g_a * math.sqrt(abs(ps - pa)), ps - pa)
+        self.pa = pa
+        if p.b_at_supply:
+            self.pb = ps
+        else:
+            g_b = valve.flow_coeff_b * open_fraction
             pb = _chamber(self.pb, h * self._beta / (p.dead_b + p.disp_b * (p.upper - q)),
-                          leak, ps + pt, -p.disp_b * v, p.valve.flow_coeff_b * open_fraction,
-                          ps if opening < 0.0 else pt)
-            self.pb = pb if pb < self._relief else self._relief
+                          b_in, b_out, ps, pt, -p.disp_b * v, g_b, ps if opening < 0.0 else pt)
+            pb = pb if pb < self._relief else self._relief
+            drawn += b_in * (ps - pb)
+            if opening < 0.0:
+                drawn += math.copysign(g_b * math.sqrt(abs(ps - pb)), ps - pb)
+            self.pb = pb
         column = self.pa * p.disp_a - self.pb * p.disp_b
         force = column + self._loss * (column - self._force) / h + p.gravity_const
         self._force = column
         if p.gravity_cos:
             force += p.gravity_cos * math.cos(q + p.gravity_phase)
-        v = _friction_step(v, force, h, p.mass, p.coulomb, p.stiction, p.viscous)
+        v = _friction_step(v, force, h, p.mass, p.coulomb, p.stiction, p.viscous, p.stribeck)
         q += h * v
         if q < p.lower:
             q, v = p.lower, 0.0
         elif q > p.upper:
             q, v = p.upper, 0.0
+        if p.b_at_supply:
+            drawn -= p.disp_b * v  # the rod side, tied to supply, fills or gives back
+        self.drawn += h * drawn
         self.q, self.v = q, v
 
     def _step_spool(self, h: float, tau: float) -> None:
@@ -455,18 +520,18 @@ class Actuator:
         self.spool = self.target + (self.spool - self.target) * self._decay
 
 
-def _chamber(p0: float, c: float, leak: float, leak_sum: float, dvdt: float,
-             conductance: float, source: float) -> float:
+def _chamber(p0: float, c: float, leak_in: float, leak_out: float, ps: float, pt: float,
+             dvdt: float, conductance: float, source: float) -> float:
     """Backward-Euler chamber pressure after one step, solved in closed form.
 
     The orifice term is :func:`hw.sim.valve.orifice_flow` from ``source`` into the chamber.
 
-    Solves ``p = p0 + c * (leak * (ps + pt - 2 p) - dV/dt + g * sign(src - p) sqrt|src - p|)``
+    Solves ``p = p0 + c * (g_in (ps - p) + g_out (pt - p) - dV/dt + g sign(src - p) sqrt|src - p|)``
     with ``c = h beta / V``: the leak terms fold into ``p0`` and ``c``, the orifice
     term is a quadratic in ``s = sqrt|src - p|``, taken with its stable root.
     """
-    den = 1.0 + 2.0 * c * leak
-    free = (p0 + c * (leak * leak_sum - dvdt)) / den
+    den = 1.0 + c * (leak_in + leak_out)
+    free = (p0 + c * (leak_in * ps + leak_out * pt - dvdt)) / den
     a = c * conductance / den
     d = free - source
     if d > 0.0:
@@ -481,17 +546,25 @@ def _chamber(p0: float, c: float, leak: float, leak_sum: float, dvdt: float,
 
 
 def _friction_step(v: float, force: float, h: float, mass: float, coulomb: float,
-                   stiction: float, viscous: float) -> float:
-    """New velocity under ``force`` with Coulomb, stiction and viscous friction, implicitly.
+                   stiction: float, viscous: float, stribeck: float) -> float:
+    """New velocity under ``force`` with Stribeck and viscous friction, implicitly in v.
 
-    At rest the load stays stuck while |force| <= stiction; moving, a step that
-    would reverse the velocity ends at rest instead.
+    At rest the load stays stuck while |force| <= stiction (breakaway); moving,
+    the friction falls from stiction to Coulomb as ``exp(-(v / stribeck)^2)``
+    (``stribeck`` 0: at once), plus ``viscous * v``; a step that would reverse
+    the velocity ends at rest instead.
     """
     if v == 0.0:
         if -stiction <= force <= stiction:
             return 0.0
-        return h * (force - math.copysign(coulomb, force)) / (mass + h * viscous)
-    v1 = (mass * v + h * (force - math.copysign(coulomb, v))) / (mass + h * viscous)
+        level = stiction if stribeck > 0.0 else coulomb
+        return h * (force - math.copysign(level, force)) / (mass + h * viscous)
+    level = coulomb
+    if stribeck > 0.0:
+        r = v / stribeck
+        if -6.0 < r < 6.0:  # beyond, exp(-r^2) < 1e-15
+            level += (stiction - coulomb) * math.exp(-r * r)
+    v1 = (mass * v + h * (force - math.copysign(level, v))) / (mass + h * viscous)
     return 0.0 if v1 * v < 0.0 else v1
 
 
@@ -508,13 +581,14 @@ class Plant:
                  load_kg: float | None = None, supply_mpa: float | None = None) -> None:
         self.transmission = Transmission(machine)
         self.hydraulics = Hydraulics.from_machine(machine, supply_mpa)
+        self.supply = Supply(self.hydraulics.supply_pa, self.hydraulics.pump)
         options = load_kg is not None or supply_mpa is not None
         self.params = tuple(ActuatorParams.from_joint(machine, i, self.hydraulics, load_kg,
                                                       self.transmission.polarity[i],
                                                       options=options)
                             for i in range(machine.n_joints))
         start = self.actuator_start(machine, initial)
-        self.actuators = tuple(Actuator(p, self.hydraulics, a * p.unit_si)
+        self.actuators = tuple(Actuator(p, self.hydraulics, a * p.unit_si, self.supply)
                                for p, a in zip(self.params, start, strict=True))
         self._actuator = [0.0] * machine.n_joints
 
@@ -542,9 +616,13 @@ class Plant:
         return a
 
     def step(self, h: float) -> None:
-        """Advance every joint by ``h`` seconds."""
+        """Advance every joint by ``h`` seconds, then the supply by what they drew."""
+        drawn = 0.0
         for actuator in self.actuators:
             actuator.step(h)
+            drawn += actuator.drawn
+            actuator.drawn = 0.0
+        self.supply.step(h, drawn)
 
     def actuator_positions(self, out: list[float]) -> None:
         """Fill ``out`` with actuator positions in joint units (mm, degrees)."""

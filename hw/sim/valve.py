@@ -24,6 +24,15 @@ Signal path (sections 1.3.1, 3.3, 4.6.1):
    (``K_b = b_ratio * K_a``, 2:1 is the usual choice). A centred spool
    still leaks a little across its lands: a laminar conductance per edge,
    from the catalogue's null leakage at supply pressure.
+5. With ``pressure_gain`` (a servo valve's lands, close to critically lapped)
+   that leakage is not the same on every edge: as the spool moves through the
+   overlap, the land that will open uncovers and leaks more, the one closing
+   covers more and leaks less (a laminar leak goes as the land's clearance
+   over its covered length), so the blocked-port pressure swings from half
+   supply at null to supply at the overlap's edge: the valve's pressure gain
+   (:meth:`Valve.edge_leaks`). Past the edge the orifice takes over and the
+   leak fades out over one more overlap width, so the flow lines beyond twice
+   the overlap are the orifice's alone.
 """
 
 from __future__ import annotations
@@ -100,6 +109,24 @@ class Valve:
             null_leak=null_leak_lpm * LPM / supply_pa,
             spool_time_s=spool_time_s,
         )
+
+    def edge_leaks(self, spool_pct: float, polarity: float) -> tuple[float, float]:
+        """Leak conductance of the supply-to-``a`` and ``a``-to-tank edges, in units of
+        ``null_leak``, with pressure gain (``b``'s edges are the same two the other way).
+
+        ``z`` is the spool's travel towards feeding chamber ``a``, in overlap widths:
+        inside the overlap the edges leak ``1 + z`` and ``1 - z``; past it the opened edge's
+        leak fades from 2 to 0 over one more width and the closed edge's is 0.
+        """
+        lap = self.lap_pos_pct if spool_pct > 0.0 else self.lap_neg_pct
+        if lap <= 0.0:
+            return (0.0, 0.0) if spool_pct else (1.0, 1.0)
+        z = polarity * spool_pct / lap
+        if z > 1.0:
+            return (4.0 - 2.0 * z if z < 2.0 else 0.0), 0.0
+        if z < -1.0:
+            return 0.0, (4.0 + 2.0 * z if z > -2.0 else 0.0)
+        return 1.0 + z, 1.0 - z
 
     def opening(self, spool_pct: float) -> float:
         """Signed metering opening, fraction of full spool stroke past the overlap.

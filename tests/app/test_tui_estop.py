@@ -8,13 +8,33 @@ import asyncio
 import os
 import signal
 
-from app.tui import TABS
+from app.tabs.jog import JogPad
+from app.tui import TABS, ServodeskApp
 from app.widgets.dialogs import ConfirmScreen
 from app.widgets.header import EStopLamp, FaultBanner
 from control.layout import Mode
 
 SIZE = (160, 48)
 OPEN = [30.0, -30.0, 30.0, -30.0, 30.0, -30.0]  # manual duties that open every valve
+
+
+def notifications(app: ServodeskApp) -> list[str]:
+    """Every message the app or a widget of it is asked to show from now on."""
+    seen: list[str] = []
+    show = app.notify
+
+    def notify(message: str, *args: object, **kwargs: object) -> None:
+        seen.append(str(message))
+        show(message, *args, **kwargs)
+
+    app.notify = notify  # Widget.notify calls the app's
+    return seen
+
+
+def command_cell(app: ServodeskApp, joint: int) -> str:
+    """The Jog table's row of ``joint`` as shown."""
+    table = app.query_one("#jog-table")
+    return table.render_line(joint + 1).text
 
 
 def test_estop_from_every_tab_closes_the_valves(tui) -> None:
@@ -97,5 +117,69 @@ def test_a_dead_controller_is_reported_at_once(tui) -> None:
                             timeout=1)
             await pilot.press("a")  # a jog now tells the operator, and raises nothing
             await pilot.press("escape")
+
+    asyncio.run(scenario())
+
+
+def test_an_estop_clears_the_jog_duties_and_keys_while_latched_do_nothing(tui) -> None:
+    """The bug report's sequence: Jog tab, duty mode, increment 5, Esc, then ``s`` six times.
+    While latched the command column stays 0, the controller is sent nothing and the
+    operator is told why; after the release and one ``s`` Rotate's duty is +5 %, not +35 %."""
+    async def scenario() -> None:
+        app = tui.app()
+        async with app.run_test(size=SIZE) as pilot:
+            await tui.ready(app, pilot)
+            client = app.client
+            seen = notifications(app)
+            await pilot.press("5", "s")
+            await tui.until(lambda: client.status().duty[1] == 5.0, what="Rotate at +5 %")
+            await pilot.press("escape")
+            await tui.until(lambda: client.status().estop, what="the latch")
+            assert app.query_one(JogPad).duty == [0.0] * 6
+            assert client._manual == [0.0] * 6
+            sent: list[object] = []
+            send = client._send
+            client._send = lambda command: (sent.append(command), send(command))[1]
+            await pilot.press(*"ssssss")
+            await pilot.pause()
+            assert app.query_one(JogPad).duty == [0.0] * 6
+            assert "+0" in command_cell(app, 1) and "+30" not in command_cell(app, 1)
+            assert sent == [], f"the controller was sent {sent}"
+            assert any("E-stop latched" in m and "^R" in m for m in seen), seen
+            client._send = send
+            await pilot.press("ctrl+r")
+            await tui.until(lambda: isinstance(app.screen, ConfirmScreen), what="the dialog")
+            await pilot.press("y")
+            await tui.until(lambda: not client.status().estop, what="the release")
+            await pilot.pause()
+            assert client.status().mode == Mode.HOLD  # the release starts nothing
+            await pilot.press("s")
+            await tui.until(lambda: client.status().mode == Mode.MANUAL_ACTUATE,
+                            what="manual actuation")
+            assert client.status().duty == (0.0, 5.0, 0.0, 0.0, 0.0, 0.0)
+            assert "+5" in command_cell(app, 1)
+
+    asyncio.run(scenario())
+
+
+def test_a_latch_from_the_controller_clears_the_clients_manual_duties(tui) -> None:
+    """The E-stop input latches inside the controller: the client forgets its manual duties
+    too, so ``jog_joint`` after the release moves only the joint it names."""
+    async def scenario() -> None:
+        app = tui.app()
+        async with app.run_test(size=SIZE) as pilot:
+            await tui.ready(app, pilot)
+            client = app.client
+            client.jog_joint(1, 30.0)
+            await tui.until(lambda: client.status().duty[1] == 30.0, what="Rotate at 30 %")
+            client.inject("press_estop", True)
+            await tui.until(lambda: client.status().estop, what="the E-stop input's latch")
+            await tui.until(lambda: client._manual == [0.0] * 6, what="the client's duties zero")
+            client.inject("press_estop", False)
+            client.reset()
+            await tui.until(lambda: not client.status().estop, what="the release")
+            client.jog_joint(3, 20.0)
+            await tui.until(lambda: client.status().duty[3] == 20.0, what="Bend at 20 %")
+            assert client.status().duty[1] == 0.0
 
     asyncio.run(scenario())

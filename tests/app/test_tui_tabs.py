@@ -70,6 +70,7 @@ def test_status_shows_joints_pose_loop_and_link(tui) -> None:
             assert "end effector" in pose and abs(shown - x) < 1.0  # eq. 4.11 of the reading
             loop = tui.text(app.query_one("#status-loop", LiveText))
             assert "sample" in loop and "lateness" in loop and "HOLD" in loop
+            assert re.search(r"supply +6\.90 MPa", loop)  # the simulator's pump, section 4.6.1
             assert "crc errors" in tui.text(app.query_one("#status-link", LiveText))
 
     asyncio.run(scenario())
@@ -148,6 +149,8 @@ def test_a_set_the_gain_check_refuses_is_shown_and_applies_nothing(tui) -> None:
             await tui.until(lambda: any("refused" in m for m in seen), what=lambda: str(seen))
             (shown,) = [m for m in seen if "refused" in m]
             assert "In/Out: unstable on the nominal model: negative gain" in shown, shown
+            in_tab = str(app.query_one("#tuning-outcome").render())  # not only in a toast
+            assert "In/Out: unstable on the nominal model: negative gain" in in_tab, in_tab
             assert app.client.coefficients["track"] == before
             assert table.get_row_at(0)[1] == "20"
 

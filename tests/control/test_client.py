@@ -14,7 +14,6 @@ import subprocess
 import sys
 import textwrap
 import time
-from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
 
@@ -45,26 +44,6 @@ def wait_until(predicate, timeout: float, what: str, every: float = 0.005) -> No
 
 def our_segments(pid: int) -> list[str]:
     return [n for n in shm.leftover_segments() if shm.owner_pid(n) == pid]
-
-
-@pytest.fixture
-def lockstep(tmp_path: Path) -> Iterator[ControlClient]:
-    # A lockstep controller computes flat out on one core; on a loaded 2-core machine the
-    # test's heartbeat thread can be starved for 250 ms. These tests are not about
-    # heartbeats (the real-time ones below are), so the client may stay silent longer.
-    client = ControlClient("unimate2000b", lockstep=True, data_dir=tmp_path,
-                           heartbeat_timeout_s=3.0)
-    yield client
-    client.close()
-    assert our_segments(os.getpid()) == []
-
-
-@pytest.fixture
-def realtime(tmp_path: Path) -> Iterator[ControlClient]:
-    client = ControlClient("unimate2000b", data_dir=tmp_path)
-    yield client
-    client.close()
-    assert our_segments(os.getpid()) == []
 
 
 @pytest.mark.parametrize("joint", list(STEPS))

@@ -4,15 +4,14 @@ resumes with no step."""
 
 from __future__ import annotations
 
-import os
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from control import ControlClient, Mode, shm
+from control import ControlClient, Mode
 from control.motion import moves
 from control.recorder import Run, load_run
 from hw.machine import load_machine
@@ -27,15 +26,6 @@ def wait_until(predicate: Callable[[], bool], what: str, timeout: float = 60.0) 
     while not predicate():
         assert time.monotonic() < deadline, f"timed out waiting for {what}"
         time.sleep(0.002)
-
-
-@pytest.fixture
-def lockstep(tmp_path: Path) -> Iterator[ControlClient]:
-    client = ControlClient("unimate2000b", lockstep=True, data_dir=tmp_path,
-                           heartbeat_timeout_s=3.0)
-    yield client
-    client.close()
-    assert [n for n in shm.leftover_segments() if shm.owner_pid(n) == os.getpid()] == []
 
 
 def ramp_on_rotate(client: ControlClient, change: float = 40.0) -> np.ndarray:

@@ -48,12 +48,13 @@ def test_too_many_taps_is_a_clear_error() -> None:
 def test_status_decodes_what_was_packed() -> None:
     layout = ControlLayout(6).status
     values = [7, 2_000_000_000, 123, 1, 4 | 64 | 256, 3, 10, 100, 5000, 9000, 2, 1500, 4000,
-              10**9, 5 * 10**8, 0.5, 0.25]
+              10**9, 5 * 10**8, 0.5, 0.25, 6.4]
     values += [float(i) for i in range(24)] + list(range(6)) + [0, 1, 0, 2, 0, 0] + list(range(8))
     values += [b"link lost"]
     status = layout.decode(layout.struct.unpack(layout.struct.pack(*values)))
     assert status.tick == 7 and status.time_s == 2.0 and status.homed and status.moving
     assert status.paused and (status.feed_override, status.feed_rate) == (0.5, 0.25)
+    assert status.supply_mpa == 6.4
     assert status.position == (0.0, 1.0, 2.0, 3.0, 4.0, 5.0)
     assert status.valve == (18.0, 19.0, 20.0, 21.0, 22.0, 23.0)
     assert status.glitches == (0, 1, 0, 2, 0, 0)

@@ -8,6 +8,7 @@ simulator is exercised in test_client.py and tests/faults.
 
 from __future__ import annotations
 
+import math
 import socket
 import time
 from collections.abc import Iterator
@@ -43,6 +44,7 @@ class ScriptedBackend:
         self.counters = LinkCounters()
         self.estop = False
         self.fault = ""
+        self.supply_mpa = math.nan
         self.positions = list(HOME)
         self.written: list[float] = []
         self.fail_reads = 0

@@ -6,6 +6,8 @@ from __future__ import annotations
 import errno
 import json
 import os
+import subprocess
+import sys
 import threading
 from pathlib import Path
 
@@ -26,6 +28,8 @@ from control.recorder import (
     save_run,
 )
 from hw.machine import load_machine
+
+ROOT = Path(__file__).resolve().parents[2]
 
 UNIMATE = load_machine("unimate2000b")
 RIG = load_machine("rig")
@@ -197,15 +201,39 @@ def test_an_unusable_directory_raises_a_clear_error(tmp_path: Path) -> None:
         save_run(make_run(), blocker / "runs")
 
 
-@pytest.mark.skipif(os.name != "posix" or os.geteuid() == 0, reason="root writes anywhere")
+READ_ONLY_SAVE = (
+    "import sys; from pathlib import Path; from control.recorder import RecorderError, "
+    "load_run, save_run\n"
+    "try:\n    save_run(load_run(Path(sys.argv[1])), Path(sys.argv[2]))\n"
+    "except RecorderError as exc:\n    print(exc)\n")
+
+
 def test_a_read_only_directory_raises_and_leaves_nothing(tmp_path: Path) -> None:
-    tmp_path.chmod(0o500)
+    """Unwritable for whoever runs the test: a user's directory without write permission;
+    for root, who writes anywhere, a read-only bind mount of it in a mount namespace of its
+    own (util-linux's unshare)."""
+    saved = save_run(make_run(), tmp_path / "elsewhere")
+    target = tmp_path / "read-only"
+    target.mkdir()
+    script = [sys.executable, "-c", READ_ONLY_SAVE, str(saved.json), str(target)]
+    if os.geteuid() == 0:
+        mount = f"mount --bind {target} {target} && mount -o remount,ro,bind {target} && "
+        script = ["unshare", "--mount", "--propagation", "private", "sh", "-c",
+                  mount + " ".join(f"'{arg}'" for arg in script)]
+        reason = "Read-only file system"
+    else:
+        target.chmod(0o500)
+        reason = "Permission denied"
     try:
-        with pytest.raises(RecorderError, match="Permission denied"):
-            save_run(make_run(), tmp_path)
-        assert visible(tmp_path) == []
+        done = subprocess.run(script, capture_output=True, text=True, timeout=60,
+                              env={**os.environ, "PYTHONPATH": str(ROOT)})
     finally:
-        tmp_path.chmod(0o700)
+        target.chmod(0o700)
+    if os.geteuid() == 0 and done.returncode and "mount" in done.stderr:
+        pytest.skip(f"root here may not mount (no CAP_SYS_ADMIN): {done.stderr.strip()}")
+    assert done.returncode == 0, done.stderr
+    assert f"cannot save the step run in {target}: {reason}" in done.stdout
+    assert visible(target) == []
 
 
 def test_disk_full_midway_leaves_nothing_behind(tmp_path: Path,

@@ -155,6 +155,10 @@ BAD = [
      r"joints\[2\]\.name: 'Up\\nDown': character 2 is '\\n', which does not print"),
     (('note = "option.c hold_coeff"', 'note = "option.c \\u202ehold_coeff"'),
      r"coefficients\.hold\.note: .*character 9 is '\\u202e', which does not print"),
+    (("cartesian_jog_speed = [25.0, 10.0]", "cartesian_jog_speed = [25.0]"),
+     r"kinematics\.cartesian_jog_speed: must have 2 entries, got 1$"),
+    (("cartesian_jog_accel = [100.0, 40.0]", "cartesian_jog_accel = [100.0, 0.0]"),
+     r"kinematics\.cartesian_jog_accel\[1\]: 0 out of range \(must be in 1…10000\)$"),
     (('model = "unimate2000b"', 'model = "unimate2000"'),
      r"kinematics\.model: 'unimate2000' is not one of unimate2000b$"),
     (("[coefficients.hold]", "[[joints]]\n" * 11 + "[coefficients.hold]"),
@@ -244,6 +248,16 @@ def test_feed_forward_gains_are_optional_and_checked() -> None:
     assert parse_machine(text, Path("ff.toml")).track.kv == (0.2, 1, 2, 0.5, 0.5, 0.4)
     with pytest.raises(MachineError, match=r"coefficients\.track\.kv: must have 6 entries"):
         parse_machine(text.replace("kv = [0.2, 1, 2,", "kv = [0.2,"), Path("ff.toml"))
+
+
+def test_the_cartesian_jog_speed_is_the_file_s_or_the_default() -> None:
+    assert load_machine("unimate2000b").cartesian_jog_speed == (25.0, 10.0)
+    assert load_machine("unimate2000b").cartesian_jog_accel == (100.0, 40.0)
+    text = UNIMATE_TEXT.replace("cartesian_jog_speed = [25.0, 10.0]\n", "")
+    assert parse_machine(text, MACHINES / "unimate2000b.toml").cartesian_jog_speed == (25.0, 10.0)
+    text = UNIMATE_TEXT.replace("cartesian_jog_speed = [25.0, 10.0]",
+                                "cartesian_jog_speed = [5, 2]")
+    assert parse_machine(text, MACHINES / "unimate2000b.toml").cartesian_jog_speed == (5.0, 2.0)
 
 
 def test_check_targets_names_the_joint() -> None:

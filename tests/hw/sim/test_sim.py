@@ -164,6 +164,10 @@ def test_wrong_readings_at_the_default_scan_and_none_scanning_slowly() -> None:
 
     assert wrong() > 5
     assert wrong(scan_period_s=6 * UNIMATE.encoder_settle_s) == 0
+    assert wrong(scan_period_s=6e-3, select_to_latch_s=1e-3) > 5  # thesis: 1 ms per joint
+    assert wrong(scan_period_s=36e-3, select_to_latch_s=6e-3) == 0  # 6 ms per joint
+    with pytest.raises(ValueError, match="select_to_latch_s"):
+        SimBackend(UNIMATE, lockstep=True, scan_period_s=6e-3, select_to_latch_s=1.5e-3)
 
 
 def test_a_long_pause_is_caught_up_in_bounded_time() -> None:
@@ -181,4 +185,4 @@ def test_the_oil_holds_the_rig_load() -> None:
     (pa, pb), = sim.chamber_pressures()
     area_a, area_b = RIG.joints[0].plant["area_a_m2"], RIG.joints[0].plant["area_b_m2"]
     assert pa * area_a - pb * area_b == pytest.approx(312.0 * 9.81, abs=100.0)
-    assert sim.joint_velocities() == [0.0]
+    assert -1.0 < sim.joint_velocities()[0] < 0.0  # creeping down on the valve's tare flow

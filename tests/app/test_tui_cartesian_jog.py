@@ -1,0 +1,165 @@
+"""Jog tab, Cartesian frames: w cycles joint / world / tool, the key pairs then move the tool
+along x, y, z or turn it about them, the live pose is shown, a jog the arm cannot make says
+why, and the rig (one axis, no kinematics) says it has no Cartesian jog."""
+
+from __future__ import annotations
+
+import asyncio
+import re
+
+import numpy as np
+
+from app.tabs.jog import JogPad, JogTab
+from app.tui import ServodeskApp
+from app.widgets.live_text import LiveText
+from control.layout import Mode
+from control.motion.robot_model import unimate_model
+from hw.machine import load_machine
+
+SIZE = (160, 48)
+MODEL = unimate_model(load_machine("unimate2000b"))
+
+
+def notifications(app: ServodeskApp) -> list[str]:
+    """Every message the app or a widget of it is asked to show from now on."""
+    seen: list[str] = []
+    show = app.notify
+
+    def notify(message: str, *args: object, **kwargs: object) -> None:
+        seen.append(str(message))
+        show(message, *args, **kwargs)
+
+    app.notify = notify  # Widget.notify calls the app's
+    return seen
+
+
+def test_world_frame_keys_step_the_tool_along_x_and_the_pose_is_shown(tui) -> None:
+    async def scenario() -> None:
+        app = tui.app()
+        async with app.run_test(size=SIZE) as pilot:
+            before = await tui.ready(app, pilot)
+            client = app.client
+            start = MODEL.pose(np.array(before.desired))
+            await pilot.press("w")
+            pad = app.query_one(JogPad)
+            assert pad.frame == "world" and pad.mode == "position"
+            assert "frame world" in tui.text(pad)
+            await pilot.press("9", "a")  # 20 mm along the world's x
+
+            def moved() -> bool:  # from the hold target, exactly
+                status = client.status()
+                return (status.mode == Mode.HOLD and abs(
+                    MODEL.pose(np.array(status.desired))[0] - start[0] - 20.0) < 1e-6)
+
+            def where() -> str:
+                status = client.status()
+                return (f"the tool 20 mm further along x: mode {status.mode!r}, moved "
+                        f"{MODEL.pose(np.array(status.desired)) - start}")
+
+            await tui.until(moved, timeout=30, what=where)
+            reached = MODEL.pose(np.array(client.status().desired))
+            np.testing.assert_allclose(reached[1:], start[1:], atol=1e-6)
+            tab = app.query_one(JogTab)
+            tab.refresh_live()
+            pose = app.query_one("#jog-pose", LiveText).text
+            shown = float(re.search(r"tool  x +(-?\d+\.\d)  y", pose).group(1))
+            assert abs(shown - reached[0]) < 1.0  # the measured pose, live
+            assert "keys (world frame) a/z x  s/x y  d/c z  f/v γ  g/b β  h/n α" in pose
+            await pilot.press("w")
+            assert pad.frame == "tool" and "frame tool" in tui.text(pad)
+            await pilot.press("w")
+            assert pad.frame == "joint"
+
+    asyncio.run(scenario())
+
+
+def test_steps_pressed_while_a_step_runs_are_added_and_run_after_it(tui) -> None:
+    """A step starting while the arm moves would start from rest mid-motion (a jolt, and the
+    step before cut short): the steps pressed meanwhile wait and run as one when it ends."""
+    async def scenario() -> None:
+        app = tui.app(lockstep=False)
+        async with app.run_test(size=SIZE) as pilot:
+            before = await tui.ready(app, pilot)
+            client = app.client
+            start = MODEL.pose(np.array(before.desired))
+            await pilot.press("w", "9", "s")  # world frame, y +20 mm: about a second
+            await tui.until(lambda: client.status().mode == Mode.FOLLOW_TRACK, timeout=5,
+                            what="the first step running")
+            await pilot.press("s", "s")
+            # both wait for the first step (+40 mm), or, on a loaded machine where it ended
+            # before the second press, the last waits for the second (+20 mm)
+            note = app.query_one("#jog-cartesian-note", LiveText).text
+            assert re.search(r"next: y \+(40|20) mm \(world frame\), when this step ends",
+                             note), note
+
+            def moved() -> float:
+                return float(MODEL.pose(np.array(client.status().desired))[1] - start[1])
+
+            # the queued step starts from the hold target if the arm has settled within its
+            # tolerance of it by then, else from where the joints are: a few mm either way;
+            # without the queue the first step is cut short where the second began (~40 mm)
+            await tui.until(lambda: abs(moved() - 60.0) < 5.0
+                            and client.status().mode == Mode.HOLD, timeout=30,
+                            what=lambda: f"the tool 60 mm along y, moved {moved():.2f} mm")
+
+    asyncio.run(scenario())
+
+
+def test_a_step_into_the_wrist_singularity_is_refused_and_says_why(tui) -> None:
+    async def scenario() -> None:
+        app = tui.app()
+        async with app.run_test(size=SIZE) as pilot:
+            before = await tui.ready(app, pilot)
+            client = app.client
+            assert 0.0 < before.position[4] < 5.0  # the simulator starts with Yaw near 0°
+            seen = notifications(app)
+            await pilot.press("w", "w", "9", "g")  # tool frame, β +5°: towards Yaw 0°
+            await tui.until(lambda: any("wrist singularity" in m for m in seen), timeout=10,
+                            what="the refusal naming the wrist singularity")
+            tab = app.query_one(JogTab)
+            tab.refresh_live()
+            note = app.query_one("#jog-cartesian-note", LiveText).text
+            assert "jog refused" in note and "wrist singularity" in note
+            status = client.status()
+            assert status.mode == Mode.HOLD and status.desired == before.desired
+
+    asyncio.run(scenario())
+
+
+def test_hold_to_move_moves_the_tool_while_held_and_holds_on_release(tui) -> None:
+    async def scenario() -> None:
+        app = tui.app(lockstep=False)
+        async with app.run_test(size=SIZE) as pilot:
+            before = await tui.ready(app, pilot)
+            client = app.client
+            start = MODEL.pose(np.array(before.desired))
+            await pilot.press("w", "m", "9")  # world frame, hold-to-move at 100 %
+            assert app.query_one(JogPad).mode == "hold-to-move"
+            tui.post_key(app, "d")  # z up, held
+            await tui.until(lambda: client.status().mode == Mode.FOLLOW_TRACK, timeout=5,
+                            what="the tool moving while held")
+            # let go: a feed hold stops the jog along its line, then the arm holds there
+            await tui.until(lambda: client.status().paused, timeout=5,
+                            what="the jog decelerating in a feed hold after the release")
+            await tui.until(lambda: client.status().mode == Mode.HOLD, timeout=5,
+                            what="hold after the release")
+            status = client.status()
+            moved = MODEL.pose(np.array(status.desired)) - start
+            assert 0.5 < moved[2] < 30.0  # up along z for the tap's fraction of a second
+            assert np.abs(moved[:2]).max() < 2.0  # along z only (start and hold: settle bands)
+
+    asyncio.run(scenario())
+
+
+def test_the_rig_has_no_cartesian_mode_and_says_so(tui) -> None:
+    async def scenario() -> None:
+        app = tui.app("rig")
+        async with app.run_test(size=SIZE) as pilot:
+            await tui.ready(app, pilot)
+            seen = notifications(app)
+            await pilot.press("w")
+            assert app.query_one(JogPad).frame == "joint"
+            assert any("no Cartesian jog on this machine" in m for m in seen), seen
+            assert "no tool pose" in app.query_one("#jog-pose", LiveText).text
+
+    asyncio.run(scenario())

@@ -1,0 +1,129 @@
+"""Tuning with care (issue 13): Load shows what a file would change and applies it only when
+confirmed, all or nothing; Save asks before replacing a file; ctrl+z puts back the set in use
+before the last apply; a set the gain check refuses is shown with its reason in the tab."""
+
+from __future__ import annotations
+
+import asyncio
+from dataclasses import replace
+from pathlib import Path
+
+from textual.widgets import DataTable, Input, Static
+
+from app.coefficient_files import coefficient_changes, load_coefficients, save_coefficients
+from app.widgets.dialogs import ConfirmScreen, ReviewScreen
+from hw.machine import load_machine
+
+SIZE = (160, 48)
+UNIMATE = load_machine("unimate2000b")
+
+
+def shown(widget: Static) -> str:
+    return str(widget.render())
+
+
+async def open_tuning(tui, app, pilot) -> DataTable:
+    await tui.ready(app, pilot)
+    await pilot.press("f5")
+    table = app.query_one("#tuning-joints", DataTable)
+    await tui.until(lambda: app.focused is table, what="the table focused")
+    return table
+
+
+def test_changes_between_two_sets_are_listed_by_joint_and_key() -> None:
+    track = UNIMATE.track
+    tuned = replace(track, kp=((25.0,), *track.kp[1:]), ki=(track.ki[0], 21.0, *track.ki[2:]),
+                    filter_divisor=2.0)
+    assert coefficient_changes(track, tuned, UNIMATE) == [
+        ("In/Out", "kp", ", ".join(f"{t:g}" for t in track.kp[0]), "25"),
+        ("Rotate", "ki", f"{track.ki[1]:g}", "21"),
+        ("all joints", "filter_divisor", f"{track.filter_divisor:g}", "2"),
+    ]
+    assert coefficient_changes(track, track, UNIMATE) == []
+
+
+def test_load_shows_the_differences_and_applies_only_on_confirm_then_undo(tui,
+                                                                           tmp_path: Path
+                                                                           ) -> None:
+    async def scenario() -> None:
+        app = tui.app()
+        async with app.run_test(size=SIZE) as pilot:
+            table = await open_tuning(tui, app, pilot)
+            client = app.client
+            live = client.coefficients["track"]
+            tuned = replace(live, kp=((18.0,), *live.kp[1:]))  # In/Out's kp 20 → 18
+            path = save_coefficients(tmp_path / "tuned", {"track": tuned}, app.machine)
+            app.query_one("#tuning-path", Input).value = str(path)
+            await pilot.click("#tuning-load")
+            await tui.until(lambda: isinstance(app.screen, ReviewScreen), what="the review")
+            review = "\n".join(str(s.render()) for s in app.screen.query(Static))
+            assert "track set ← 'track' from tuned.toml" in review
+            assert "In/Out" in review and "kp" in review and "20 → 18" in review
+            assert client.coefficients["track"] == live  # nothing yet
+            await pilot.press("n")
+            await tui.until(lambda: not isinstance(app.screen, ReviewScreen))
+            assert client.coefficients["track"] == live
+            assert "not applied" in shown(app.query_one("#tuning-outcome"))
+            await pilot.click("#tuning-load")
+            await tui.until(lambda: isinstance(app.screen, ReviewScreen), what="the review")
+            await pilot.press("y")
+            await tui.until(lambda: client.coefficients["track"] == tuned,
+                            what=lambda: shown(app.query_one("#tuning-outcome")))
+            await tui.until(lambda: table.get_row_at(0)[1] == "18", what="the table updated")
+            table.focus()
+            await pilot.press("ctrl+z")
+            await tui.until(lambda: client.coefficients["track"] == live, what="undone")
+            assert "undone" in shown(app.query_one("#tuning-outcome"))
+            await pilot.press("ctrl+z")  # nothing left to undo: nothing changes
+            assert client.coefficients["track"] == live
+
+    asyncio.run(scenario())
+
+
+def test_a_file_with_a_refused_set_applies_nothing_and_says_why_in_the_tab(tui,
+                                                                           tmp_path: Path
+                                                                           ) -> None:
+    """hold changed within the check, track with In/Out's kp negated: the gain check refuses
+    the track set, so neither is applied, and the reason stays in the tab."""
+    async def scenario() -> None:
+        app = tui.app()
+        async with app.run_test(size=SIZE) as pilot:
+            await open_tuning(tui, app, pilot)
+            client = app.client
+            hold, track = client.coefficients["hold"], client.coefficients["track"]
+            sets = {"hold": replace(hold, ki=(hold.ki[0] * 0.5, *hold.ki[1:])),
+                    "track": replace(track, kp=((-20.0,), *track.kp[1:]))}
+            path = save_coefficients(tmp_path / "mixed", sets, app.machine)
+            app.query_one("#tuning-path", Input).value = str(path)
+            await pilot.click("#tuning-load")
+            await tui.until(lambda: isinstance(app.screen, ReviewScreen), what="the review")
+            await pilot.press("y")
+            outcome = app.query_one("#tuning-outcome")
+            await tui.until(lambda: "refused" in shown(outcome), what="the refusal in the tab")
+            assert "In/Out: unstable on the nominal model: negative gain" in shown(outcome)
+            assert client.coefficients == {"hold": hold, "track": track}
+
+    asyncio.run(scenario())
+
+
+def test_save_asks_before_replacing_a_file(tui, tmp_path: Path) -> None:
+    async def scenario() -> None:
+        app = tui.app()
+        async with app.run_test(size=SIZE) as pilot:
+            await open_tuning(tui, app, pilot)
+            path = tmp_path / "mine.toml"
+            path.write_text("# the operator's own notes\n")
+            app.query_one("#tuning-path", Input).value = str(path)
+            await pilot.click("#tuning-save")
+            await tui.until(lambda: isinstance(app.screen, ConfirmScreen), what="the question")
+            await pilot.press("n")
+            await tui.until(lambda: not isinstance(app.screen, ConfirmScreen))
+            assert path.read_text() == "# the operator's own notes\n"
+            await pilot.click("#tuning-save")
+            await tui.until(lambda: isinstance(app.screen, ConfirmScreen), what="the question")
+            await pilot.press("y")
+            await tui.until(lambda: "[coefficients.track]" in path.read_text(), what="saved")
+            assert load_coefficients(path, app.machine)["track"] == app.client.coefficients[
+                "track"]
+
+    asyncio.run(scenario())

@@ -1,0 +1,100 @@
+"""ControlClient.jog_cartesian on the simulated Unimate, for real: the tool moves by the
+displacement along the commanded line, and a jog past a limit is refused with nothing sent."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from control import ControlClient, Mode
+from control.motion.robot_model import unimate_model
+from hw.machine import load_machine
+from kinematics.unimate import Unreachable
+
+UNIMATE = load_machine("unimate2000b")
+MODEL = unimate_model(UNIMATE)
+START = np.array([1500.0, 10.0, 5.0, 20.0, 30.0, 10.0])
+TOLERANCE = np.array([j.tolerance for j in UNIMATE.joints])
+
+
+def wait_until(predicate, timeout: float, what: str) -> None:
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+        time.sleep(0.005)
+
+
+@pytest.fixture
+def robot(tmp_path: Path) -> Iterator[ControlClient]:
+    client = ControlClient("unimate2000b", lockstep=True, data_dir=tmp_path,
+                           heartbeat_timeout_s=3.0)
+    try:
+        result = client.wait(client.go_to(START, speed=1.0), timeout=60)
+        assert result.complete, result.status
+        yield client
+    finally:
+        client.close()
+
+
+def tool_band(q: np.ndarray) -> float:
+    """How far (mm) the tool point can be from where the joints are meant to be when each
+    joint is within a quarter of its settle tolerance: Σ |∂p/∂q_j| · tolerance_j / 4."""
+    p = MODEL.forward(q)[:3, 3]
+    nudged = MODEL.forward(q + np.diag(TOLERANCE / 4))[:, :3, 3]
+    return float(np.linalg.norm(nudged - p, axis=1).sum())
+
+
+def settled(robot: ControlClient, target: np.ndarray) -> bool:
+    return bool(np.all(np.abs(np.array(robot.status().position) - target) <= TOLERANCE / 4))
+
+
+def test_a_cartesian_jog_moves_the_tool_by_the_displacement(robot: ControlClient) -> None:
+    wait_until(lambda: settled(robot, START), 30, "the arm settled at the start")
+    before = MODEL.pose(np.array(robot.status().position))
+    result = robot.wait(robot.jog_cartesian([20.0, -10.0, 5.0, 0.0, 0.0, 0.0]), timeout=60)
+    assert result.complete and result.run.kind == "cartesian_jog", result.status
+    desired = result.run.desired
+    commanded = MODEL.pose(desired)
+    # the commanded tool runs on the line, from where it was to the displacement
+    step = commanded[:, :3] - commanded[0, :3]
+    line = np.array([20.0, -10.0, 5.0]) / np.linalg.norm([20.0, -10.0, 5.0])
+    off = np.linalg.norm(step - np.outer(step @ line, line), axis=1)
+    assert off.max() < 0.5
+    np.testing.assert_allclose(commanded[-1] - commanded[0], [20.0, -10.0, 5.0, 0, 0, 0],
+                               atol=1e-6)
+    # and the simulated arm follows it there: the measured tool moved by the displacement,
+    # within what the joints' settle bands allow at the start and at the end (the simulated
+    # Bend hunts within its band at a standstill, as a hydraulic joint with stiction does)
+    wait_until(lambda: settled(robot, desired[-1]), 30, "the arm settled at the jog's end")
+    after = MODEL.pose(np.array(robot.status().position))
+    moved = after[:3] - before[:3]
+    band = tool_band(START) + tool_band(desired[-1])  # ~20 mm: Bend's 1° at 640 mm is 11
+    assert np.linalg.norm(moved - [20.0, -10.0, 5.0]) < band, (moved, band)
+
+
+def test_a_tool_frame_rotation_turns_the_tool_about_its_own_axis(robot: ControlClient) -> None:
+    wait_until(lambda: settled(robot, START), 30, "the arm settled at the start")
+    result = robot.wait(robot.jog_cartesian([0, 0, 0, 0, 0, 10.0], frame="tool"), timeout=60)
+    assert result.complete, result.status
+    first, last = MODEL.forward(result.run.desired[[0, -1]])
+    np.testing.assert_allclose(last[:3, 3], first[:3, 3], atol=1e-6)  # the tool point stays
+    turned = first[:3, :3].T @ last[:3, :3]  # about the tool's z axis, by 10°
+    assert np.degrees(np.arctan2(turned[1, 0], turned[0, 0])) == pytest.approx(10.0, abs=1e-6)
+
+
+def test_an_unreachable_jog_raises_and_sends_nothing(robot: ControlClient) -> None:
+    before = robot.status()
+    with pytest.raises(Unreachable, match=r"In/Out would be 204\d\.\d mm, past its limits"):
+        robot.jog_cartesian([5000.0, 0, 0, 0, 0, 0])
+    with pytest.raises(Unreachable, match=r"Bend would be -110\.\d°, past its limits"):
+        robot.jog_cartesian([0, 0, 0, 0, 40.0, 0], frame="tool")
+    status = robot.status()
+    assert status.mode == Mode.HOLD
+    assert status.desired == before.desired  # the hold target never moved
+    result = robot.wait(robot.jog_cartesian([5.0, 0, 0, 0, 0, 0]), timeout=60)
+    assert result.complete  # and the next jog runs as usual
