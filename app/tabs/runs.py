@@ -29,6 +29,7 @@ from app.run_text import local_time, run_lines
 from app.tabs.tab import TabPage
 from app.widgets.figure_plot import FigurePlot, panel_size
 from control.recorder import RecorderError, Run, RunInfo, list_runs, load_run, save_run
+from control.run_mcap import write_mcap
 
 
 class RunsTab(TabPage):
@@ -38,6 +39,7 @@ class RunsTab(TabPage):
     BINDINGS: ClassVar = [
         Binding("v", "next_view", "next plot"),
         Binding("x", "export", "export plot"),
+        Binding("m", "export_mcap", "export MCAP"),
         Binding("r", "reload", "refresh list"),
         Binding("s", "save_unsaved", "save unsaved run", show=False),
     ]
@@ -241,6 +243,25 @@ class RunsTab(TabPage):
                         severity="error")
             return
         self.notify("exported " + ", ".join(str(p) for p in written))
+
+    def action_export_mcap(self) -> None:
+        """The whole run as MCAP, for Foxglove or PlotJuggler (``control/run_mcap.py``)."""
+        if self.run is None:
+            self.notify("open a run first (Enter on the list)", severity="warning")
+            return
+        stem = self.run_name.replace(" ", "-")
+        self._export_mcap(self.run, self.desk.data_dir / "exports" / f"{stem}.mcap")
+
+    @work(thread=True, group="runs-export")
+    def _export_mcap(self, run: Run, path: Path) -> None:
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            write_mcap(run, path)
+        except OSError as exc:
+            self.notify(f"cannot export to {path}: {exc}; check the data directory is writable",
+                        severity="error")
+            return
+        self.notify(f"exported {path}")
 
     def on_button_pressed(self, event: Button.Pressed) -> None:
         if event.button.id == "runs-save-button":

@@ -20,6 +20,7 @@ from app.tabs.runs import RunsTab
 from app.widgets.fields import NumberField
 from app.widgets.live_text import LiveText
 from control.layout import Mode
+from control.run_mcap import read_mcap
 from kinematics import unimate
 
 SIZE = (160, 48)
@@ -81,6 +82,12 @@ def test_step_runs_on_the_simulator_and_appears_in_runs(tui, data_dir: Path) -> 
             (svg,) = (data_dir / "plots").glob("*.svg")  # the plot on screen, from its data
             lines = ET.parse(svg).getroot().findall(".//{http://www.w3.org/2000/svg}polyline")
             assert len(lines) == len(runs.figure().panels) // 2 * 3  # desired, actual; duty
+            await pilot.press("m")
+            await tui.until(lambda: list((data_dir / "exports").glob("*.mcap")), what="MCAP")
+            (mcap,) = (data_dir / "exports").glob("*.mcap")
+            record, topics = read_mcap(mcap)
+            assert record["kind"] == "step"
+            assert len(topics["/joints/actual"]) == runs.run.samples
 
     asyncio.run(scenario())
 
