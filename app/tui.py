@@ -12,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import gc
 import threading
+import time
 from dataclasses import replace
 from pathlib import Path
 from typing import ClassVar
@@ -22,11 +23,13 @@ from textual.screen import ModalScreen
 from textual.widgets import Footer, TabbedContent, TabPane
 
 from app.desk import Desk
+from app.event_log import LogEntry, entries_of
 from app.history import History, Sampler
 from app.messages import ClientFailed, ClientReady, ControllerEvent, RunsChanged
 from app.tabs.identify import IdentifyTab
 from app.tabs.jog import JogTab
 from app.tabs.latency import LatencyTab
+from app.tabs.log import LogTab
 from app.tabs.moves import MovesTab
 from app.tabs.path_forms import ViaPointsForm
 from app.tabs.positions import PositionsTab
@@ -45,11 +48,12 @@ from control.timing import Timing
 from hw.machine import Machine, load_machine
 
 HEADER_HZ = 10.0
+STALL_DUPLICATE_S = 2.0  # a stall the Latency tab sees this soon after the controller's notice
 SETTLE_S = 1.5  # after a tab's first frames its long-lived objects exist
 TABS: tuple[tuple[str, type[TabPage]], ...] = (
     ("jog", JogTab), ("moves", MovesTab), ("scope", ScopeTab), ("status", StatusTab),
     ("tuning", TuningTab), ("runs", RunsTab), ("latency", LatencyTab),
-    ("identify", IdentifyTab), ("positions", PositionsTab),
+    ("identify", IdentifyTab), ("positions", PositionsTab), ("log", LogTab),
 )
 FAULT_ADVICE = {
     "limit": "Drive it back with the opposite jog key, or run a move that stays inside the "
@@ -141,6 +145,9 @@ class ServodeskApp(App[None]):
         self._early: list[ClientReady | ClientFailed | ControllerEvent] | None = []
         self.fault_kind = ""
         self.feed_tenths = 10  # the feed override as the operator set it, in tenths
+        self.estop_latched = False  # an E-stop sent or reported, until the controller releases it
+        self._estop_banner = ""  # the latched E-stop's banner, which nothing lesser replaces
+        self._estop_reason = ""
 
     # -- layout --------------------------------------------------------------------------------
 
@@ -189,6 +196,18 @@ class ServodeskApp(App[None]):
 
     def on_load(self) -> None:
         self.start_client()  # the controller starts while the screen is built
+        self.desk.events.open(self.data_dir, self.machine.name, self._log_problem)
+
+    def _log_problem(self, problem: str) -> None:
+        """The event log's file cannot be written (from its writer thread)."""
+        with contextlib.suppress(RuntimeError):  # the app has closed
+            self.call_from_thread(self.notify, f"{problem}; the Log tab still lists this "
+                                  "session's events", severity="warning", timeout=10)
+
+    def record_event(self, entry: LogEntry) -> None:
+        """Add ``entry`` to the session's event log; the header shows the newest."""
+        self.desk.events.add(entry)
+        self.header.latest = entry
 
     def tab(self, name: str) -> TabPage:
         return self.tabs[name]
@@ -251,6 +270,7 @@ class ServodeskApp(App[None]):
             return
         self._client_down(message.reason)
         self._link(state="failed", reason="controller did not start")
+        self.record_event(LogEntry(time.time(), "fault", f"start: {message.reason}"))
         self._fault("start", f"The controller did not start: {message.reason}")
 
     def shutdown_client(self) -> None:
@@ -265,6 +285,7 @@ class ServodeskApp(App[None]):
 
     def on_unmount(self) -> None:
         self.shutdown_client()
+        self.desk.events.close()
 
     # -- events from the controller ------------------------------------------------------------
 
@@ -273,12 +294,23 @@ class ServodeskApp(App[None]):
             return
         if self._held_back(message):
             return
-        match message.event.record:
+        event = message.event
+        if (isinstance(event.record, EStop) and event.record.latched and self._estop_banner
+                and event.record.reason == self._estop_reason):
+            return  # latched again for the same reason (the E-stop word, then its command)
+        arrived = time.time() - (time.monotonic() - event.wall)
+        for entry in entries_of(event.record, self.machine, arrived):
+            self.record_event(entry)
+        match event.record:
             case EStop(latched=True, reason=reason):
+                self.estop_latched = True
                 self._estop_tabs(latched=True)
-                self._fault("estop", f"E-STOP latched: {reason}. "
-                                     f"{estop_advice(reason, self.port)}")
+                self._estop_reason = reason
+                self._estop_banner = f"E-STOP latched: {reason}. {estop_advice(reason, self.port)}"
+                self._fault("estop", self._estop_banner)
             case EStop(latched=False):
+                self.estop_latched = False
+                self._estop_banner = ""
                 self._estop_tabs(latched=False)
                 self._link(estop_sent=False)
                 if self.fault_kind == "estop":
@@ -298,9 +330,23 @@ class ServodeskApp(App[None]):
                 self.notify(f"initialise: {status}")
 
     def _fault(self, kind: str, message: str) -> None:
+        """Show ``message`` in the banner. While the E-stop is latched its reason stays on
+        top: a lesser fault (the client silent, a limit) is added below it, never in its place."""
+        if self.estop_latched and self._estop_banner and kind not in ("estop", "died"):
+            kind, message = "estop", f"{self._estop_banner}\nAlso: {message}"
         self.fault_kind = kind
         self.banner.message = message
         self.refresh_bindings()
+
+    def on_latency_tab_stalled(self, message: LatencyTab.Stalled) -> None:
+        """The Latency tab's watch saw a stall; the controller's own notice of a stall
+        during a move says more (the move, its time), so one of those just now stands."""
+        now = time.time()
+        if any(e.kind == "stall" and e.data.get("message") and now - e.wall < STALL_DUPLICATE_S
+               for e in self.desk.events.entries[-20:]):
+            return
+        self.record_event(LogEntry(now, "stall", message.what,
+                                   data={"late_max_us": message.late_max_us}))
 
     def on_runs_changed(self, message: RunsChanged) -> None:
         runs = self.tab("runs")
@@ -396,6 +442,7 @@ class ServodeskApp(App[None]):
         """Latch every valve closed, now. Works on every screen, dialogs included."""
         self._send_estop()
         self._link(estop_sent=True)
+        self.estop_latched = True
         self._estop_tabs(latched=True)
         while isinstance(self.screen, ModalScreen):
             self.pop_screen()

@@ -51,7 +51,18 @@ from control.commands import (
     finite,
     joint_index,
 )
-from control.events import ControllerEvent, Crash, Died, EStop, Fault, MoveDone, Notice, Ready
+from control.events import (
+    CoefficientsApplied,
+    ControllerEvent,
+    Crash,
+    Died,
+    EStop,
+    Fault,
+    MoveDone,
+    MoveStarted,
+    Notice,
+    Ready,
+)
 from control.layout import (
     ESTOP_WORD,
     HEARTBEAT_WORD,
@@ -559,6 +570,9 @@ class ControlClient:
         self.coefficient_checks[which] = check.record(override)
         self._models = known
         self._send(command)
+        overridden = override if override is not None and not check.ok else ""
+        self._dispatch(Event(CoefficientsApplied(which, coefficients.name, check.summary(),
+                                                 overridden)))
         if not check.ok:
             self._dispatch(Event(Notice(
                 f"gain check overridden for the {which} set {coefficients.name!r} ({override}): "
@@ -680,6 +694,7 @@ class ControlClient:
             shm.release(segment, unlink=True)
             raise
         self._forget_manual()  # the move ends manual actuation
+        self._dispatch(Event(MoveStarted(move_id, kind, samples * self.dt)))
         return handle
 
     def wait(self, handle: MoveHandle, timeout: float | None = None) -> MoveResult:

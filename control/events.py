@@ -122,6 +122,38 @@ class Crash(ControllerEvent):
 
 
 @dataclass(frozen=True)
+class MoveStarted(ControllerEvent):
+    """The client sent a move (raised in the client, not sent): its id, kind and length."""
+
+    KIND: ClassVar[str] = "move_start"
+    move_id: int
+    move_kind: str
+    seconds: float
+
+    @property
+    def message(self) -> str:
+        return f"move {self.move_id} started: {self.move_kind}, {self.seconds:.1f} s"
+
+
+@dataclass(frozen=True)
+class CoefficientsApplied(ControllerEvent):
+    """The client replaced the hold or track set (raised in the client, not sent); ``override``
+    is the reason given for a set the gain check refused, "" when it passed."""
+
+    KIND: ClassVar[str] = "coefficients"
+    which: str
+    name: str
+    summary: str
+    override: str = ""
+
+    @property
+    def message(self) -> str:
+        how = (f"gain check overridden ({self.override}): {self.summary}" if self.override
+               else f"gain check passed: {self.summary}")
+        return f"{self.which} set {self.name!r} applied; {how}"
+
+
+@dataclass(frozen=True)
 class Died(ControllerEvent):
     """The client's watchdog: the control process is gone (raised in the client, not sent)."""
 

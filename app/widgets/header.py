@@ -1,5 +1,6 @@
-"""The always-visible top of the screen: who and how the controller is, a large E-stop lamp,
-and the fault banner that says what happened and what to do."""
+"""The always-visible top of the screen: who and how the controller is, the latest entry of
+the event log, a large E-stop lamp, and the fault banner that says what happened and what to
+do."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ from textual.containers import Horizontal, Vertical
 from textual.reactive import reactive
 from textual.widgets import Static
 
+from app.event_log import LogEntry
 from app.widgets.live_text import LiveText
 from control.layout import Flag, Mode, Status
 
@@ -71,7 +73,8 @@ class EStopLamp(LiveText):
 
 
 class StatusHeader(Horizontal):
-    """Machine, backend, link health, control mode, loop lateness and the E-stop lamp."""
+    """Machine, backend and the latest logged event; link health, control mode, loop lateness;
+    the E-stop lamp."""
 
     DEFAULT_CSS = """
     StatusHeader {
@@ -89,6 +92,7 @@ class StatusHeader(Horizontal):
 
     status: reactive[Status | None] = reactive(None, always_update=True)
     link: reactive[Link] = reactive(Link)
+    latest: reactive[LogEntry | None] = reactive(None)
 
     def __init__(self, machine_title: str, backend: str, *, id: str | None = None) -> None:
         super().__init__(id=id)
@@ -98,8 +102,7 @@ class StatusHeader(Horizontal):
 
     def compose(self) -> ComposeResult:
         with Vertical(id="header-text"):
-            yield Static(Text.assemble(("servodesk", "bold"), f"  {self.machine_title}  ·  ",
-                                       ("backend ", "dim"), self.backend), id="header-identity")
+            yield Static(self._identity(), id="header-identity")
             yield LiveText(id="header-health")
             yield LiveText(id="header-loop")
         yield EStopLamp(id="estop-lamp")
@@ -114,6 +117,20 @@ class StatusHeader(Horizontal):
 
     def watch_link(self) -> None:
         self._show()
+
+    def watch_latest(self) -> None:
+        if self.is_mounted:
+            self.query_one("#header-identity", Static).update(self._identity())
+
+    def _identity(self) -> Text:
+        text = Text.assemble(("servodesk", "bold"), f"  {self.machine_title}  ·  ",
+                             ("backend ", "dim"), self.backend)
+        entry = self.latest
+        if entry is not None:
+            text.append("   latest ", "dim")
+            text.append(entry.line(), "bold yellow" if entry.serious else "")
+        text.no_wrap, text.overflow = True, "ellipsis"
+        return text
 
     def _show(self) -> None:
         if self._lines is None:
