@@ -42,6 +42,7 @@ from app.widgets.dialogs import ConfirmScreen
 from app.widgets.header import FaultBanner, StatusHeader
 from control.client import ControlClient, ControllerError, Event
 from control.events import Died, EStop, Fault, Initialised, Notice, Refused
+from control.layout import Mode
 from control.motion.robot_model import model_of
 from control.recorder import default_data_dir
 from control.timing import Timing
@@ -84,6 +85,10 @@ def estop_advice(reason: str, port: str | None) -> str:
         return ("Do not trust that joint's reading: check its encoder, cable and valve and the "
                 "hydraulic supply before you press ^R.")
     return "Every valve is closed. When it is safe, press ^R to release (the joints then hold)."
+
+
+class QuitScreen(ConfirmScreen):
+    """The question before quitting mid-move or latched (one at a time)."""
 
 
 class ServodeskApp(App[None]):
@@ -521,6 +526,42 @@ class ServodeskApp(App[None]):
             self.notify(str(exc), severity="error")
             return
         self.feed_tenths = tenths
+
+    async def action_quit(self) -> None:
+        """Quit; first ask, when a move is running or the E-stop is latched."""
+        if isinstance(self.screen, QuitScreen):
+            return
+        concern = self._quit_concern()
+        if not concern:
+            self.exit()
+            return
+
+        def answer(yes: bool | None) -> None:
+            if yes:
+                self.exit()
+
+        self.push_screen(QuitScreen("Quit servodesk?", concern, "Quit"), answer)
+
+    def _quit_concern(self) -> str:
+        """Why quitting now deserves a second thought ("" when it does not)."""
+        client = self.client
+        if client is None or client.dead:
+            return ""
+        try:
+            status = client.status()
+        except (ControllerError, TimeoutError, ValueError):
+            return ""
+        if status.moving or status.mode == Mode.INITIALISE:
+            total = status.move_total
+            done = f" ({status.move_done / total:.0%} done)" if total else ""
+            return (f"Move {status.move_id} is running{done}. Quitting stops the controller: "
+                    "every valve closes at once, wherever the arm is, and the move is lost.")
+        if self.estop_latched or status.estop:
+            reason = f": {self._estop_reason}" if self._estop_reason else ""
+            return (f"The E-stop is latched{reason}. Quitting closes the controller with every "
+                    "valve still closed; the reason stays in this session's events.jsonl "
+                    f"({self.desk.events.path or 'not written'}).")
+        return ""
 
     def action_dismiss_fault(self) -> None:
         self.fault_kind = ""

@@ -121,7 +121,10 @@ def test_servodesk_runs_in_a_real_terminal(tmp_path: Path) -> None:
         term.wait(lambda s: " RUN" in s and "E-STOP LATCHED" not in s, "the release")
         term.keys("C-e")
         term.wait(lambda s: "E-STOP LATCHED" in s, "the E-stop from ctrl+e")
-        term.keys("C-q")
+        term.keys("C-q")  # latched: it asks first
+        term.wait(lambda s: "Quit servodesk?" in s and "E-stop is latched" in s,
+                  "the quit question")
+        term.keys("y")
         deadline = time.monotonic() + WAIT_S
         while term.exit_status() is None and time.monotonic() < deadline:
             time.sleep(0.05)
