@@ -200,6 +200,7 @@ class ServodeskApp(App[None]):
             self.on_controller_event(message)
 
     def on_load(self) -> None:
+        gc.freeze()  # what is imported so far: building the screen collects only its own
         self.start_client()  # the controller starts while the screen is built
         self.desk.events.open(self.data_dir, self.machine.name, self._log_problem)
 

@@ -264,7 +264,11 @@ def performance_section(r: dict, when: str, machine: str, quick: bool) -> str:
             "python -m benchmarks.serial_rtt            # --port /dev/ttyACM0 for a real board",
             "python -m benchmarks.law",
             f"python -m benchmarks.ui{' --quick' if quick else ''}"
-            "                      # Scope frame time, key to valve",
+            "                      # Scope frame time, key to valve, UI pauses",
+            "python -m benchmarks.ui --pauses             # UI pauses opening every tab beside "
+            "a CPU burner",
+            "python -m benchmarks.ui --soak 300           # every tab in tmux beside a burner "
+            "for 5 min: client-silent events",
             "python -m benchmarks.tracking",
             "python -m benchmarks.cartesian_jog       # IK per jog step, key → first motion",
             "```"]

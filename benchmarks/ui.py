@@ -15,13 +15,22 @@ Unimate 2000B. Parts:
 3. the controller's lateness over a few seconds with the Scope hidden and shown;
 4. key to duty: a Jog key posted to the app as the terminal driver posts it, until
    the controller publishes the new valve duty (watched from another process);
-5. startup: ``python -m app`` in a tmux window until the live screen shows.
+5. startup: ``python -m app`` in a tmux window until the live screen shows;
+6. UI pauses (``--pauses``; ``--no-burner`` without the burner): every tab opened for the
+   first time (and End point in Moves) beside a CPU burner; the event loop's longest
+   pause per tab (a task that wakes every 5 ms records how late it woke), the client's
+   heartbeat's longest age as the controller sees it (read from shared memory by another
+   process) and the controller's client-silent events;
+7. soak (``--soak 300``): ``python -m app`` in tmux beside a CPU burner, a tab switch
+   every second for that many seconds; the client-silent events of the session's
+   events.jsonl counted.
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import json
 import multiprocessing as mp
 import os
 import shlex
@@ -39,16 +48,18 @@ import numpy as np
 from rich.style import Style
 from textual import events
 from textual.screen import Screen
+from textual.widgets import OptionList
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # ahead of benchmarks/hw.py
 
+from app.event_log import FILE as EVENT_FILE
 from app.plotting.braille import Trace, render
 from app.plotting.figure import decimate
 from app.tabs.latency import Lateness
 from app.tabs.scope import ScopeTab
-from app.tui import ServodeskApp
+from app.tui import TABS, ServodeskApp
 from control import shm
-from control.layout import ControlLayout
+from control.layout import HEARTBEAT_WORD, ControlLayout
 from control.seqlock import SeqlockReader
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -56,6 +67,9 @@ POINTS = 2_000
 WATCH_S = 0.0003  # the watcher polls the status this often (it is published every 1 ms)
 JOINTS = 6
 SIZE = (160, 48)
+PAUSE_TICK_S = 0.005  # the pause clock's wake-ups
+TAB_SETTLE_S = 1.5  # each tab's time to show and settle before the next
+SOAK_KEY_S = 1.0  # the soak's tab switches
 PANEL = (70, 8, 3)  # columns, position rows, duty rows of one joint on a 160 × 48 screen
 
 
@@ -164,7 +178,7 @@ async def ready(app: ServodeskApp, pilot: object) -> None:
 def lateness(app: ServodeskApp, since: Lateness) -> str:
     assert app.client is not None
     now = Lateness.total(app.client.histogram()).since(since)
-    return (f"mean {now.mean_us:6.1f} µs, max ≤ {now.max_us:6.0f} µs, overruns {now.overruns}, "
+    return (f"mean {now.mean_us:6.1f} µs, max {now.max_text()}, overruns {now.overruns}, "
             f"{now.ticks} ticks")
 
 
@@ -291,6 +305,175 @@ async def key_to_duty(app: ServodeskApp, presses: int) -> None:
               f"{np.percentile(samples, 95):6.2f} ms, max {max(samples):6.2f} ms")
 
 
+def start_burner() -> subprocess.Popen:
+    """A busy loop in its own process: one core's worth of someone else's work."""
+    return subprocess.Popen([sys.executable, "-c", "while True: pass"])
+
+
+def watch_heartbeat(segment: str, joints: int, conn: Connection) -> None:
+    """In its own process (no GIL shared with the UI), as the controller reads it: poll the
+    client's heartbeat word (its monotonic ns) every ``WATCH_S`` until told to stop; answer the
+    longest age it reached, ms."""
+    memory = shm.attach(segment)
+    words = ControlLayout(joints).client_words(memory.buf)
+    conn.send("ready")
+    oldest = 0
+    try:
+        while not conn.poll():
+            beat = words[HEARTBEAT_WORD]
+            if beat:
+                oldest = max(oldest, time.monotonic_ns() - beat)
+            time.sleep(WATCH_S)
+        conn.send(oldest / 1e6)
+    finally:
+        words.release()
+        shm.release(memory, unlink=False)
+
+
+class PauseClock:
+    """The UI event loop's pauses: a task that asks to wake every ``PAUSE_TICK_S`` records how
+    much later than that it woke, under the label of what the script is doing, and how much
+    of that the UI thread spent working (its CPU time; the rest it waited for a CPU)."""
+
+    def __init__(self) -> None:
+        self.label = ""
+        self.pauses: dict[str, list[float]] = {}
+        self.worked: dict[str, list[float]] = {}
+        self._task: asyncio.Task | None = None
+
+    def start(self) -> None:
+        self._task = asyncio.get_running_loop().create_task(self._tick())
+
+    def stop(self) -> None:
+        if self._task is not None:
+            self._task.cancel()
+
+    async def _tick(self) -> None:
+        last, last_cpu = time.perf_counter(), time.thread_time()
+        while True:
+            await asyncio.sleep(PAUSE_TICK_S)
+            now, cpu = time.perf_counter(), time.thread_time()
+            if self.label:
+                self.pauses.setdefault(self.label, []).append((now - last - PAUSE_TICK_S) * 1e3)
+                self.worked.setdefault(self.label, []).append((cpu - last_cpu) * 1e3)
+            last, last_cpu = now, cpu
+
+    def longest(self, label: str) -> tuple[float, float]:
+        """The longest pause under ``label`` and the UI thread's CPU time in it, ms."""
+        k = int(np.argmax(self.pauses[label]))
+        return self.pauses[label][k], self.worked[label][k]
+
+
+async def open_end_point(app: ServodeskApp) -> None:
+    """Moves tab: highlight End point in the menu, as the arrow keys would."""
+    menu = app.query_one("#move-kinds", OptionList)
+    menu.highlighted = next(i for i, option in enumerate(menu.options)
+                            if option.id == "EndPointForm")
+
+
+async def tab_pauses(burn: bool) -> None:
+    """Every tab opened for the first time (and End point in Moves), each given
+    ``TAB_SETTLE_S``, with a CPU burner beside the app: the UI's longest pause in each, the
+    heartbeat's longest age as the controller would see it, and the controller's
+    client-silent events."""
+    burner = start_burner() if burn else None
+    clock = PauseClock()
+    try:
+        with tempfile.TemporaryDirectory() as data_dir:
+            app = ServodeskApp("unimate2000b", data_dir=data_dir)
+            async with app.run_test(size=SIZE) as pilot:
+                await ready(app, pilot)
+                assert app.client is not None
+                parent, child = mp.get_context("spawn").Pipe()
+                watcher = mp.get_context("spawn").Process(
+                    target=watch_heartbeat, args=(app.client.segment_name,
+                                                  app.machine.n_joints, child), daemon=True)
+                watcher.start()
+                if parent.recv() != "ready":
+                    raise RuntimeError("the heartbeat watcher did not start")
+                clock.start()
+                for i, (name, _) in enumerate(TABS):
+                    clock.label = name
+                    post_key(app, f"f{i + 1}")
+                    await asyncio.sleep(TAB_SETTLE_S)
+                    if name == "moves":
+                        clock.label = "moves: End point"
+                        await open_end_point(app)
+                        await asyncio.sleep(TAB_SETTLE_S)
+                clock.stop()
+                parent.send(None)
+                heartbeat_ms = parent.recv()
+                watcher.join(timeout=2)
+                silent = [e for e in app.desk.events.entries if e.kind == "UI lost"]
+    finally:
+        if burner is not None:
+            burner.kill()
+            burner.wait()
+    every = [p for pauses in clock.pauses.values() for p in pauses]
+    print(f"\n6. UI pauses opening every tab for the first time ({SIZE[0]}×{SIZE[1]}, "
+          f"{'a CPU burner beside it' if burn else 'no burner'}; event-loop wake-ups "
+          f"{PAUSE_TICK_S * 1e3:g} ms apart, lateness ms)")
+    for label, pauses in clock.pauses.items():
+        longest, worked = clock.longest(label)
+        print(f"   {label:<18} median {statistics.median(pauses):6.1f}, max {longest:6.1f} "
+              f"(the UI thread working {worked:5.1f} of it)")
+    print(f"   all tabs           median {statistics.median(every):6.1f}, max {max(every):6.1f} "
+          f"(target < 100); load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs")
+    print(f"   heartbeat's longest age at the controller {heartbeat_ms:6.1f} ms (it holds at "
+          f"250); client-silent events {len(silent)}")
+    for entry in silent:
+        print(f"   {entry.line()}")
+
+
+def soak(seconds: float) -> None:
+    """``python -m app`` in tmux beside a CPU burner, switching every tab (F1…F9, a key every
+    ``SOAK_KEY_S``) for ``seconds``; the controller's client-silent events counted from the
+    session's events.jsonl."""
+    tmux = shutil.which("tmux")
+    if tmux is None:
+        print("\n7. soak skipped: tmux is not installed")
+        return
+    socket = f"servodesk-soak-{os.getpid()}"
+    run = [tmux, "-L", socket, "-f", os.devnull]
+    burner = start_burner()
+    keys = 0
+    try:
+        with tempfile.TemporaryDirectory() as data_dir:
+            command = (f"cd {shlex.quote(str(ROOT))} && PYTHONPATH={shlex.quote(str(ROOT))} "
+                       f"{shlex.quote(sys.executable)} -m app --data-dir {data_dir}")
+            subprocess.run([*run, "new-session", "-d", "-s", "soak", "-x", str(SIZE[0]), "-y",
+                            str(SIZE[1]), command], check=True)
+            try:
+                deadline = time.monotonic() + 60
+                while " RUN" not in subprocess.run([*run, "capture-pane", "-p", "-t", "soak"],
+                                                   capture_output=True, text=True).stdout:
+                    if time.monotonic() > deadline:
+                        raise RuntimeError("the app did not show a live screen within 60 s")
+                    time.sleep(0.1)
+                end = time.monotonic() + seconds
+                while time.monotonic() < end:
+                    subprocess.run([*run, "send-keys", "-t", "soak", f"F{keys % len(TABS) + 1}"],
+                                   check=True)
+                    keys += 1
+                    time.sleep(SOAK_KEY_S)
+                subprocess.run([*run, "send-keys", "-t", "soak", "C-q"])
+                logged = [json.loads(line) for path in
+                          Path(data_dir).glob(f"sessions/*/{EVENT_FILE}")
+                          for line in path.read_text().splitlines()]
+            finally:
+                subprocess.run([*run, "kill-server"], capture_output=True)
+    finally:
+        burner.kill()
+        burner.wait()
+    silent = [e for e in logged if e["kind"] == "UI lost"]
+    stalls = [e for e in logged if e["kind"] == "stall"]
+    print(f"\n7. soak: {seconds:g} s in tmux {SIZE[0]}×{SIZE[1]} beside a CPU burner, {keys} tab "
+          f"switches ({SOAK_KEY_S:g} s apart, F1…F{len(TABS)}): client-silent events "
+          f"{len(silent)}, loop stalls logged {len(stalls)}, {len(logged)} events in all")
+    for entry in silent + stalls:
+        print(f"   {entry['time']} {entry['kind']}: {entry['what']}")
+
+
 def startup(repeats: int) -> None:
     """Seconds from starting ``python -m app`` in a 160 × 48 tmux window to a live screen."""
     tmux = shutil.which("tmux")
@@ -329,11 +512,23 @@ def main() -> None:
     resource_tracker.ensure_running()
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="fewer repeats, shorter runs")
+    parser.add_argument("--pauses", action="store_true",
+                        help="only part 6: the UI's pauses opening every tab beside a burner")
+    parser.add_argument("--no-burner", action="store_true", help="part 6 without the burner")
+    parser.add_argument("--soak", type=float, metavar="SECONDS",
+                        help="only part 7: switch every tab in tmux beside a burner this long")
     args = parser.parse_args()
+    if args.soak:
+        soak(args.soak)
+        return
+    if args.pauses:
+        asyncio.run(tab_pauses(not args.no_burner))
+        return
     repeats, seconds, presses = (5, 3.0, 20) if args.quick else (20, 8.0, 60)
     renderers(repeats)
     asyncio.run(scope_and_keys(seconds, presses))
     startup(3 if args.quick else 5)
+    asyncio.run(tab_pauses(not args.no_burner))
 
 
 if __name__ == "__main__":

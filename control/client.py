@@ -293,12 +293,15 @@ class ControlClient:
     def _await_ready(self, timeout_s: float) -> None:
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
-            if self._conn.poll(0.05):
+            if self._conn.poll(0.01):
                 try:
                     record = self._conn.recv()
                 except EOFError:
                     break
                 if isinstance(record, Ready):
+                    # the controller watches the heartbeat from now: beat before the threads
+                    # start, which a busy UI (building its screen) can delay
+                    self._words[HEARTBEAT_WORD] = time.monotonic_ns()
                     self.notice = record.notice
                     self.realtime = record.realtime
                     return
@@ -347,10 +350,10 @@ class ControlClient:
     def _beat(self) -> None:
         """Heartbeats on their own thread, written into shared memory (no channel to fill), so
         saving a run, a busy UI or a frozen controller never silences or blocks them."""
-        while not self._closing.wait(HEARTBEAT_S):
-            if self.dead or self._stopping:
+        while not (self.dead or self._stopping):
+            self._words[HEARTBEAT_WORD] = time.monotonic_ns()  # the first at once: see Ready
+            if self._closing.wait(HEARTBEAT_S):
                 return
-            self._words[HEARTBEAT_WORD] = time.monotonic_ns()
 
     def _deliver(self) -> None:
         """Send queued commands in order; only this thread ever waits on the channel."""

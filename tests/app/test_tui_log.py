@@ -9,6 +9,7 @@ import asyncio
 import json
 import os
 import signal
+import socket
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -17,6 +18,7 @@ import numpy as np
 
 from app.event_log import EventLog, LogEntry
 from app.tabs.latency import OVER_US, Lateness, StallWatch
+from app.tui import ServodeskApp
 from app.widgets.dialogs import ConfirmScreen
 from app.widgets.header import FaultBanner
 from control.layout import HEARTBEAT_WORD, HIST_BINS, LatencyHistogram
@@ -128,6 +130,42 @@ def test_an_estop_reason_stays_in_the_banner_while_the_client_goes_silent(tui) -
             assert "Also: client silent" in banner.message
             assert "E-STOP LATCHED" in tui.text(app.query_one("#estop-lamp"))
             await tui.until(lambda: logged(app, "UI back"), what="the client's return")
+
+    asyncio.run(scenario())
+
+
+def free_tcp_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+def test_a_lost_link_and_its_return_go_into_the_log(tui, data_dir: Path, emulator) -> None:
+    """An I/O board (the emulator, over TCP) whose watchdog trips while the controller is
+    frozen for 150 ms: the link fault's E-stop and the lost link are logged; the operator's
+    release reconnects, and the link's return is logged too."""
+    board = emulator("--tcp", str(free_tcp_port()), "--glitch-scale", "0")
+
+    async def scenario() -> None:
+        app = ServodeskApp("unimate2000b", "serial", board.url, data_dir,
+                           client_options={"heartbeat_timeout_s": 2.0})
+        async with app.run_test(size=SIZE) as pilot:
+            await tui.ready(app, pilot)
+            client = app.client
+            await tui.until(lambda: client.status().link["frames_rx"] > 50, what="the board")
+            os.kill(client.pid, signal.SIGSTOP)
+            try:
+                time.sleep(0.15)  # past the board's 50 ms watchdog: the fault itself
+            finally:
+                os.kill(client.pid, signal.SIGCONT)
+            await tui.until(lambda: logged(app, "link lost"), what="the lost link logged")
+            assert logged(app, "E-stop", "latched: link fault")
+            await pilot.press("ctrl+r")
+            await tui.until(lambda: isinstance(app.screen, ConfirmScreen), what="the dialog")
+            await pilot.press("y")
+            await tui.until(lambda: logged(app, "link back", "link re-established"),
+                            what="the link's return logged")
+            await tui.until(lambda: logged(app, "release"), what="the release logged")
 
     asyncio.run(scenario())
 
