@@ -167,6 +167,10 @@ def parse_ui(text: str) -> dict:
         "key_to_duty_median_ms": number(r"4\. key to duty[^\n]*\n\s+median\s+([\d.]+)", text),
         "key_to_duty_p95_ms": number(r"4\. key to duty[^\n]*\n.*p95\s+([\d.]+)", text),
         "key_to_duty_max_ms": number(r"4\. key to duty[^\n]*\n.*max\s+([\d.]+)", text),
+        "pause_max_ms": number(r"all tabs\s+median\s+[\d.]+, max\s+([\d.]+)", text),
+        "pause_load": number(r"load average ([\d.]+) on", text),
+        "heartbeat_age_ms": number(r"heartbeat's longest age at the controller\s+([\d.]+)", text),
+        "client_silent": number(r"client-silent events (\d+)", text),
     }
 
 
@@ -415,7 +419,12 @@ def scope_part(ui: object) -> list[str]:
             f"Controller lateness with the Status tab shown: mean "
             f"{fmt(ui['late_hidden_mean_us'], '.1f')} µs, {fmt(ui['overruns_hidden'])} overruns; "
             f"with the Scope drawing: mean {fmt(ui['late_scope_mean_us'], '.1f')} µs, "
-            f"{fmt(ui['overruns_scope'])} overruns.", ""]
+            f"{fmt(ui['overruns_scope'])} overruns.", "",
+            f"Opening every tab for the first time beside a CPU burner: the UI's longest pause "
+            f"{fmt(ui['pause_max_ms'], '.0f')} ms (target < 100; load average "
+            f"{fmt(ui['pause_load'], '.1f')}), the heartbeat's longest age at the controller "
+            f"{fmt(ui['heartbeat_age_ms'], '.0f')} ms (it holds at 250), "
+            f"{fmt(ui['client_silent'])} client-silent events.", ""]
 
 
 def law_part(law: object) -> list[str]:
