@@ -15,7 +15,7 @@ import os
 import signal
 import sys
 
-from app import cli_emulate, cli_kinematics, cli_machine, cli_move, cli_runs
+from app import cli_controller, cli_emulate, cli_kinematics, cli_machine, cli_move, cli_runs
 from control.law import SLIPS
 from control.timing import TIMINGS, Timing
 from hw.factory import BACKENDS
@@ -45,8 +45,13 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--slip", action="append", choices=sorted(SLIPS), default=[],
                         help="thesis timing: run the listing's law with this slip (errata); "
                              "repeat for several")
+    parser.add_argument("--attach", nargs="?", const="", metavar="SOCKET",
+                        help="open the TUI on the controller `servodesk controller` runs (its "
+                             "socket; default the one in the user's runtime directory) instead "
+                             "of starting one; it observes until you take command (^K)")
     sub = parser.add_subparsers(title="commands (none: open the TUI)", metavar="COMMAND")
-    for module in (cli_kinematics, cli_machine, cli_emulate, cli_move, cli_runs):
+    for module in (cli_kinematics, cli_machine, cli_emulate, cli_controller, cli_move,
+                   cli_runs):
         module.add_parsers(sub)
     return parser
 
@@ -59,7 +64,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.backend == "serial" and not args.port:
         parser.error("--backend serial needs --port URL (a device, the emulator's pty path or "
                      "socket://HOST:PORT)")
-    from app.tui import ServodeskApp
+    from app.tui import ServodeskApp, attached_app
+    from control.client import ControllerError
     from hw.machine import MachineError
 
     try:
@@ -67,9 +73,10 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:
         parser.error(str(exc))
     try:
-        app = ServodeskApp(args.machine, args.backend, args.port, args.data_dir, seed=args.seed,
-                           client_options={"timing": timing})
-    except MachineError as exc:
+        app = (attached_app(args.attach) if args.attach is not None else
+               ServodeskApp(args.machine, args.backend, args.port, args.data_dir, seed=args.seed,
+                            client_options={"timing": timing}))
+    except (MachineError, ConnectionError, ControllerError, OSError) as exc:
         print(f"servodesk: {exc}", file=sys.stderr)
         return 2
     try:

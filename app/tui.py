@@ -13,6 +13,7 @@ import contextlib
 import gc
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 from typing import ClassVar
@@ -40,8 +41,9 @@ from app.tabs.tab import TabPage
 from app.tabs.tuning import TuningTab
 from app.widgets.dialogs import ConfirmScreen
 from app.widgets.header import FaultBanner, StatusHeader
+from control.attached import AttachedClient
 from control.client import ControlClient, ControllerError, Event
-from control.events import Died, EStop, Fault, Initialised, Notice, Refused
+from control.events import Commander, Died, EStop, Fault, Initialised, Notice, Refused
 from control.layout import Mode
 from control.motion.robot_model import model_of
 from control.recorder import default_data_dir
@@ -118,14 +120,22 @@ class ServodeskApp(App[None]):
                 "(Positions tab)"),
         *[Binding(f"f{i + 1}", f"show_tab('{name}')", f"{cls.TITLE} tab", show=False,
                   priority=True) for i, (name, cls) in enumerate(TABS)],
+        Binding("ctrl+k", "take_command", "take command", priority=True,
+                tooltip="command the controller servodesk controller runs (the others observe)"),
+        Binding("ctrl+o", "release_command", "release command", priority=True,
+                tooltip="the controller holds; another client may take command"),
         Binding("ctrl+q", "quit", "quit", priority=True),
     ]
 
     def __init__(self, machine: str | Path | Machine = "unimate2000b", backend: str = "sim",
                  port: str | None = None, data_dir: str | Path | None = None,
                  lockstep: bool = False, *, seed: int = 0, sim_options: dict | None = None,
-                 client_options: dict | None = None) -> None:
+                 client_options: dict | None = None, client: ControlClient | None = None
+                 ) -> None:
+        """``client``: one already attached to a controller service (``attached_app``),
+        used instead of starting a controller."""
         super().__init__()
+        self._attached = client
         self.machine = machine if isinstance(machine, Machine) else load_machine(machine)
         self.model = model_of(self.machine)  # MachineError for a DH table of another form
         self.backend = backend
@@ -223,6 +233,11 @@ class ServodeskApp(App[None]):
     # -- the client's life ---------------------------------------------------------------------
 
     def _start_client_blocking(self) -> None:
+        if self._attached is not None:
+            self._attached.on_event = self._event_from_thread
+            self.client = self._attached
+            self._post(ClientReady(self._attached))
+            return
         try:
             client = ControlClient(
                 self.machine, self.backend, port=self.port, seed=self.seed,
@@ -263,7 +278,7 @@ class ServodeskApp(App[None]):
         client = message.client
         self.sampler = Sampler(client.status, self.history)
         self.sampler.start()
-        self._link(state="live")
+        self._link(state="live", command=_role(client))
         if self._estop_pending:
             self._send_estop()
         if client.notice:
@@ -331,6 +346,9 @@ class ServodeskApp(App[None]):
                 self._fault("died", text)
             case Notice() | Refused() as record:
                 self.notify(record.message, title="controller", timeout=6)
+            case Commander(reason=reason):
+                self._link(command=_role(self.client))
+                self.notify(reason, title="command", timeout=6)
             case Initialised(status=status):
                 moves = self.tab("moves")
                 assert isinstance(moves, MovesTab)
@@ -573,6 +591,24 @@ class ServodeskApp(App[None]):
                     f"({self.desk.events.path or 'not written'}).")
         return ""
 
+    def action_take_command(self) -> None:
+        """Command the service's controller (refused, with who holds it, if another does)."""
+        self._command_change(lambda client: client.take_command())
+
+    def action_release_command(self) -> None:
+        """Give command back: the controller holds; another client may take it."""
+        self._command_change(lambda client: client.release_command())
+
+    def _command_change(self, change: Callable[[AttachedClient], None]) -> None:
+        client = self.client
+        if not isinstance(client, AttachedClient):
+            return
+        try:
+            change(client)
+        except ControllerError as exc:
+            self.notify(str(exc), severity="error")
+        self._link(command=_role(client))
+
     def action_dismiss_fault(self) -> None:
         self.fault_kind = ""
         self.banner.message = ""
@@ -594,4 +630,23 @@ class ServodeskApp(App[None]):
             return bool(self.fault_kind)
         if action == "run_move":
             return isinstance(self._active, MovesTab)
+        if action in ("take_command", "release_command"):
+            return self._attached is not None
         return True
+
+
+def _role(client: ControlClient | None) -> str:
+    """The header's word on command: "" for a client that started its own controller."""
+    return client.role if isinstance(client, AttachedClient) else ""
+
+
+def attached_app(socket: str | Path | None = None) -> ServodeskApp:
+    """The TUI on the controller ``servodesk controller`` runs at ``socket`` (default: the
+    user's); it observes until the operator takes command (^K)."""
+    client = ControlClient.attach(socket or None, name="servodesk TUI")
+    try:
+        return ServodeskApp(client.machine, client.backend, client.port, client.data_dir,
+                            client_options={"timing": client.timing}, client=client)
+    except BaseException:
+        client.close()
+        raise

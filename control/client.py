@@ -168,7 +168,12 @@ class ControlClient:
     ``backend`` is ``sim`` or ``serial`` (with ``port``). ``lockstep`` runs the
     simulator as fast as it computes (tests). ``on_event`` is called from the
     client's monitor thread for every event (a TUI marshals it to its loop).
+    ``ControlClient.attach`` gives a client of a controller run apart, with this API.
     """
+
+    OWNS_CONTROLLER = True  # started it, unlinks its segment, stops it on close
+    RESTART = "restart servodesk to continue"
+    CHANNEL_CLOSED = "the control process closed its channel"
 
     def __init__(self, machine: str | Path | Machine = "unimate2000b", backend: str = "sim", *,
                  port: str | None = None, seed: int = 0, lockstep: bool = False,
@@ -178,46 +183,17 @@ class ControlClient:
                  start_timeout_s: float = 30.0, sim_options: dict | None = None,
                  on_event: Callable[[Event], None] | None = None,
                  timing: Timing | None = None) -> None:
-        self.machine = machine if isinstance(machine, Machine) else load_machine(machine)
-        self.backend = backend
-        self.lockstep = lockstep
-        self.data_dir = Path(data_dir) if data_dir is not None else default_data_dir()
-        self.timing = timing or Timing()
-        self.dt = period_s or self.timing.sample_time_s(self.machine)  # between path rows
+        self._configure(machine if isinstance(machine, Machine) else load_machine(machine),
+                        backend, data_dir, timing, period_s, on_event, lockstep=lockstep)
+        self.port = port
         slots = self.timing.slots(self.machine)
         sim_options = {**self.timing.sim_options(self.machine), **(sim_options or {})}
-        self.on_event = on_event
-        self.events: queue.Queue[Event] = queue.Queue()
-        self.notice = ""
-        self.realtime = False
-        self.dead = ""
-        self._moves: dict[int, MoveHandle] = {}
-        self._kept: dict[str, str] = {}  # run id: segment of a run not saved, for the next start
-        self._ids = itertools.count(1)
-        self._outgoing: queue.Queue[Command] = queue.Queue(OUTGOING)
-        self._closing = threading.Event()
-        self._stopping = False
-        self._manual = [0.0] * self.machine.n_joints  # the duties jog_joint keeps for the others
-        self._latched = False  # an E-stop sent or reported, until the controller releases it
-        self.coefficients = {"hold": self.machine.hold, "track": self.machine.track}
-        # what the gain check said of each set in use, saved with every run (control.identify.gains)
-        self.coefficient_checks: dict[str, dict[str, object]] = {
-            which: {"passed": None, "summary": "the machine file's set, applied at start"}
-            for which in self.coefficients}
-        self._models: tuple[DeadbandModel | None, ...] = (None,) * self.machine.n_joints
         # runs a dead process left unsaved first, then the clean-up (control/recovery.py)
         notices = recover_runs(self.data_dir) + shm.cleanup_orphans()[1]
-        self.layout = ControlLayout(self.machine.n_joints)
-        self._segment = shm.create(f"ctl{next(_SESSIONS)}", self.layout.size,
-                                   "the controller's status")
-        buf = self._segment.buf
-        self.layout.write_header(buf)
-        self._words = self.layout.client_words(buf)
+        self._open_segment(shm.create(f"ctl{next(_SESSIONS)}", self.layout.size,
+                                      "the controller's status"))
+        self.layout.write_header(self._segment.buf)
         self._words[HEARTBEAT_WORD] = time.monotonic_ns()
-        self._status = SeqlockReader(buf, self.layout.status_offset, self.layout.status.struct)
-        self._coefficient_writers = {
-            which: SeqlockWriter(buf, self.layout.coefficient_offset(which),
-                                 self.layout.coefficients.struct) for which in ("hold", "track")}
         for which, c in self.coefficients.items():
             self._coefficient_writers[which].write(*self.layout.coefficients.encode(c))
         config = process.ProcessConfig(
@@ -242,6 +218,63 @@ class ControlClient:
             self._shutdown_process()
             self._release()
             raise
+        self._start_threads(notices)
+
+    @classmethod
+    def attach(cls, path: str | Path | None = None, *, name: str = "",
+               on_event: Callable[[Event], None] | None = None,
+               timeout_s: float = 5.0) -> ControlClient:
+        """A client of the controller that ``servodesk controller`` runs (``path``: its socket,
+        by default the one in the user's runtime directory), with this class's API. It
+        observes until ``take_command``; ``close`` detaches and leaves the controller running
+        (``control/attached.py``)."""
+        from control.attached import AttachedClient
+
+        return AttachedClient(path, name=name, on_event=on_event, timeout_s=timeout_s)
+
+    def _configure(self, machine: Machine, backend: str, data_dir: str | Path | None,
+                   timing: Timing | None, period_s: float | None,
+                   on_event: Callable[[Event], None] | None, *, lockstep: bool = False) -> None:
+        """The client's own state, whoever runs its controller."""
+        self.machine = machine
+        self.backend = backend
+        self.lockstep = lockstep
+        self.data_dir = Path(data_dir) if data_dir is not None else default_data_dir()
+        self.timing = timing or Timing()
+        self.dt = period_s or self.timing.sample_time_s(self.machine)  # between path rows
+        self.on_event = on_event
+        self.events: queue.Queue[Event] = queue.Queue()
+        self.notice = ""
+        self.realtime = False
+        self.dead = ""
+        self.heartbeat_on = True  # this client's heartbeat thread writes the heartbeat word
+        self._moves: dict[int, MoveHandle] = {}
+        self._kept: dict[str, str] = {}  # run id: segment of a run not saved, for the next start
+        self._ids = itertools.count(1)
+        self._outgoing: queue.Queue[Command] = queue.Queue(OUTGOING)
+        self._closing = threading.Event()
+        self._stopping = False
+        self._manual = [0.0] * self.machine.n_joints  # the duties jog_joint keeps for the others
+        self._latched = False  # an E-stop sent or reported, until the controller releases it
+        self.coefficients = {"hold": self.machine.hold, "track": self.machine.track}
+        # what the gain check said of each set in use, saved with every run (control.identify.gains)
+        self.coefficient_checks: dict[str, dict[str, object]] = {
+            which: {"passed": None, "summary": "the machine file's set, applied at start"}
+            for which in self.coefficients}
+        self._models: tuple[DeadbandModel | None, ...] = (None,) * self.machine.n_joints
+        self.layout = ControlLayout(self.machine.n_joints)
+
+    def _open_segment(self, segment: object) -> None:
+        """Views of the control segment: the client's words, the status, the coefficient sets."""
+        self._segment = segment
+        buf = segment.buf  # type: ignore[attr-defined]
+        self._words = self.layout.client_words(buf)
+        self._status = SeqlockReader(buf, self.layout.status_offset, self.layout.status.struct)
+        self._coefficient_writers = {
+            which: SeqlockWriter(buf, self.layout.coefficient_offset(which),
+                                 self.layout.coefficients.struct) for which in ("hold", "track")}
+
+    def _start_threads(self, notices: Sequence[str]) -> None:
         self._monitor = threading.Thread(target=self._watch, name="servodesk-events",
                                          daemon=True)
         self._heart = threading.Thread(target=self._beat, name="servodesk-heartbeat",
@@ -263,23 +296,30 @@ class ControlClient:
 
     @property
     def pid(self) -> int:
+        """The control process's id."""
         return self._process.pid
 
     @property
     def alive(self) -> bool:
         return self._process.poll() is None
 
+    def _exited(self) -> str:
+        """Why the controller is gone, or "" while it runs (the monitor thread asks)."""
+        code = self._process.poll()
+        return "" if code is None else f"the control process exited (code {code})"
+
+    def _may_send(self, command: Command) -> None:
+        """Raise ``ControllerError`` with the reason if this client may not send ``command``:
+        the client that started its controller may send anything."""
+
     def close(self) -> None:
         """Stop the controller (valves closed), save what it finished, unlink every segment.
         A controller that does not stop within ``CLOSE_WAIT_S`` (frozen, flooded) is killed."""
         if self._closing.is_set():
             return
-        self._stopping = True
         if not self.dead:
-            with contextlib.suppress(ControllerError):
-                self._send(Shutdown())
-            with contextlib.suppress(subprocess.TimeoutExpired):
-                self._process.wait(timeout=CLOSE_WAIT_S)
+            self._stop_controller()
+        self._stopping = True
         self._closing.set()
         self._shutdown_process()
         for thread in (self._monitor, self._heart, self._sender):
@@ -289,6 +329,14 @@ class ControlClient:
         for handle in list(self._moves.values()):
             self._finish(handle, "interrupted: client closed", None)
         self._release()
+
+    def _stop_controller(self) -> None:
+        """Ask the controller to stop and give it ``CLOSE_WAIT_S`` to do so."""
+        self._stopping = True
+        with contextlib.suppress(ControllerError):
+            self._send(Shutdown())
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            self._process.wait(timeout=CLOSE_WAIT_S)
 
     def _await_ready(self, timeout_s: float) -> None:
         deadline = time.monotonic() + timeout_s
@@ -340,10 +388,11 @@ class ControlClient:
         self._status.release()
         for writer in self._coefficient_writers.values():
             writer.release()
-        shm.release(self._segment, unlink=True)
+        shm.release(self._segment, unlink=self.OWNS_CONTROLLER)
         with contextlib.suppress(OSError):
             self._conn.close()
-        self._stderr.close()
+        if self.OWNS_CONTROLLER:
+            self._stderr.close()
 
     # -- the monitor thread: heartbeats out, events in, death noticed -------------------
 
@@ -351,7 +400,8 @@ class ControlClient:
         """Heartbeats on their own thread, written into shared memory (no channel to fill), so
         saving a run, a busy UI or a frozen controller never silences or blocks them."""
         while not (self.dead or self._stopping):
-            self._words[HEARTBEAT_WORD] = time.monotonic_ns()  # the first at once: see Ready
+            if self.heartbeat_on:  # the first at once: see Ready
+                self._words[HEARTBEAT_WORD] = time.monotonic_ns()
             if self._closing.wait(HEARTBEAT_S):
                 return
 
@@ -374,12 +424,12 @@ class ControlClient:
                 if self._conn.poll(0.01):
                     self._dispatch(Event(self._conn.recv()))
             except (EOFError, OSError):
-                self._died("the control process closed its channel")
+                self._died(self.CHANNEL_CLOSED)
             # poll on every pass, after the death too: it reaps an exited controller at once
             # rather than leaving a zombie until close()
-            exited = self._process.poll() is not None
+            exited = self._exited()
             if exited and not self.dead:
-                self._died(f"the control process exited (code {self._process.returncode})")
+                self._died(exited)
             if self.dead:
                 self._closing.wait(0.05)
 
@@ -392,7 +442,7 @@ class ControlClient:
         if self.dead or self._stopping:
             return
         self.dead = (f"controller died: {why}. The valves are closed by the I/O board's "
-                     "watchdog; restart servodesk to continue")
+                     f"watchdog; {self.RESTART}")
         for handle in list(self._moves.values()):
             self._finish(handle, "interrupted: controller died", None)
         self._dispatch(Event(Died(self.dead)))
@@ -462,6 +512,7 @@ class ControlClient:
         dead or has not taken the last ``OUTGOING`` commands (frozen or flooded)."""
         if self.dead:
             raise ControllerError(self.dead)
+        self._may_send(command)
         try:
             self._outgoing.put_nowait(command)
         except queue.Full:
@@ -472,6 +523,11 @@ class ControlClient:
         """The controller left manual actuation (E-stop, hold, a move): a later ``jog_joint``
         starts from zero duty on every other joint, never from duties set before."""
         self._manual = [0.0] * self.machine.n_joints
+
+    def send(self, command: Command) -> None:
+        """Queue a typed command (``control.commands``) as it is: the controller checks it
+        (a controller service relays its clients' commands this way)."""
+        self._send(command)
 
     def hold(self) -> None:
         """Abort any move and hold every joint where it is (the thesis's default mode)."""
@@ -562,6 +618,7 @@ class ControlClient:
         from control.identify import gains  # scipy: loaded on first use, never by the controller
 
         command = SetCoefficients(which)
+        self._may_send(command)  # before the set is written where the controller reads it
         if override is not None and (not isinstance(override, str) or not override.strip()):
             raise ValueError(f"override needs the reason as a non-empty string, got {override!r}")
         known = self._known_models(models)
@@ -667,7 +724,7 @@ class ControlClient:
         whoever outlives the move, into a new move segment; then StartMove."""
         kind, path, profile = plan.kind, plan.path, plan.profile
         samples = len(path if path is not None else profile)
-        meta = segment_meta(self.machine, kind, self.dt, self.data_dir, self._process.pid, {
+        meta = segment_meta(self.machine, kind, self.dt, self.data_dir, self.pid, {
             "backend": self.backend, "timing": self.timing.describe(self.machine),
             "coefficients": {k: {**coefficients_record(c), "check": self.coefficient_checks[k]}
                              for k, c in self.coefficients.items()},
@@ -718,6 +775,11 @@ class ControlClient:
             if self.dead or not self.alive:
                 raise ControllerError(self.dead or "the control process has exited") from None
             raise
+
+    @property
+    def heartbeat_ns(self) -> int:
+        """The heartbeat word as last written (monotonic ns), by whichever client beats."""
+        return self._words[HEARTBEAT_WORD]
 
     @property
     def segment_name(self) -> str:

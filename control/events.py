@@ -159,3 +159,17 @@ class Died(ControllerEvent):
 
     KIND: ClassVar[str] = "died"
     message: str
+
+
+@dataclass(frozen=True)
+class Commander(ControllerEvent):
+    """Who holds command of a controller service ("" nobody) and why that changed
+    (``control/service.py``): sent to every attached client."""
+
+    KIND: ClassVar[str] = "commander"
+    holder: str
+    reason: str
+
+    @property
+    def message(self) -> str:
+        return self.reason

@@ -35,6 +35,7 @@ class Link:
     state: str = "starting"  # starting, live, dead, failed
     reason: str = ""
     estop_sent: bool = False
+    command: str = ""  # attached to a controller service: "commanding", or who holds command
 
 
 class EStopLamp(LiveText):
@@ -191,6 +192,10 @@ class StatusHeader(Horizontal):
             text.append(f"  feed {status.feed_override:.0%}", "bold yellow")
         if not status.homed:
             text.append("   NOT INITIALISED", "bold yellow")
+        if link.command == "commanding":
+            text.append("   COMMANDING", "bold green")
+        elif link.command:
+            text.append(f"   {link.command}", "bold magenta")
         return text
 
     def _loop(self, status: Status | None) -> Text:
