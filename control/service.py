@@ -96,8 +96,9 @@ class ControllerService:
         self._commander_beat = (0, 0.0)  # the heartbeat word as last seen changing, and when
         self._numbers = itertools.count(1)
         self._moves: dict[int, tuple[Peer, str]] = {}  # move id: its client, its segment
+        self._claim()
+        self._key = rendezvous.new_key(self.socket_path)  # first: who sees the socket can log in
         self._socket = self._listen()
-        self._key = rendezvous.new_key(self.socket_path)
         client.on_event = self._from_controller
         self._threads = [threading.Thread(target=self._accept, name="service-accept", daemon=True),
                          threading.Thread(target=self._watch_commander, name="service-watch",
@@ -105,8 +106,9 @@ class ControllerService:
         for thread in self._threads:
             thread.start()
 
-    def _listen(self) -> socket.socket:
-        """Bind the socket owner-only (created 0600 under a 0700 directory)."""
+    def _claim(self) -> None:
+        """The socket's directory, private; refused if a service listens there already (a
+        socket file no one listens on is a dead service's: removed)."""
         rendezvous.private_dir(self.socket_path.parent)
         if self.socket_path.exists():
             with contextlib.suppress(ConnectionError, OSError), \
@@ -115,6 +117,9 @@ class ControllerService:
                 raise RuntimeError(f"a controller service already listens on {self.socket_path}: "
                                    "attach to it (servodesk --attach) or stop it first")
             self.socket_path.unlink()
+
+    def _listen(self) -> socket.socket:
+        """Bind the socket owner-only (created 0600 in the 0700 directory)."""
         sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         old = os.umask(0o177)
         try:

@@ -23,9 +23,12 @@ import contextlib
 import json
 import os
 import select
+import shutil
 import signal
 import subprocess
 import sys
+import tempfile
+import time
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
@@ -54,11 +57,14 @@ SLOW_PATHS = (
     "tests/control/test_feed.py",      # feed override and hold on the control subprocess
     "tests/control/test_client_cartesian_jog.py",  # Cartesian jogs on it
     "tests/control/test_process.py",   # the control subprocess's imports
+    "tests/control/test_service.py",   # servodesk controller and clients attached to it
+    "tests/app/test_tui_attach.py",    # TUIs attached to servodesk controller
 )
 # Fixtures that start one, with the file that defines them (they are visible in its folder
 # when it is a conftest.py, in that file alone otherwise).
 SLOW_FIXTURES = {
     "emulator": "tests/conftest.py",                   # servodesk emulate
+    "controller_service": "tests/conftest.py",         # servodesk controller
     "controller": "tests/faults/conftest.py",          # ControlClient
     "tui": "tests/app/conftest.py",                    # the TUI under Pilot, and its controller
     "lockstep": "tests/control/conftest.py",           # ControlClient, lockstep
@@ -211,6 +217,62 @@ def emulator(tmp_path: Path) -> Iterator[Callable[..., EmulatorProcess]]:
     yield start
     for process in started:
         process.kill()
+
+
+# -- the controller as a service -------------------------------------------------------------
+
+SERVICE_START_S = 60.0
+
+
+class ServiceProcess:
+    """``servodesk controller`` in a private runtime directory (short: a socket's path has at
+    most 107 bytes), saving runs in ``data_dir``; ``socket`` appears when it is ready."""
+
+    def __init__(self, tmp_path: Path, *args: str) -> None:
+        self.runtime = Path(tempfile.mkdtemp(prefix="sd-"))
+        self.socket = self.runtime / "servodesk" / "controller.sock"
+        self.data_dir = tmp_path / "runs"
+        self.log = tmp_path / "controller.log"
+        env = {**os.environ, "PYTHONPATH": str(ROOT), "XDG_RUNTIME_DIR": str(self.runtime)}
+        with self.log.open("wb") as err:
+            self.proc = subprocess.Popen(
+                [sys.executable, "-m", "app", "controller", "--data-dir", str(self.data_dir),
+                 *args], cwd=ROOT, env=env, stdin=subprocess.DEVNULL,
+                stdout=subprocess.DEVNULL, stderr=err)
+        self.started_s = self.wait_ready()
+
+    def wait_ready(self) -> float:
+        """Wait for the socket (not for a time); how long it took."""
+        start = time.monotonic()
+        while not self.socket.exists():
+            if self.proc.poll() is not None or time.monotonic() - start > SERVICE_START_S:
+                self.kill()
+                raise RuntimeError(f"servodesk controller did not start: {self.log.read_text()}")
+            time.sleep(0.01)
+        return time.monotonic() - start
+
+    def stop(self) -> int:
+        """SIGTERM; its exit code."""
+        self.proc.send_signal(signal.SIGTERM)
+        try:
+            return self.proc.wait(timeout=30)
+        finally:
+            self.kill()
+
+    def kill(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait(timeout=30)
+        shutil.rmtree(self.runtime, ignore_errors=True)
+
+
+@pytest.fixture
+def controller_service(tmp_path: Path) -> Iterator[ServiceProcess]:
+    """A running ``servodesk controller`` (a 2 s heartbeat allowance: a loaded two-core
+    machine can pause a client's heartbeat thread); stopped at teardown."""
+    service = ServiceProcess(tmp_path, "--heartbeat-timeout", "2", "--release-after", "3")
+    yield service
+    service.kill()
 
 
 # -- files that are no machine description ---------------------------------------------------
