@@ -1,0 +1,54 @@
+"""``servodesk --attach``: two TUIs on one ``servodesk controller``. One takes command (^K),
+the other's header says who holds it and its jog is refused with the reason; command is
+handed over with ^O and ^K."""
+
+from __future__ import annotations
+
+import asyncio
+
+from app.tui import attached_app
+from app.widgets.live_text import LiveText
+from control.layout import Mode
+from tests.app.test_tui_tabs import notifications
+
+SIZE = (160, 48)
+
+
+def test_two_attached_tuis_one_commands_the_other_observes(controller_service, tui) -> None:
+    async def scenario() -> None:
+        first = attached_app(controller_service.socket)
+        second = attached_app(controller_service.socket)
+        async with first.run_test(size=SIZE) as one, second.run_test(size=SIZE) as two:
+            await tui.ready(first, one)
+            await tui.ready(second, two)
+            headers = [app.query_one("#header-health", LiveText) for app in (first, second)]
+            await tui.until(lambda: "observing: nobody holds command" in headers[1].text,
+                            what="the observer's header")
+            tui.post_key(first, "ctrl+k")
+            await tui.until(lambda: "COMMANDING" in headers[0].text, what="the commander's header")
+            name = first.client.name
+            await tui.until(lambda: f"observing: command is held by {name}" in headers[1].text,
+                            what="the observer's header naming the commander")
+            refused = notifications(second)
+            tui.post_key(second, "a")  # a jog key on the Jog tab
+            await tui.until(lambda: any(f"command is held by {name}; take it first" in text
+                                        for text in refused), what="the observer's refusal")
+            assert first.client.status().mode == Mode.HOLD  # nothing reached the controller
+            tui.post_key(first, "a")
+            await tui.until(lambda: first.client.status().mode == Mode.MANUAL_ACTUATE
+                            and first.client.status().duty[0] > 0, what="the commander's jog")
+            tui.post_key(first, "space")
+            await tui.until(lambda: not any(first.client.status().duty), what="the jog stopped")
+            tui.post_key(second, "ctrl+k")  # refused: the first holds command
+            await tui.until(lambda: any("holds command; it must release it first" in text
+                                        for text in refused), what="the take refused")
+            tui.post_key(first, "ctrl+o")
+            await tui.until(lambda: "observing: nobody holds command" in headers[0].text,
+                            what="the release in the first header")
+            tui.post_key(second, "ctrl+k")
+            await tui.until(lambda: "COMMANDING" in headers[1].text, what="the hand-over")
+            await tui.until(lambda: f"held by {second.client.name}" in headers[0].text,
+                            what="the first header naming the new commander")
+        assert controller_service.proc.poll() is None  # both TUIs gone, the controller runs on
+
+    asyncio.run(scenario())
