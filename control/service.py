@@ -304,6 +304,7 @@ class ControllerService:
     def _watch_commander(self) -> None:
         """A commander whose heartbeat stops for ``release_after_s`` loses command."""
         while not self.stopped.wait(POLL_S):
+            self.client.poll_events()  # broadcast already; the queue must not grow for ever
             with self._lock:
                 holder = self._holder
                 if holder is None:
