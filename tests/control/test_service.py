@@ -150,6 +150,35 @@ def test_the_commander_killed_mid_move_leaves_a_holding_controller_another_can_t
                    shm.leftover_segments())  # the dead client's move segment was saved, unlinked
 
 
+def test_a_silent_commander_loses_command_and_the_controller_holds_and_runs_on(
+        controller_service) -> None:
+    silent = ControlClient.attach(controller_service.socket, name="silent")
+    watcher = ControlClient.attach(controller_service.socket, name="watcher")
+    try:
+        silent.take_command()
+        silent.jog([20.0, 0, 0, 0, 0, 0])
+        until(lambda: watcher.status().mode == Mode.MANUAL_ACTUATE, what="the jog")
+        silent.heartbeat_on = False  # frozen: its socket stays open, its heartbeat stops
+        lost = watcher.wait_event("fault", timeout=10, match=lambda e: e.payload["kind"] ==
+                                  "ui_lost")
+        assert "holding position" in lost.message
+        assert watcher.status().mode == Mode.HOLD
+        released = watcher.wait_event("commander", timeout=10,
+                                      match=lambda e: e.payload["holder"] == "")
+        assert released.message == (f"{silent.name} silent for 3 s: command released, the "
+                                    "controller holds")
+        tick = watcher.status().tick
+        until(lambda: watcher.status().tick > tick + 100, what="the controller to keep ticking")
+        with pytest.raises(NotCommanding, match="nobody holds command"):
+            silent.jog([20.0, 0, 0, 0, 0, 0])
+        watcher.take_command()
+        watcher.hold()
+    finally:
+        silent.close()
+        watcher.close()
+    assert controller_service.proc.poll() is None
+
+
 def test_the_socket_is_the_owners_alone_and_a_wrong_key_is_refused(controller_service) -> None:
     socket_path = controller_service.socket
     assert stat.S_IMODE(os.stat(socket_path.parent).st_mode) == 0o700
