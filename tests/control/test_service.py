@@ -97,7 +97,7 @@ def test_an_estop_from_an_observer_latches(controller_service) -> None:
             observer.reset()  # releasing the latch is the commander's
         commander.wait_event("estop", match=lambda e: e.payload["latched"])
         commander.reset()
-        until(lambda: not commander.status().estop, timeout=5, what="the commander's release")
+        commander.wait_event("estop", timeout=5, match=lambda e: not e.payload["latched"])
     finally:
         commander.close()
         observer.close()
