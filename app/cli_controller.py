@@ -79,9 +79,9 @@ def run(args: argparse.Namespace) -> int:
         client.close()
         print(f"servodesk controller: {exc}", file=sys.stderr)
         return 2
-    log.info("listening on %s: %s, %s backend, controller pid %d, ready in %.2f s; %s",
+    log.info("listening on %s: %s, %s backend, controller pid %d, ready in %.2f s%s",
              service.socket_path, client.machine.title, client.backend, client.pid,
-             time.monotonic() - started, client.notice)
+             time.monotonic() - started, f"; {client.notice}" if client.notice else "")
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: service.stopped.set())
     while not service.stopped.wait(0.5):
