@@ -26,6 +26,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from multiprocessing.connection import Connection
+from multiprocessing.shared_memory import SharedMemory
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -195,7 +196,7 @@ class ControlClient:
         self.layout.write_header(self._segment.buf)
         self._words[HEARTBEAT_WORD] = time.monotonic_ns()
         for which, c in self.coefficients.items():
-            self._coefficient_writers[which].write(*self.layout.coefficients.encode(c))
+            self._write_coefficients(which, self.layout.coefficients.encode(c))
         config = process.ProcessConfig(
             machine=str(self.machine.path), backend=backend, port=port, seed=seed,
             lockstep=lockstep, control_segment=self._segment.name, period_s=self.dt / slots,
@@ -264,15 +265,23 @@ class ControlClient:
         self._models: tuple[DeadbandModel | None, ...] = (None,) * self.machine.n_joints
         self.layout = ControlLayout(self.machine.n_joints)
 
-    def _open_segment(self, segment: object) -> None:
-        """Views of the control segment: the client's words, the status, the coefficient sets."""
+    def _open_segment(self, segment: SharedMemory) -> None:
+        """Views of the control segment: the client's words and the status."""
         self._segment = segment
-        buf = segment.buf  # type: ignore[attr-defined]
+        buf = segment.buf
         self._words = self.layout.client_words(buf)
         self._status = SeqlockReader(buf, self.layout.status_offset, self.layout.status.struct)
-        self._coefficient_writers = {
-            which: SeqlockWriter(buf, self.layout.coefficient_offset(which),
-                                 self.layout.coefficients.struct) for which in ("hold", "track")}
+
+    def _write_coefficients(self, which: str, values: tuple) -> None:
+        """Write a packed set where the controller reads it on ``SetCoefficients``. The writer
+        takes the seqlock's count as it is now: under a controller service another client may
+        have written the set since this one attached."""
+        writer = SeqlockWriter(self._segment.buf, self.layout.coefficient_offset(which),
+                               self.layout.coefficients.struct)
+        try:
+            writer.write(*values)
+        finally:
+            writer.release()
 
     def _start_threads(self, notices: Sequence[str]) -> None:
         self._monitor = threading.Thread(target=self._watch, name="servodesk-events",
@@ -386,8 +395,6 @@ class ControlClient:
     def _release(self) -> None:
         self._words.release()
         self._status.release()
-        for writer in self._coefficient_writers.values():
-            writer.release()
         shm.release(self._segment, unlink=self.OWNS_CONTROLLER)
         with contextlib.suppress(OSError):
             self._conn.close()
@@ -624,8 +631,7 @@ class ControlClient:
         known = self._known_models(models)
         check = (gains.assess if override is not None else gains.check)(
             coefficients, self.machine, known, self.dt)
-        encoded = self.layout.coefficients.encode(coefficients)
-        self._coefficient_writers[which].write(*encoded)
+        self._write_coefficients(which, self.layout.coefficients.encode(coefficients))
         self.coefficients[which] = coefficients
         self.coefficient_checks[which] = check.record(override)
         self._models = known

@@ -13,6 +13,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable
+from dataclasses import replace
 from multiprocessing.connection import AuthenticationError, Client
 from pathlib import Path
 
@@ -177,6 +178,28 @@ def test_a_silent_commander_loses_command_and_the_controller_holds_and_runs_on(
         silent.close()
         watcher.close()
     assert controller_service.proc.poll() is None
+
+
+def test_a_set_the_commander_gives_is_the_one_a_later_client_sees(controller_service) -> None:
+    commander = ControlClient.attach(controller_service.socket, name="tuner")
+    try:
+        commander.take_command()
+        hold = commander.machine.hold
+        softer = replace(hold, duty_limit=hold.duty_limit * 0.9)
+        assert commander.set_coefficients("hold", softer).ok
+        later = ControlClient.attach(controller_service.socket, name="later")
+        try:
+            assert later.coefficients["hold"].duty_limit == softer.duty_limit
+            assert later.coefficients["track"] is later.machine.track  # untouched: by its name
+            with pytest.raises(NotCommanding, match="take it first"):
+                later.set_coefficients("hold", hold)  # refused before it is written
+            again = ControlClient.attach(controller_service.socket, name="again")
+            assert again.coefficients["hold"].duty_limit == softer.duty_limit
+            again.close()
+        finally:
+            later.close()
+    finally:
+        commander.close()
 
 
 def test_the_socket_is_the_owners_alone_and_a_wrong_key_is_refused(controller_service) -> None:
