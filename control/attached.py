@@ -16,6 +16,7 @@ import os
 import queue
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 from control import rendezvous, shm
@@ -35,12 +36,15 @@ class NotCommanding(ControllerError):
 
 
 class AttachedClient(ControlClient):
+    """``ControlClient`` on a controller service's socket: observes until ``take_command``."""
+
     OWNS_CONTROLLER = False
     RESTART = "start `servodesk controller` again, then attach"
     CHANNEL_CLOSED = "the controller service closed its connection (stopped or killed)"
 
     def __init__(self, path: str | Path | None = None, *, name: str = "",
-                 on_event: object = None, timeout_s: float = 5.0) -> None:
+                 on_event: Callable[[Event], None] | None = None,
+                 timeout_s: float = 5.0) -> None:
         conn = rendezvous.connect(path)
         try:
             conn.send(rendezvous.Join(name or Path(sys.argv[0]).name or "python", os.getpid()))
@@ -56,7 +60,7 @@ class AttachedClient(ControlClient):
             raise ControllerError(f"the controller service answered {hello!r}, not a hello")
         timing = Timing(hello.timing, hello.interrupt_ms, tuple(hello.slips))
         self._configure(load_machine(hello.machine), hello.backend, hello.data_dir, timing,
-                        hello.dt, on_event)  # type: ignore[arg-type]
+                        hello.dt, on_event)
         self.port = hello.port
         self.name = hello.client
         self.holder = hello.holder
@@ -110,16 +114,18 @@ class AttachedClient(ControlClient):
         """Give command back: the controller holds every joint; another client may take it."""
         self._ask(rendezvous.ReleaseCommand(), RELEASE, lambda: not self.commanding, timeout_s)
 
-    def _ask(self, request: object, what: str, granted: object, timeout_s: float) -> None:
+    def _ask(self, request: object, what: str, granted: Callable[[], bool],
+             timeout_s: float) -> None:
+        """Send ``request`` and wait until ``granted()`` or the service refuses ``what``."""
         self.check()
-        with_answers = self._answers
-        while not with_answers.empty():
-            with_answers.get_nowait()
+        answers = self._answers
+        while not answers.empty():  # answers to earlier requests
+            answers.get_nowait()
         self._outgoing.put(request)  # type: ignore[arg-type]
         deadline = time.monotonic() + timeout_s
-        while not granted():  # type: ignore[operator]
+        while not granted():
             try:
-                answer = with_answers.get(timeout=max(deadline - time.monotonic(), 0.0))
+                answer = answers.get(timeout=max(deadline - time.monotonic(), 0.0))
             except queue.Empty:
                 raise ControllerError(f"{what}: no answer from the controller service within "
                                       f"{timeout_s:g} s") from None

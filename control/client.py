@@ -85,6 +85,7 @@ from control.timing import Timing
 from hw.machine import Coefficients, Machine, load_machine
 
 if TYPE_CHECKING:
+    from control.attached import AttachedClient
     from control.identify.gains import GainCheck
     from control.identify.sysid import DeadbandModel
 
@@ -224,12 +225,12 @@ class ControlClient:
     @classmethod
     def attach(cls, path: str | Path | None = None, *, name: str = "",
                on_event: Callable[[Event], None] | None = None,
-               timeout_s: float = 5.0) -> ControlClient:
+               timeout_s: float = 5.0) -> AttachedClient:
         """A client of the controller that ``servodesk controller`` runs (``path``: its socket,
         by default the one in the user's runtime directory), with this class's API. It
         observes until ``take_command``; ``close`` detaches and leaves the controller running
         (``control/attached.py``)."""
-        from control.attached import AttachedClient
+        from control.attached import AttachedClient  # here: it imports this module
 
         return AttachedClient(path, name=name, on_event=on_event, timeout_s=timeout_s)
 
