@@ -19,6 +19,9 @@ from hw.backend import Backend
 from hw.machine import Machine
 from hw.transmission import Transmission
 
+SETTLE_READS = 50  # readings after a resync in which a wrong first belief is corrected
+AGREE_READS = 3  # rejected readings in a row that agree, to replace that belief
+
 
 class EncoderInput:
     """Inputs: the backend's words and sample time. Outputs: ``position`` (joint units),
@@ -43,6 +46,12 @@ class EncoderInput:
         self.glitches = [0] * n
         self.rejects = [0] * n
         self.believe = [True] * n  # the first reading is believed
+        # ... but it may be a wrong reading (section 6.2): for SETTLE_READS readings after,
+        # AGREE_READS rejected readings in a row that agree with each other replace it
+        self.settling = [SETTLE_READS] * n
+        self.agree = [0] * n  # rejected readings in a row that agree with each other
+        self.last_reject = [0.0] * n
+        self.last_reject_ns = [0] * n
         self.last_ok_ns = [0] * n
         self.speed_per_ns = [j.max_speed * 1e-9 * margin for j in machine.joints]
         self.step_floor = [3 * abs(j.encoder.gradient) for j in machine.joints]  # 3 counts
@@ -56,10 +65,13 @@ class EncoderInput:
         now = backend.sample_ns  # a late serial reply re-reads old words: time them so
         self.transmission.actuators_from_words(raw, self.offset, reading)
         rejects, last_ok, believe = self.rejects, self.last_ok_ns, self.believe
-        speed, floor = self.speed_per_ns, self.step_floor
+        speed, floor, settling = self.speed_per_ns, self.step_floor, self.settling
         for j in range(self.n) if joints is None else joints:
             a = reading[j]
-            if abs(a - actuator[j]) <= speed[j] * (now - last_ok[j]) + floor[j] or believe[j]:
+            if settling[j]:
+                settling[j] -= 1
+            if (abs(a - actuator[j]) <= speed[j] * (now - last_ok[j]) + floor[j] or believe[j]
+                    or self.believed_wrong(j, a, now)):
                 actuator[j] = a
                 last_ok[j] = now
                 rejects[j] = 0
@@ -70,12 +82,25 @@ class EncoderInput:
             else:
                 rejects[j] += 1
                 self.glitches[j] += 1
+                self.last_reject[j], self.last_reject_ns[j] = a, now
                 if rejects[j] >= self.glitch_limit:
                     self.implausible(j, f"read {rejects[j]} jumps in a row (to "
                                         f"{a:.2f}{self.joints[j].symbol} from "
                                         f"{actuator[j]:.2f}{self.joints[j].symbol}), more than "
                                         "it can move: a stuck bit or a bad cable")
         self.transmission.joints_from_actuators(actuator, self.position)
+
+    def believed_wrong(self, j: int, a: float, now: int) -> bool:
+        """Just after a resync: whether reading ``a``, rejected against the belief, agrees with
+        the readings rejected just before it (``AGREE_READS`` in a row), so that it was the
+        one reading believed outright that was wrong. Past the settling readings, readings
+        that agree against the belief are a stuck bit or a bad cable: a feedback fault."""
+        if not self.settling[j] or not self.rejects[j]:
+            self.agree[j] = 0
+            return False
+        near = self.speed_per_ns[j] * (now - self.last_reject_ns[j]) + self.step_floor[j]
+        self.agree[j] = self.agree[j] + 1 if abs(a - self.last_reject[j]) <= near else 0
+        return self.agree[j] + 1 >= AGREE_READS
 
     def implausible(self, j: int, what: str) -> None:
         """Record the first feedback fault: the controller latches the E-stop on it."""
@@ -87,6 +112,7 @@ class EncoderInput:
         """Believe the next reading outright (the joints may have moved while nobody watched)
         and forget a feedback fault; the reading is judged again."""
         self.believe = [True] * self.n
+        self.settling = [SETTLE_READS] * self.n
         self.rejects = [0] * self.n
         self.fault, self.fault_joint = "", -1
         self.read(backend)
