@@ -33,6 +33,7 @@ from control.recorder import Run
 from control.timing import Timing
 from hw.machine import load_machine
 from hw.sim.valve import quantise_duty
+from hw.transmission import valve_duty
 
 RIG = load_machine("rig")
 UNIMATE = load_machine("unimate2000b")
@@ -128,24 +129,19 @@ def figure_3_2(out: Path, data: Path, quick: bool) -> Section:
 
 
 def _steady_speed(robot: ControlClient, duty: float, start: float) -> tuple[float, float]:
-    """The PWM the UPP card puts out (%: after the controller's down-scaling of section 3.6,
-    in whole 1 % steps) and the speed (mm/s) it gives at ``duty`` %, from ``start`` mm, over
-    the stroke's middle 180 mm."""
+    """The PWM the UPP card puts out (%: the valve duty after the controller's down-scaling of
+    section 3.6, in whole 1 % steps) and the speed (mm/s) it gives at ``duty`` %, from
+    ``start`` mm: a recorded open-loop run (tracking_actuate), fitted over the 60-240 mm of
+    the stroke after its start."""
     done = robot.wait(robot.go_to([start], speed=0.8), timeout=120)
     assert done.complete, done.status
-    robot.jog([duty])
-    travel = []
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline:
-        s = robot.status()
-        travel.append((s.time_s, s.position[0], abs(s.valve[0])))
-        if abs(s.position[0] - start) > 250:
-            break
-    robot.hold()
-    t, q, pwm = np.array(travel).T
+    seconds = min(250.0 / (6.4 * abs(duty)), 10.0)  # 250 mm at eq. 3.1's speed, or less
+    profile = np.full((round(seconds / robot.dt), 1), float(duty))
+    run = robot.wait(robot.actuate(profile, meta={"figure": "3.2"}), timeout=300).run
+    q = run.actual[:, 0]
     middle = (np.abs(q - start) > 60) & (np.abs(q - start) < 240)
-    card = quantise_duty(float(np.median(pwm[middle])), RIG.valve_resolution_pct)
-    return card, float(np.polyfit(t[middle], q[middle], 1)[0])
+    card = quantise_duty(valve_duty(RIG.joints[0], duty), RIG.valve_resolution_pct)
+    return abs(card), float(np.polyfit(run.t[middle], q[middle], 1)[0])
 
 
 # -- Figures 3.7-3.10: the rig's PID steps --------------------------------------------------
