@@ -19,6 +19,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from textual.pilot import Pilot
 from textual.widgets import Input, OptionList
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -50,6 +51,18 @@ def save(app: ServodeskApp, name: str, folder: Path = OUT) -> None:
     folder.mkdir(parents=True, exist_ok=True)
     path = app.save_screenshot(filename=f"{name}.svg", path=str(folder))
     print(f"wrote {Path(path).relative_to(ROOT)}")
+
+
+async def latest_run(app: ServodeskApp, pilot: Pilot) -> None:
+    """The Runs tab with the newest run open on its Up/Down plot."""
+    await pilot.press("f6")
+    runs = app.query_one(RunsTab)
+    await wait_for(lambda: bool(runs.infos))
+    runs.open_latest()
+    await wait_for(lambda: runs.run is not None)
+    runs.view = runs.views().index("plotdata Up/Down")
+    runs.draw()
+    await pilot.pause(0.8)
 
 
 async def unimate(data_dir: str) -> None:
@@ -89,14 +102,7 @@ async def unimate(data_dir: str) -> None:
         await pilot.press("f5")
         await pilot.pause(0.8)
         save(app, "tuning")
-        await pilot.press("f6")
-        runs = app.query_one(RunsTab)
-        await wait_for(lambda: bool(runs.infos))
-        runs.open_latest()
-        await wait_for(lambda: runs.run is not None)
-        runs.view = runs.views().index("plotdata Up/Down")
-        runs.draw()
-        await pilot.pause(0.8)
+        await latest_run(app, pilot)
         save(app, "runs")
         await pilot.press("f7")
         await pilot.pause(1.0)
@@ -175,14 +181,7 @@ async def small(data_dir: str) -> None:
             await pilot.press(key)
             await pilot.pause(1.0)
             save(app, name, folder)
-        await pilot.press("f6")
-        runs = app.query_one(RunsTab)
-        await wait_for(lambda: bool(runs.infos))
-        runs.open_latest()
-        await wait_for(lambda: runs.run is not None)
-        runs.view = runs.views().index("plotdata Up/Down")
-        runs.draw()
-        await pilot.pause(0.8)
+        await latest_run(app, pilot)
         save(app, "runs", folder)
         for key, name in (("f7", "latency"), ("f8", "identify"), ("f9", "positions")):
             await pilot.press(key)

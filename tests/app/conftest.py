@@ -71,6 +71,19 @@ class Tui:
         return "\n".join(widget.render_line(y).text for y in range(widget.size.height))
 
     @staticmethod
+    def notifications(app: ServodeskApp) -> list[str]:
+        """Every message the app or a widget of it is asked to show from now on."""
+        seen: list[str] = []
+        show = app.notify
+
+        def notify(message: str, *args: object, **kwargs: object) -> None:
+            seen.append(str(message))
+            show(message, *args, **kwargs)
+
+        app.notify = notify  # Widget.notify calls the app's
+        return seen
+
+    @staticmethod
     def post_key(app: ServodeskApp, key: str) -> None:
         """Deliver a key the way the terminal driver does, without waiting for idle."""
         assert app._driver is not None

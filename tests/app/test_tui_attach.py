@@ -9,7 +9,6 @@ import asyncio
 from app.tui import attached_app
 from app.widgets.live_text import LiveText
 from control.layout import Mode
-from tests.app.test_tui_tabs import notifications
 
 SIZE = (160, 48)
 
@@ -29,7 +28,7 @@ def test_two_attached_tuis_one_commands_the_other_observes(controller_service, t
             name = first.client.name
             await tui.until(lambda: f"observing: command is held by {name}" in headers[1].text,
                             what="the observer's header naming the commander")
-            refused = notifications(second)
+            refused = tui.notifications(second)
             tui.post_key(second, "a")  # a jog key on the Jog tab
             await tui.until(lambda: any(f"command is held by {name}; take it first" in text
                                         for text in refused), what="the observer's refusal")

@@ -10,7 +10,6 @@ import re
 import numpy as np
 
 from app.tabs.jog import JogPad, JogTab
-from app.tui import ServodeskApp
 from app.widgets.live_text import LiveText
 from control.layout import Mode
 from control.motion.robot_model import unimate_model
@@ -19,18 +18,6 @@ from hw.machine import load_machine
 SIZE = (160, 48)
 MODEL = unimate_model(load_machine("unimate2000b"))
 
-
-def notifications(app: ServodeskApp) -> list[str]:
-    """Every message the app or a widget of it is asked to show from now on."""
-    seen: list[str] = []
-    show = app.notify
-
-    def notify(message: str, *args: object, **kwargs: object) -> None:
-        seen.append(str(message))
-        show(message, *args, **kwargs)
-
-    app.notify = notify  # Widget.notify calls the app's
-    return seen
 
 
 def test_world_frame_keys_step_the_tool_along_x_and_the_pose_is_shown(tui) -> None:
@@ -112,7 +99,7 @@ def test_a_step_into_the_wrist_singularity_is_refused_and_says_why(tui) -> None:
             before = await tui.ready(app, pilot)
             client = app.client
             assert 0.0 < before.position[4] < 5.0  # the simulator starts with Yaw near 0°
-            seen = notifications(app)
+            seen = tui.notifications(app)
             await pilot.press("w", "w", "9", "g")  # tool frame, β +5°: towards Yaw 0°
             await tui.until(lambda: any("wrist singularity" in m for m in seen), timeout=10,
                             what="the refusal naming the wrist singularity")
@@ -156,7 +143,7 @@ def test_the_rig_has_no_cartesian_mode_and_says_so(tui) -> None:
         app = tui.app("rig")
         async with app.run_test(size=SIZE) as pilot:
             await tui.ready(app, pilot)
-            seen = notifications(app)
+            seen = tui.notifications(app)
             await pilot.press("w")
             assert app.query_one(JogPad).frame == "joint"
             assert any("no Cartesian jog on this machine" in m for m in seen), seen

@@ -18,18 +18,6 @@ SIZE = (160, 48)
 OPEN = [30.0, -30.0, 30.0, -30.0, 30.0, -30.0]  # manual duties that open every valve
 
 
-def notifications(app: ServodeskApp) -> list[str]:
-    """Every message the app or a widget of it is asked to show from now on."""
-    seen: list[str] = []
-    show = app.notify
-
-    def notify(message: str, *args: object, **kwargs: object) -> None:
-        seen.append(str(message))
-        show(message, *args, **kwargs)
-
-    app.notify = notify  # Widget.notify calls the app's
-    return seen
-
 
 def command_cell(app: ServodeskApp, joint: int) -> str:
     """The Jog table's row of ``joint`` as shown."""
@@ -130,7 +118,7 @@ def test_an_estop_clears_the_jog_duties_and_keys_while_latched_do_nothing(tui) -
         async with app.run_test(size=SIZE) as pilot:
             await tui.ready(app, pilot)
             client = app.client
-            seen = notifications(app)
+            seen = tui.notifications(app)
             await pilot.press("5", "s")
             await tui.until(lambda: client.status().duty[1] == 5.0, what="Rotate at +5 %")
             await pilot.press("escape")

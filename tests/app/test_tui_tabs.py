@@ -117,18 +117,6 @@ def test_tuning_edits_apply_live_and_files_round_trip(tui, tmp_path: Path) -> No
     asyncio.run(scenario())
 
 
-def notifications(app) -> list[str]:
-    """Every message the app is asked to show from now on."""
-    seen: list[str] = []
-    show = app.notify
-
-    def notify(message: str, *args: object, **kwargs: object) -> None:
-        seen.append(str(message))
-        show(message, *args, **kwargs)
-
-    app.notify = notify
-    return seen
-
 
 def test_a_set_the_gain_check_refuses_is_shown_and_applies_nothing(tui) -> None:
     """In/Out's kp edited to −20 in the track set: the client refuses it (issue 11's gain
@@ -137,7 +125,7 @@ def test_a_set_the_gain_check_refuses_is_shown_and_applies_nothing(tui) -> None:
         app = tui.app()
         async with app.run_test(size=SIZE) as pilot:
             await tui.ready(app, pilot)
-            seen = notifications(app)
+            seen = tui.notifications(app)
             await pilot.press("f5")
             table = app.query_one("#tuning-joints", DataTable)
             await tui.until(lambda: app.focused is table, what="the table focused")
@@ -164,7 +152,7 @@ def test_the_rigs_observer_preset_is_refused_with_the_reason(tui) -> None:
         app = tui.app("rig")
         async with app.run_test(size=SIZE) as pilot:
             await tui.ready(app, pilot)
-            seen = notifications(app)
+            seen = tui.notifications(app)
             await pilot.press("f5")
             await pilot.pause()
             app.query_one("#tuning-preset").value = "observer"
