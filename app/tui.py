@@ -391,6 +391,12 @@ class ServodeskApp(App[None]):
     def on_moves_tab_hold_requested(self, message: MovesTab.HoldRequested) -> None:
         self.action_hold()
 
+    def on_moves_tab_feed_requested(self, message: MovesTab.FeedRequested) -> None:
+        if message.steps:
+            self.action_feed(message.steps)
+        else:
+            self.action_feed_hold()
+
     def _freeze_long_lived(self) -> None:
         """Exempt the widgets and caches built so far from full garbage collections.
 

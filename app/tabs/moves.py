@@ -84,6 +84,9 @@ def forms_for(machine: Machine) -> list[type[MoveForm]]:
     return [*kinds, PathFileForm, ViaPointsForm]
 
 
+FEED_BUTTONS = {"feed-down": -1, "feed-hold": 0, "feed-up": 1}
+
+
 class MovesTab(TabPage):
     """Choose a move, fill it in, preview it, run it, read its result."""
 
@@ -92,6 +95,13 @@ class MovesTab(TabPage):
 
     class HoldRequested(Message):
         """Abort was pressed: abort the move and hold every joint where it is."""
+
+    @dataclass
+    class FeedRequested(Message):
+        """A feed button: the override down or up a tenth (``steps``), or (0) feed hold or
+        resume: the same as ctrl+↓, ctrl+↑ and ctrl+f on every tab."""
+
+        steps: int
 
     @dataclass
     class RunUnsaved(Message):
@@ -125,6 +135,11 @@ class MovesTab(TabPage):
                 with Horizontal(id="move-buttons"):
                     yield Button("Run ^S", id="move-run", variant="success", compact=True)
                     yield Button("Abort ^G", id="move-abort", variant="error", compact=True)
+                with Horizontal(id="move-feed"):
+                    yield Button("−", id="feed-down", compact=True, tooltip="feed −10 % (^↓)")
+                    yield Button("hold", id="feed-hold", compact=True,
+                                 tooltip="feed hold, or resume (^F)")
+                    yield Button("+", id="feed-up", compact=True, tooltip="feed +10 % (^↑)")
             with ContentSwitcher(id="move-forms", initial=f"form-{kinds[0].KIND}"):
                 for kind in kinds:
                     yield kind(self.machine, self.model)
@@ -263,6 +278,9 @@ class MovesTab(TabPage):
         elif event.button.id == "move-abort":
             event.stop()
             self.post_message(self.HoldRequested())
+        elif event.button.id in FEED_BUTTONS:
+            event.stop()
+            self.post_message(self.FeedRequested(FEED_BUTTONS[event.button.id]))
 
     def action_run(self) -> None:
         error = self.query_one("#move-error", Static)
@@ -341,6 +359,13 @@ class MovesTab(TabPage):
         for label, s in summaries:
             table.add_row(*summary_cells(label, s))
 
+    def _feed_label(self, paused: bool, override: float) -> None:
+        """The feed button says what it will do and, off 100 %, the override."""
+        label = "resume" if paused else ("hold" if override == 1.0 else f"{override:.0%}")
+        button = self.query_one("#feed-hold", Button)
+        if str(button.label) != label:
+            button.label = label
+
     def _state(self, text: Text) -> None:
         self.query_one("#move-state", LiveText).show(text)
 
@@ -348,6 +373,7 @@ class MovesTab(TabPage):
         status = self.status()
         if status is not None:
             self.form.here = tuple(status.position)  # the others get it when shown
+            self._feed_label(status.paused, status.feed_override)
         handle = self.handle
         if status is None or handle is None:
             return

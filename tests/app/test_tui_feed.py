@@ -49,3 +49,33 @@ def test_feed_keys_slow_hold_and_resume_a_running_move(tui) -> None:
             assert len(result.run.meta["pauses"]) == 1
 
     asyncio.run(scenario())
+
+
+def test_the_moves_tabs_feed_buttons_slow_hold_and_resume(tui) -> None:
+    async def scenario() -> None:
+        app = tui.app(lockstep=False)
+        async with app.run_test(size=SIZE) as pilot:
+            status = await tui.ready(app, pilot)
+            client = app.client
+            await pilot.press("f2")
+            start = np.array(status.position)
+            end = start.copy()
+            end[1] += 20.0
+            handle = client.move(moves.ramp(start, end, ramp_time=20.0, machine=UNIMATE),
+                                 kind="ramp")
+            await tui.until(lambda: client.status().move_done > 100, what="the ramp under way")
+            await pilot.click("#feed-down")
+            await tui.until(lambda: client.status().feed_override == 0.9, what="90 %")
+            button = app.query_one("#feed-hold")
+            await tui.until(lambda: str(button.label) == "90%", what="the button's 90%")
+            await pilot.click("#feed-hold")
+            await tui.until(lambda: client.status().paused, what="the feed hold")
+            await tui.until(lambda: str(button.label) == "resume", what="the button's resume")
+            await pilot.click("#feed-hold")
+            await tui.until(lambda: not client.status().paused, what="the resume")
+            await pilot.click("#feed-up")
+            await tui.until(lambda: client.status().feed_override == 1.0, what="100 %")
+            tui.post_key(app, "ctrl+g")
+            await asyncio.to_thread(client.wait, handle, 30)
+
+    asyncio.run(scenario())

@@ -27,7 +27,8 @@ BRAILLE = range(0x2801, 0x2900)
 # the widgets each tab is for (the Moves tab's preview and the Runs plot are checked drawn)
 ESSENTIAL = {
     "jog": ("#jog-table",),
-    "moves": ("#move-kinds", "#move-forms", "#move-run", "#move-abort", "#move-preview-title",
+    "moves": ("#move-kinds", "#move-forms", "#move-run", "#move-abort", "#feed-hold",
+              "#move-preview-title",
               "#move-preview", "#move-progress", "#move-state", "#move-result"),
     "scope": ("#scope-bar", *(f"#scope-joint-{j}" for j in range(6))),
     "status": ("#status-joints", "#status-pose", "#status-loop", "#status-link"),
@@ -38,6 +39,7 @@ ESSENTIAL = {
                  "#identify-model", "#identify-plot"),
     "positions": ("#positions-table", "#positions-speed", "#positions-here",
                   "#positions-state"),
+    "log": ("#log-file", "#log-table"),
 }
 
 
