@@ -19,8 +19,8 @@ from hw.backend import Backend
 from hw.machine import Machine
 from hw.transmission import Transmission
 
-SETTLE_READS = 50  # readings after a resync in which a wrong first belief is corrected
-AGREE_READS = 3  # rejected readings in a row that agree, to replace that belief
+AGREE_READS = 3  # rejected readings in a row that agree, to replace an unconfirmed belief
+SETTLE_READS = 8  # readings a resync takes at most to confirm every joint's belief
 
 
 class EncoderInput:
@@ -46,9 +46,9 @@ class EncoderInput:
         self.glitches = [0] * n
         self.rejects = [0] * n
         self.believe = [True] * n  # the first reading is believed
-        # ... but it may be a wrong reading (section 6.2): for SETTLE_READS readings after,
+        # ... but it may be a wrong reading (section 6.2): until a reading agrees with it,
         # AGREE_READS rejected readings in a row that agree with each other replace it
-        self.settling = [SETTLE_READS] * n
+        self.confirmed = [False] * n
         self.agree = [0] * n  # rejected readings in a row that agree with each other
         self.last_reject = [0.0] * n
         self.last_reject_ns = [0] * n
@@ -65,13 +65,12 @@ class EncoderInput:
         now = backend.sample_ns  # a late serial reply re-reads old words: time them so
         self.transmission.actuators_from_words(raw, self.offset, reading)
         rejects, last_ok, believe = self.rejects, self.last_ok_ns, self.believe
-        speed, floor, settling = self.speed_per_ns, self.step_floor, self.settling
+        speed, floor, confirmed = self.speed_per_ns, self.step_floor, self.confirmed
         for j in range(self.n) if joints is None else joints:
             a = reading[j]
-            if settling[j]:
-                settling[j] -= 1
-            if (abs(a - actuator[j]) <= speed[j] * (now - last_ok[j]) + floor[j] or believe[j]
-                    or self.believed_wrong(j, a, now)):
+            agrees = abs(a - actuator[j]) <= speed[j] * (now - last_ok[j]) + floor[j]
+            if agrees or believe[j] or self.believed_wrong(j, a, now):
+                confirmed[j] = agrees and not believe[j]
                 actuator[j] = a
                 last_ok[j] = now
                 rejects[j] = 0
@@ -91,11 +90,12 @@ class EncoderInput:
         self.transmission.joints_from_actuators(actuator, self.position)
 
     def believed_wrong(self, j: int, a: float, now: int) -> bool:
-        """Just after a resync: whether reading ``a``, rejected against the belief, agrees with
-        the readings rejected just before it (``AGREE_READS`` in a row), so that it was the
-        one reading believed outright that was wrong. Past the settling readings, readings
-        that agree against the belief are a stuck bit or a bad cable: a feedback fault."""
-        if not self.settling[j] or not self.rejects[j]:
+        """Whether reading ``a``, rejected against a belief no reading has confirmed yet (the
+        one believed outright at a resync), agrees with the readings rejected just before it
+        (``AGREE_READS`` in a row): then that one reading was the wrong one. Against a
+        confirmed belief, readings that agree with each other are a stuck bit or a bad
+        cable: a feedback fault."""
+        if self.confirmed[j] or not self.rejects[j]:
             self.agree[j] = 0
             return False
         near = self.speed_per_ns[j] * (now - self.last_reject_ns[j]) + self.step_floor[j]
@@ -108,14 +108,22 @@ class EncoderInput:
             self.fault_joint = j
             self.fault = f"feedback fault: {self.joints[j].name}'s encoder {what}"
 
-    def resync(self, backend: Backend) -> None:
-        """Believe the next reading outright (the joints may have moved while nobody watched)
-        and forget a feedback fault; the reading is judged again."""
+    def resync(self, backend: Backend, period_ns: int) -> None:
+        """Believe the readings anew (the joints may have moved while nobody watched) and
+        forget a feedback fault: read until a second reading confirms every joint's belief,
+        ``period_ns`` apart, at most ``SETTLE_READS`` times. A wrong reading believed outright
+        is replaced by the readings that agree against it on the way (``believed_wrong``).
+        A few milliseconds, before the loop starts or in a reset, every valve closed."""
         self.believe = [True] * self.n
-        self.settling = [SETTLE_READS] * self.n
         self.rejects = [0] * self.n
         self.fault, self.fault_joint = "", -1
         self.read(backend)
+        clock = backend.clock
+        for _ in range(SETTLE_READS):
+            if all(self.confirmed):
+                break
+            clock.sleep_until(clock.now_ns() + period_ns)
+            self.read(backend)
 
     def zero(self) -> None:
         """Rig, section 3.5: where the actuators rest now becomes the encoders' zero."""

@@ -100,7 +100,7 @@ class Controller:
 
     def start(self) -> None:
         """Read the joints, hold where they are and publish, so the first status is real."""
-        self.encoders.read(self.backend)
+        self.encoders.resync(self.backend, self.config.period_ns)
         self.modes.hold_here()
         self.publish()
         self.outbox.flush()
@@ -198,7 +198,7 @@ class Controller:
             self.outbox.put(Notice("link re-established"))
         self.guards.release()
         self.modes.law.reset()
-        self.encoders.resync(self.backend)
+        self.encoders.resync(self.backend, self.config.period_ns)
         self.hold_here()
         self.outbox.put(EStop(False, "reset by operator"))
 

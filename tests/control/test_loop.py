@@ -112,7 +112,7 @@ def ticks(controller: Controller, backend: ScriptedBackend, n: int) -> None:
 def teleport(controller: Controller, backend: ScriptedBackend, j: int, q: float) -> None:
     """Put joint ``j`` at ``q`` as a reset finds it (believed outright), holding there."""
     backend.positions[j] = q
-    controller.encoders.resync(backend)
+    controller.encoders.resync(backend, controller.config.period_ns)
     controller.modes.hold_here()
     ticks(controller, backend, 2)
 

@@ -24,7 +24,10 @@ from hw.transmission import Transmission
 
 UNIMATE = load_machine("unimate2000b")
 GLITCH_SCALE = 1.0
-SPIKE_MARGIN_PCT = 15.0
+# A wrong low bit within a step the joint could make passes the filter (it cannot be told
+# from motion) and kicks the valve by Kp times its size: up to about 20 % on In/Out at the
+# lamp model's rate. An accepted wrong high bit would saturate the valve (100 %).
+SPIKE_MARGIN_PCT = 25.0
 
 
 def run_sine(controller: Callable[..., ControlClient], glitch_scale: float
@@ -63,7 +66,7 @@ def test_wrong_readings_are_rejected_counted_and_never_reach_the_valves(
         controller, measured) -> None:
     """At 1 ms, six encoders a tick, the lamp model's own rate (about 1 %): every joint
     counts rejected readings, no recorded reading jumps further than the joint can move,
-    and no valve command exceeds the clean run's peak by more than 15 % (an accepted
+    and no valve command exceeds the clean run's peak by more than 25 % (an accepted
     wrong high bit would be a jump of tens of degrees and a saturated valve)."""
     clean, clean_glitches = run_sine(controller, 0.0)
     glitchy, glitches = run_sine(controller, GLITCH_SCALE)
