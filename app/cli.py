@@ -15,7 +15,15 @@ import os
 import signal
 import sys
 
-from app import cli_controller, cli_emulate, cli_kinematics, cli_machine, cli_move, cli_runs
+from app import (
+    cli_controller,
+    cli_emulate,
+    cli_kinematics,
+    cli_machine,
+    cli_move,
+    cli_runs,
+    cli_serve,
+)
 from control.law import SLIPS
 from control.timing import TIMINGS, Timing
 from hw.factory import BACKENDS
@@ -49,8 +57,13 @@ def build_parser() -> argparse.ArgumentParser:
                         help="open the TUI on the controller `servodesk controller` runs (its "
                              "socket; default the one in the user's runtime directory) instead "
                              "of starting one; it observes until you take command (^K)")
+    parser.add_argument("--observe-only", action="store_true",
+                        help="with --attach: this TUI never takes command (^K says why)")
+    parser.add_argument("--take-command", action="store_true",
+                        help="with --attach: take command at start (refused, with who holds it, "
+                             "if another client does)")
     sub = parser.add_subparsers(title="commands (none: open the TUI)", metavar="COMMAND")
-    for module in (cli_kinematics, cli_machine, cli_emulate, cli_controller, cli_move,
+    for module in (cli_kinematics, cli_machine, cli_emulate, cli_controller, cli_serve, cli_move,
                    cli_runs):
         module.add_parsers(sub)
     return parser
@@ -64,6 +77,11 @@ def main(argv: list[str] | None = None) -> int:
     if args.backend == "serial" and not args.port:
         parser.error("--backend serial needs --port URL (a device, the emulator's pty path or "
                      "socket://HOST:PORT)")
+    if (args.observe_only or args.take_command) and args.attach is None:
+        parser.error("--observe-only and --take-command are for a TUI on a controller service: "
+                     "add --attach")
+    if args.observe_only and args.take_command:
+        parser.error("--observe-only and --take-command exclude each other")
     from app.tui import ServodeskApp, attached_app
     from control.client import ControllerError
     from hw.machine import MachineError
@@ -73,7 +91,8 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:
         parser.error(str(exc))
     try:
-        app = (attached_app(args.attach) if args.attach is not None else
+        app = (attached_app(args.attach, observe_only=args.observe_only,
+                            take_command=args.take_command) if args.attach is not None else
                ServodeskApp(args.machine, args.backend, args.port, args.data_dir, seed=args.seed,
                             client_options={"timing": timing}))
     except (MachineError, ConnectionError, ControllerError, OSError) as exc:

@@ -54,6 +54,8 @@ HEADER_HZ = 10.0
 STALL_DUPLICATE_S = 2.0  # a stall the Latency tab sees this soon after the controller's notice
 SETTLE_S = 1.5  # after a tab's first frames its long-lived objects exist
 FREEZE_S = 5.0  # and every so often after: the widgets' line caches keep growing
+OBSERVE_ONLY = ("this view observes only; it cannot take command (servodesk serve was started "
+                "without --command)")
 TABS: tuple[tuple[str, type[TabPage]], ...] = (
     ("jog", JogTab), ("moves", MovesTab), ("scope", ScopeTab), ("status", StatusTab),
     ("tuning", TuningTab), ("runs", RunsTab), ("latency", LatencyTab),
@@ -130,12 +132,15 @@ class ServodeskApp(App[None]):
     def __init__(self, machine: str | Path | Machine = "unimate2000b", backend: str = "sim",
                  port: str | None = None, data_dir: str | Path | None = None,
                  lockstep: bool = False, *, seed: int = 0, sim_options: dict | None = None,
-                 client_options: dict | None = None, client: ControlClient | None = None
-                 ) -> None:
+                 client_options: dict | None = None, client: ControlClient | None = None,
+                 observe_only: bool = False, take_command: bool = False) -> None:
         """``client``: one already attached to a controller service (``attached_app``),
-        used instead of starting a controller."""
+        used instead of starting a controller; ``observe_only``: this TUI never takes command
+        (^K says why); ``take_command``: it takes command as soon as it is attached."""
         super().__init__()
         self._attached = client
+        self.observe_only = observe_only
+        self._take_at_start = take_command
         self.machine = machine if isinstance(machine, Machine) else load_machine(machine)
         self.model = model_of(self.machine)  # MachineError for a DH table of another form
         self.backend = backend
@@ -283,6 +288,8 @@ class ServodeskApp(App[None]):
             self._send_estop()
         if client.notice:
             self.notify(client.notice, title="controller", timeout=6)
+        if self._take_at_start:
+            self.action_take_command()
         for tab in self.tabs.values():
             tab.client_ready(client)
         if self._active is not None:
@@ -599,6 +606,9 @@ class ServodeskApp(App[None]):
 
     def action_take_command(self) -> None:
         """Command the service's controller (refused, with who holds it, if another does)."""
+        if self.observe_only:
+            self.notify(OBSERVE_ONLY, severity="error", timeout=6)
+            return
         self._command_change(lambda client: client.take_command())
 
     def action_release_command(self) -> None:
@@ -646,13 +656,16 @@ def _role(client: ControlClient | None) -> str:
     return client.role if isinstance(client, AttachedClient) else ""
 
 
-def attached_app(socket: str | Path | None = None) -> ServodeskApp:
+def attached_app(socket: str | Path | None = None, *, observe_only: bool = False,
+                 take_command: bool = False) -> ServodeskApp:
     """The TUI on the controller ``servodesk controller`` runs at ``socket`` (default: the
-    user's); it observes until the operator takes command (^K)."""
+    user's); it observes until the operator takes command (^K), or always
+    (``observe_only``), or takes it at once (``take_command``)."""
     client = ControlClient.attach(socket or None, name="servodesk TUI")
     try:
         return ServodeskApp(client.machine, client.backend, client.port, client.data_dir,
-                            client_options={"timing": client.timing}, client=client)
+                            client_options={"timing": client.timing}, client=client,
+                            observe_only=observe_only, take_command=take_command)
     except BaseException:
         client.close()
         raise

@@ -1,0 +1,154 @@
+"""``servodesk serve``: the TUI in a web browser (``textual-serve``), on a controller service.
+
+It attaches to the ``servodesk controller`` listening on ``--socket`` (default the user's), or
+starts one (a subprocess given ``--machine``, ``--backend``, ``--port``, ``--data-dir``,
+``--seed``, ``--timing``; stopped when serve stops). Every browser session runs its own
+``python -m app --attach SOCKET``: observe-only (^K refused with the reason), or, with
+``--command``, taking command at start (refused, with who holds it, if another client does).
+Any session's E-stop latches. It listens on 127.0.0.1 unless told otherwise: from another
+machine, forward the port over SSH (``ssh -L 8000:127.0.0.1:8000 host``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from control.timing import TIMINGS
+from hw.factory import BACKENDS
+
+TEMPLATES = Path(__file__).with_name("serve_templates")  # textual-serve's page, offline
+CONTROLLER_START_S = 60.0  # a cold start on a loaded machine imports numpy, scipy…
+CONTROLLER_STOP_S = 30.0
+
+
+def add_parsers(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "serve", help="the TUI in a web browser, on a controller service",
+        description="Serve the TUI to web browsers (textual-serve): each browser session is a "
+                    "TUI attached to the controller service on --socket, started here if none "
+                    "runs. Sessions observe only, unless --command: then each takes command "
+                    "at start (one at a time holds it). Any session's E-stop latches. Bound to "
+                    "127.0.0.1: from elsewhere, forward it (ssh -L 8000:127.0.0.1:8000 host).")
+    # SUPPRESS: an unset subcommand option must not hide the global one
+    p.add_argument("--machine", default=argparse.SUPPRESS,
+                   help="for a controller started here: built-in machine (unimate2000b, rig) or "
+                        "a machine TOML path")
+    p.add_argument("--backend", default=argparse.SUPPRESS, choices=BACKENDS,
+                   help="for a controller started here: sim (default) or serial")
+    p.add_argument("--port", default=argparse.SUPPRESS,
+                   help="for a controller started here: pyserial URL of the I/O board")
+    p.add_argument("--data-dir", default=argparse.SUPPRESS, metavar="DIR",
+                   help="for a controller started here: where runs are saved")
+    p.add_argument("--seed", type=int, default=argparse.SUPPRESS, help="simulator seed")
+    p.add_argument("--timing", default=argparse.SUPPRESS, choices=TIMINGS,
+                   help="for a controller started here: servodesk (default) or thesis")
+    p.add_argument("--socket", type=Path, metavar="PATH",
+                   help="the controller service's socket (default: the user's, as for "
+                        "`servodesk controller`); one is started there if none listens")
+    p.add_argument("--host", default="127.0.0.1",
+                   help="address to listen on (default 127.0.0.1: this machine only; reach it "
+                        "from elsewhere through SSH port forwarding)")
+    p.add_argument("--http-port", type=int, default=8000, metavar="N",
+                   help="TCP port of the web page (default 8000; --port is the I/O board's)")
+    p.add_argument("--command", action="store_true",
+                   help="each browser session takes command at start (default: observe only; "
+                        "E-stop works either way)")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from textual_serve.server import Server
+
+    from control import rendezvous
+
+    if args.backend == "serial" and not args.port:
+        print("servodesk serve: --backend serial needs --port URL", file=sys.stderr)
+        return 2
+    socket = args.socket or rendezvous.default_socket()
+    controller: subprocess.Popen[bytes] | None = None
+    title = _title(socket)
+    if title is None:
+        controller = subprocess.Popen(_controller_argv(args, socket), stdin=subprocess.DEVNULL,
+                                      start_new_session=True)  # serve stops it, after the TUIs
+        try:
+            title = _wait_for(controller, socket)
+        except RuntimeError as exc:
+            _stop(controller)
+            print(f"servodesk serve: {exc}", file=sys.stderr)
+            return 2
+    role = "--take-command" if args.command else "--observe-only"
+    command = shlex.join([sys.executable, "-m", "app", "--attach", str(socket), role])
+    server = Server(command, host=args.host, port=args.http_port, title=f"servodesk: {title}",
+                    templates_path=TEMPLATES)
+    print(f"servodesk serve: http://{args.host}:{args.http_port}/ ({title}; controller "
+          f"{'started here' if controller else 'attached'} at {socket}; sessions "
+          f"{'take command' if args.command else 'observe only'})", file=sys.stderr, flush=True)
+    try:
+        server.serve()
+    except OSError as exc:  # the port is taken, the address is not this machine's
+        print(f"servodesk serve: cannot listen on {args.host}:{args.http_port}: {exc}",
+              file=sys.stderr)
+        return 2
+    finally:
+        if controller is not None:
+            _stop(controller)
+    return 0
+
+
+def _title(socket: Path) -> str | None:
+    """The machine of the controller service at ``socket``; None if none listens there."""
+    from control.client import ControlClient, ControllerError
+
+    try:
+        probe = ControlClient.attach(socket, name="servodesk serve")
+    except (OSError, ControllerError):  # none listens, or a stale socket
+        return None
+    try:
+        return f"{probe.machine.title}, {probe.backend}"
+    finally:
+        probe.close()
+
+
+def _controller_argv(args: argparse.Namespace, socket: Path) -> list[str]:
+    """``servodesk controller`` with serve's machine, backend and timing."""
+    argv = [sys.executable, "-m", "app", "--machine", str(args.machine), "--backend",
+            args.backend, "--seed", str(args.seed), "--timing", args.timing,
+            "--interrupt-ms", str(args.interrupt_ms)]
+    for slip in args.slip:
+        argv += ["--slip", slip]
+    if args.port:
+        argv += ["--port", args.port]
+    if args.data_dir:
+        argv += ["--data-dir", str(args.data_dir)]
+    return [*argv, "controller", "--socket", str(socket)]
+
+
+def _wait_for(controller: subprocess.Popen[bytes], socket: Path) -> str:
+    """Wait until the controller started here answers on ``socket``; its machine."""
+    deadline = time.monotonic() + CONTROLLER_START_S
+    while time.monotonic() < deadline:
+        if controller.poll() is not None:
+            raise RuntimeError(f"the controller did not start (exit {controller.returncode}; "
+                               "its reason is above)")
+        if socket.exists() and (title := _title(socket)) is not None:
+            return title
+        time.sleep(0.05)
+    raise RuntimeError(f"the controller did not listen on {socket} within "
+                       f"{CONTROLLER_START_S:g} s")
+
+
+def _stop(controller: subprocess.Popen[bytes]) -> None:
+    """SIGTERM (valves closed, clients told), a kill if it does not end."""
+    if controller.poll() is None:
+        controller.send_signal(signal.SIGTERM)
+        try:
+            controller.wait(timeout=CONTROLLER_STOP_S)
+        except subprocess.TimeoutExpired:
+            controller.kill()
+            controller.wait()
