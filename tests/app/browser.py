@@ -15,6 +15,7 @@ import codecs
 import contextlib
 import os
 import re
+import shutil
 import socket
 import subprocess
 import sys
@@ -77,6 +78,7 @@ class Served:
     def __init__(self, log: Path, *args: str, runtime: Path | None = None) -> None:
         self.port = free_port()
         self.url = f"http://127.0.0.1:{self.port}/"
+        self._own_runtime = runtime is None
         self.runtime = runtime or Path(tempfile.mkdtemp(prefix="sd-"))
         self.socket = self.runtime / "servodesk" / "controller.sock"
         self.log = log
@@ -111,6 +113,8 @@ class Served:
         if self.proc.poll() is None:
             self.proc.kill()
             self.proc.wait(timeout=30)
+        if self._own_runtime:
+            shutil.rmtree(self.runtime, ignore_errors=True)
 
 
 class Browser:
