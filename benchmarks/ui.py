@@ -23,7 +23,11 @@ Unimate 2000B. Parts:
    process) and the controller's client-silent events;
 7. soak (``--soak 300``): ``python -m app`` in tmux beside a CPU burner, a tab switch
    every second for that many seconds; the client-silent events of the session's
-   events.jsonl counted.
+   events.jsonl counted;
+8. browser (``--browser`` alone; also in the full run when Chromium is installed):
+   ``servodesk serve`` started (its own controller), then three times a fresh headless
+   Chromium opened on it (tests/app/browser.py): the time from asking for the page to the
+   first bytes of the TUI's output, and to its first live frame (the header's tick count).
 """
 
 from __future__ import annotations
@@ -506,6 +510,40 @@ def startup(repeats: int) -> None:
           f"{statistics.median(times):.2f} s, max {max(times):.2f} s")
 
 
+def browser_first_render(repeats: int = 3) -> None:
+    """Seconds from a headless Chromium asking for ``servodesk serve``'s page to the TUI's
+    first output and to its first live frame, each in a fresh browser (Chromium's own start
+    not counted)."""
+    from tests.app.browser import CHROMIUM, WINDOW, Served, browser
+
+    if not Path(CHROMIUM).exists():
+        print("\n8. browser: skipped (no chromium)")
+        return
+    first_bytes, live = [], []
+    with tempfile.TemporaryDirectory() as tmp:
+        started = time.monotonic()
+        served = Served(Path(tmp) / "serve.log", "--data-dir", str(Path(tmp) / "runs"))
+        up_s = time.monotonic() - started
+        try:
+            for _ in range(repeats):
+                with browser() as page:
+                    asked = time.monotonic()
+                    page.open(served.url)  # returns once the page has loaded
+                    while not page.text().strip():
+                        time.sleep(0.005)
+                    first_bytes.append(time.monotonic() - asked)
+                    while "tick " not in page.text():
+                        time.sleep(0.005)
+                    live.append(time.monotonic() - asked)
+        finally:
+            served.stop()
+    print(f"\n8. browser (servodesk serve, headless Chromium {WINDOW[0]}×{WINDOW[1]} px, "
+          f"{repeats} fresh browsers; serve and its controller up in {up_s:.2f} s): page asked "
+          f"→ first TUI output median {statistics.median(first_bytes):.2f} s "
+          f"(max {max(first_bytes):.2f}), "
+          f"→ first live frame median {statistics.median(live):.2f} s (max {max(live):.2f})")
+
+
 def main() -> None:
     # The key-to-valve watcher is a spawned process, and spawn starts multiprocessing's
     # resource tracker with sys.stderr's descriptor: start it now, before Textual takes stderr.
@@ -517,7 +555,12 @@ def main() -> None:
     parser.add_argument("--no-burner", action="store_true", help="part 6 without the burner")
     parser.add_argument("--soak", type=float, metavar="SECONDS",
                         help="only part 7: switch every tab in tmux beside a burner this long")
+    parser.add_argument("--browser", action="store_true",
+                        help="only part 8: servodesk serve's first render in headless Chromium")
     args = parser.parse_args()
+    if args.browser:
+        browser_first_render()
+        return
     if args.soak:
         soak(args.soak)
         return
@@ -529,6 +572,7 @@ def main() -> None:
     asyncio.run(scope_and_keys(seconds, presses))
     startup(3 if args.quick else 5)
     asyncio.run(tab_pauses(not args.no_burner))
+    browser_first_render()
 
 
 if __name__ == "__main__":
