@@ -8,17 +8,24 @@ drawn on a canvas."""
 
 from __future__ import annotations
 
+import os
 import re
+import shutil
+import socket
+import subprocess
+import sys
+import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 from selenium.webdriver.common.keys import Keys
 
+from app.cli import main
 from control.attached import AttachedClient
 from control.client import ControlClient
 from control.layout import Mode
-from tests.app.browser import Browser, Served, browser, wait_until
+from tests.app.browser import ROOT, Browser, Served, browser, wait_until
 
 START_S = 90.0  # serve, a controller, Chromium and a TUI on a loaded two-core machine
 STEP_S = 30.0
@@ -106,3 +113,32 @@ def test_with_command_the_session_commands_and_its_estop_latches(served, page, t
         wait_until(lambda: not script.alive, STEP_S, "the controller stopped with serve")
     finally:
         script.close()
+
+
+def test_a_taken_port_is_a_clear_error_and_the_controller_started_for_it_stops(tmp_path
+                                                                               ) -> None:
+    runtime = Path(tempfile.mkdtemp(prefix="sd-"))
+    try:
+        with socket.socket() as taken:
+            taken.bind(("127.0.0.1", 0))
+            taken.listen()
+            port = taken.getsockname()[1]
+            done = subprocess.run(
+                [sys.executable, "-m", "app", "serve", "--data-dir", str(tmp_path / "runs"),
+                 "--http-port", str(port)], cwd=ROOT,
+                env={**os.environ, "PYTHONPATH": str(ROOT), "XDG_RUNTIME_DIR": str(runtime)},
+                capture_output=True, text=True, timeout=START_S)
+        assert done.returncode == 2
+        assert f"cannot listen on 127.0.0.1:{port}" in done.stderr
+        assert "servodesk controller: stopped" in done.stderr  # not left running
+    finally:
+        shutil.rmtree(runtime, ignore_errors=True)
+
+
+@pytest.mark.parametrize("options", [["--observe-only"], ["--take-command"],
+                                     ["--attach", "--observe-only", "--take-command"]])
+def test_the_command_options_of_an_attached_tui_are_checked(options, capsys) -> None:
+    with pytest.raises(SystemExit) as exited:
+        main(options)
+    assert exited.value.code == 2
+    assert "--observe-only and --take-command" in capsys.readouterr().err
