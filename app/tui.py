@@ -54,8 +54,8 @@ HEADER_HZ = 10.0
 STALL_DUPLICATE_S = 2.0  # a stall the Latency tab sees this soon after the controller's notice
 SETTLE_S = 1.5  # after a tab's first frames its long-lived objects exist
 FREEZE_S = 5.0  # and every so often after: the widgets' line caches keep growing
-OBSERVE_ONLY = ("this view observes only; it cannot take command (servodesk serve was started "
-                "without --command)")
+OBSERVE_ONLY = ("this view observes only; it cannot take command (--observe-only: servodesk "
+                "serve without --command)")
 TABS: tuple[tuple[str, type[TabPage]], ...] = (
     ("jog", JogTab), ("moves", MovesTab), ("scope", ScopeTab), ("status", StatusTab),
     ("tuning", TuningTab), ("runs", RunsTab), ("latency", LatencyTab),
