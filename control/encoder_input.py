@@ -69,7 +69,8 @@ class EncoderInput:
         for j in range(self.n) if joints is None else joints:
             a = reading[j]
             agrees = abs(a - actuator[j]) <= speed[j] * (now - last_ok[j]) + floor[j]
-            if agrees or believe[j] or self.believed_wrong(j, a, now):
+            believable = believe[j] and (not self.homed or self.low[j] <= a <= self.high[j])
+            if agrees or believable or self.believed_wrong(j, a, now):
                 confirmed[j] = agrees and not believe[j]
                 actuator[j] = a
                 last_ok[j] = now

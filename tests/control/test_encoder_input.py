@@ -57,3 +57,22 @@ def test_agreeing_readings_against_a_confirmed_belief_are_a_feedback_fault() -> 
     ticks(backend, encoders, UNIMATE.supervision.glitch_limit)
     assert encoders.fault.startswith("feedback fault: Bend's encoder read")
     assert abs(encoders.position[BEND] - truth) < 0.1  # the stuck bit was never believed
+
+
+def test_a_resync_never_believes_a_reading_outside_the_joints_range() -> None:
+    backend, encoders, truth = started()
+    top = 1 << 12  # the Gray word's top bit: half the disk away
+    backend.stick_bit(BEND, 12, 0 if backend_word(backend, BEND) & top else 1)
+    encoders.believe = [True] * 6  # as a resync leaves it, before its next reading
+    encoders.read(backend)
+    wrong = encoders.reading[BEND]
+    assert not UNIMATE.joints[BEND].lower <= wrong <= UNIMATE.joints[BEND].upper
+    backend.stick_bit(BEND, 12, None)
+    encoders.read(backend)  # the out-of-range word was not believed; this one is
+    assert abs(encoders.position[BEND] - truth) < 0.1 and encoders.fault == ""
+
+
+def backend_word(backend: SimBackend, joint: int) -> int:
+    raw = [0] * 6
+    SimBackend.read(backend, raw)
+    return raw[joint]
