@@ -17,6 +17,7 @@ from collections.abc import Callable
 import numpy as np
 
 from control import ControlClient
+from control.loop import LoopConfig
 from control.motion import moves
 from control.recorder import Run, as_written, load_run
 from hw.machine import load_machine
@@ -51,7 +52,8 @@ def implausible_steps(actual: np.ndarray, dt: float) -> int:
     unchanged samples the next step may cover ``k + 1`` samples of motion. Judged
     per actuator, as the filter judges (the Yaw reading includes Bend's).
     """
-    speed = np.array([1.5 * j.max_speed * dt for j in UNIMATE.joints])
+    margin = LoopConfig(period_ns=1).glitch_margin  # the controller's own judgement
+    speed = np.array([margin * j.max_speed * dt for j in UNIMATE.joints])
     floor = np.array([3 * abs(j.encoder.gradient) for j in UNIMATE.joints])
     steps = np.abs(np.diff(Transmission(UNIMATE).actuators_of(actual), axis=0))
     unchanged = np.zeros(actual.shape[1])
