@@ -3,7 +3,13 @@
 Section 6.2: the multiplexed encoders sometimes read a wrong word. Each word
 becomes its actuator's coordinate through the transmission, and each actuator's
 reading is judged there, where a wrong word shows alone: a jump further than
-the actuator can move since its last good reading is rejected and counted. The
+the actuator can move (its ``full_duty_speed``, times the margin) since its last
+good reading is rejected and counted. A wrong word within that reach (a wrong low
+bit) cannot be told from motion and is believed; then, with the joint moving fast,
+the true readings after it can lie beyond the belief's reach, and five rejections
+in a row would be a feedback fault. So ``RECALL_READS`` rejected readings in a row
+that are each within reach of one of the ``EARLIER`` beliefs before the present one
+are believed: the present belief was the wrong reading. The
 thesis saw two or three wrong readings at a time (Figure 6.1); ``glitch_limit``
 rejections in a row are not a glitch but a lying encoder (a stuck bit, a cut
 cable), and a feedback fault: no jump is ever believed, except the first
@@ -21,6 +27,8 @@ from hw.transmission import Transmission
 
 AGREE_READS = 3  # rejected readings in a row that agree, to replace an unconfirmed belief
 SETTLE_READS = 8  # readings a resync takes at most to confirm every joint's belief
+EARLIER = 2  # beliefs before the present one that a rejected reading is also judged from
+RECALL_READS = 2  # rejected readings in a row within reach of an earlier belief, to believe
 
 
 class EncoderInput:
@@ -53,7 +61,10 @@ class EncoderInput:
         self.last_reject = [0.0] * n
         self.last_reject_ns = [0] * n
         self.last_ok_ns = [0] * n
-        self.speed_per_ns = [j.max_speed * 1e-9 * margin for j in machine.joints]
+        # per joint, the EARLIER beliefs before the present one, newest first: (reading, when)
+        self.earlier: list[list[tuple[float, int]]] = [[(0.0, 0)] * EARLIER for _ in range(n)]
+        self.recall = [0] * n  # rejected readings in a row within reach of an earlier belief
+        self.speed_per_ns = [j.full_duty_speed * 1e-9 * margin for j in machine.joints]
         self.step_floor = [3 * abs(j.encoder.gradient) for j in machine.joints]  # 3 counts
         self.homed = machine.encoder_kind == "gray"
 
@@ -70,8 +81,15 @@ class EncoderInput:
             a = reading[j]
             agrees = abs(a - actuator[j]) <= speed[j] * (now - last_ok[j]) + floor[j]
             believable = believe[j] and (not self.homed or self.low[j] <= a <= self.high[j])
-            if agrees or believable or self.believed_wrong(j, a, now):
+            if agrees or believable or self.believed_wrong(j, a, now) or self.recalled(j, a, now):
                 confirmed[j] = agrees and not believe[j]
+                earlier = self.earlier[j]
+                self.recall[j] = 0
+                if agrees and not believe[j]:
+                    earlier.pop()
+                    earlier.insert(0, (actuator[j], last_ok[j]))
+                else:  # a belief judged wrong, or none before this reading: no reach to judge by
+                    earlier[:] = [(a, now)] * EARLIER
                 actuator[j] = a
                 last_ok[j] = now
                 rejects[j] = 0
@@ -103,6 +121,17 @@ class EncoderInput:
         self.agree[j] = self.agree[j] + 1 if abs(a - self.last_reject[j]) <= near else 0
         return self.agree[j] + 1 >= AGREE_READS
 
+    def recalled(self, j: int, a: float, now: int) -> bool:
+        """Whether reading ``a``, rejected against the present belief, is the
+        ``RECALL_READS``-th in a row within reach of one of the beliefs before it: then the
+        present belief was a wrong reading within reach, and the readings are the joint."""
+        reach, floor = self.speed_per_ns[j], self.step_floor[j]
+        if any(abs(a - b) <= reach * (now - t) + floor for b, t in self.earlier[j]):
+            self.recall[j] += 1
+        else:
+            self.recall[j] = 0
+        return self.recall[j] >= RECALL_READS
+
     def implausible(self, j: int, what: str) -> None:
         """Record the first feedback fault: the controller latches the E-stop on it."""
         if not self.fault:
@@ -117,6 +146,7 @@ class EncoderInput:
         A few milliseconds, before the loop starts or in a reset, every valve closed."""
         self.believe = [True] * self.n
         self.rejects = [0] * self.n
+        self.recall = [0] * self.n
         self.fault, self.fault_joint = "", -1
         self.read(backend)
         clock = backend.clock
@@ -132,5 +162,7 @@ class EncoderInput:
         for j in range(self.n):
             self.offset[j] += round(transmission.count_of(j, self.actuator[j]))
         transmission.actuators_from_words(self.raw, self.offset, self.actuator)
+        self.earlier = [[(a, t)] * EARLIER for a, t in zip(self.actuator, self.last_ok_ns,
+                                                            strict=True)]
         transmission.joints_from_actuators(self.actuator, self.position)
         self.homed = True

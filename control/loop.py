@@ -45,9 +45,8 @@ class LoopConfig:
     period_ns: int
     heartbeat_timeout_ns: int = 250 * MS
     orphan_timeout_ns: int = 5_000 * MS
-    # plausible jump = margin x max_speed x elapsed + 3 counts; at full duty the simulated
-    # joints reach 1.6-2x the machine file's max_speed (the path rules' speed), so 3
-    glitch_margin: float = 3.0
+    # plausible jump = margin x full_duty_speed x elapsed + 3 counts (control/encoder_input.py)
+    glitch_margin: float = 1.5
     initialise: InitialiseConfig = field(default_factory=InitialiseConfig)
     slots: int = 1  # ticks per sample: the thesis's timing (control/timing.py) serves n
     slips: frozenset[str] = frozenset()  # the listing's slips to run (control.law.SLIPS)

@@ -113,6 +113,11 @@ class Joint:
     plant: Mapping[str, float] = field(default_factory=lambda: MappingProxyType({}))
     min_following_error: float = 0.0  # MIN_FERROR: the limit at standstill (units)
     jog_speed: float = 0.0  # how fast a position jog moves the hold target (units/s)
+    full_duty_speed: float = 0.0  # fastest the joint moves at 100 % duty (units/s); glitch filter
+
+    def __post_init__(self) -> None:
+        if not self.full_duty_speed:  # not given: the path rules' speed
+            object.__setattr__(self, "full_duty_speed", self.max_speed)
 
     @property
     def symbol(self) -> str:
@@ -573,7 +578,7 @@ class _Reader:
         self.only(doc, key, {"key", "name", "kind", "unit", "limits", "min_pwm", "polarity",
                              "max_speed", "max_accel", "tolerance", "following_error",
                              "min_following_error", "jog_speed", "encoder", "down_scale",
-                             "gain_unit",
+                             "gain_unit", "full_duty_speed",
                              "plant"})
         name = self.string(doc, key, "name")
         kind = self.string(doc, key, "kind", choices=tuple(JOINT_KINDS))
@@ -606,6 +611,9 @@ class _Reader:
                 tolerance, ferror),
             jog_speed=self.number(doc, key, "jog_speed", JOG_SPEED_FRACTION * max_speed, 0.0,
                                   max_speed, strict_low=True),
+            # a path at max_speed must be within what full duty gives
+            full_duty_speed=self.number(doc, key, "full_duty_speed", max_speed, max_speed,
+                                        ranges.speed[1]),
             encoder=encoder,
             down_scale=self.number(doc, key, "down_scale", 1.0, *DOWN_SCALE),
             gain_unit=self.number(doc, key, "gain_unit", 1.0, *GAIN_UNIT),

@@ -17,6 +17,7 @@ from collections.abc import Callable
 import numpy as np
 
 from control import ControlClient
+from control.encoder_input import EARLIER
 from control.loop import LoopConfig
 from control.motion import moves
 from control.recorder import Run, as_written, load_run
@@ -46,21 +47,31 @@ def run_sine(controller: Callable[..., ControlClient], glitch_scale: float
 
 
 def implausible_steps(actual: np.ndarray, dt: float) -> int:
-    """Recorded steps larger than an actuator can move since its reading last changed.
+    """Recorded steps larger than an actuator can move since each of its last three readings.
 
-    A rejected reading leaves the actuator's position unchanged, so after ``k``
-    unchanged samples the next step may cover ``k + 1`` samples of motion. Judged
-    per actuator, as the filter judges (the Yaw reading includes Bend's).
+    A rejected reading leaves the actuator's position unchanged, so a step after ``k``
+    unchanged samples may cover ``k + 1`` samples of motion; and a wrong reading within
+    reach is believed, after which the filter believes readings within reach of the two
+    beliefs before it (its ``EARLIER``). Per actuator (the Yaw reading includes Bend's),
+    at the controller's margin on the joints' full-duty speed.
     """
     margin = LoopConfig(period_ns=1).glitch_margin  # the controller's own judgement
-    speed = np.array([margin * j.max_speed * dt for j in UNIMATE.joints])
+    speed = np.array([margin * j.full_duty_speed * dt for j in UNIMATE.joints])
     floor = np.array([3 * abs(j.encoder.gradient) for j in UNIMATE.joints])
-    steps = np.abs(np.diff(Transmission(UNIMATE).actuators_of(actual), axis=0))
-    unchanged = np.zeros(actual.shape[1])
+    a = Transmission(UNIMATE).actuators_of(actual)
+    seen = [a[0].copy() for _ in range(1 + EARLIER)]  # newest first, and the sample of each
+    at = [np.zeros(a.shape[1]) for _ in range(1 + EARLIER)]
     bad = 0
-    for step in steps:
-        bad += int(np.sum(step > speed * (unchanged + 1) + floor))
-        unchanged = np.where(step == 0, unchanged + 1, 0)
+    for i, now in enumerate(a[1:], start=1):
+        moved = now != seen[0]
+        far = np.ones(a.shape[1], dtype=bool)
+        for value, when in zip(seen, at, strict=True):
+            far &= np.abs(now - value) > speed * (i - when) + floor
+        bad += int(np.sum(moved & far))
+        for k in range(EARLIER, 0, -1):
+            seen[k] = np.where(moved, seen[k - 1], seen[k])
+            at[k] = np.where(moved, at[k - 1], at[k])
+        seen[0], at[0] = np.where(moved, now, seen[0]), np.where(moved, i, at[0])
     return bad
 
 

@@ -96,6 +96,10 @@ BAD = [
      r"joints\[2\]\.min_pwm: negative minimum 126 must be in 0…100 %"),
     (("polarity = -1\nmax_speed = 25.0", "polarity = 0\nmax_speed = 25.0"),
      r"joints\[2\]\.polarity: must be 1 or -1"),
+    (("full_duty_speed = 29.0", "full_duty_speed = 20.0"),  # below max_speed 25
+     r"joints\[2\]\.full_duty_speed: .* in 25…3600"),
+    (("full_duty_speed = 425.0", "full_duty_speed = 20000.0"),
+     r"joints\[0\]\.full_duty_speed: .* in 400…10000"),
     (('coupled_to = "bend"', 'coupled_to = "elbow"'),
      r"joints\[4\]\.encoder\.coupled_to: 'elbow' is not a joint key"),
     (("ki = [200.0, 29.0, 100.0, 3.0, 14.0, 80.0]", "ki = [200.0, 29.0]"),
