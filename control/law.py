@@ -3,9 +3,13 @@
     u(k+1) = Σ w[i]·u(k−i) + Σ kp[i]·e(k−i) + kd·Σ f[i]·e(k−i) / (p·Δt) + Σ ki·e(k)·Δt
 
 then saturation to ±100 %, minimum-PWM compensation (section 5.4.1, errata #5)
-and the coefficient set's duty limit. Taps are newest first (errata #21). With
-``w`` empty, ``kp = [Kp]`` and the filter (11, −18, 9, −2)/6 it is the PID of
-eq. 3.3; with ``w`` non-empty, the observer controller of section 3.6.2.
+and the coefficient set's duty limit. The integral is clamped at ``integral_limit``
+and, to prevent windup as section 3.6.1 intends, does not grow while the output is
+saturated the way its error pushes (conditional integration, errata #31): the
+listing's clamp alone lets a 400 mm rig step wind it to 13 % (slip ``windup``).
+Taps are newest first (errata #21). With ``w`` empty, ``kp = [Kp]`` and the
+filter (11, −18, 9, −2)/6 it is the PID of eq. 3.3; with ``w`` non-empty, the
+observer controller of section 3.6.2.
 
 Inputs per tick: joint index and error e(k) = desired − actual in joint units
 (mm, deg). Output: u(k+1) in percent, before down-scaling and polarity, which the
@@ -35,6 +39,7 @@ SLIPS = {
     "derivative": "errata #1: the derivative is divided by 6 and multiplied by Δt",
     "integral_oldest": "errata #2: the integral sums the oldest error of the history",
     "min_pwm": "errata #5: integer division makes the minimum-PWM factor 1: u + pmin",
+    "windup": "errata #31: the integral grows while the valve is saturated (clamped at ±50 only)",
 }
 
 
@@ -47,6 +52,7 @@ class _JointGains:
     b: tuple[float, ...]  # taps on e(k), e(k−1), …: kp[i] + kd·f[i] / (p·Δt), see _error_taps
     ki_dt: float  # ki·Δt
     oldest: bool  # integrate the oldest error (slip "integral_oldest")
+    windup: bool  # integrate while saturated (slip "windup")
     integral_limit: float
     pos_scale: float  # 1 − pmin/100
     pmin: float
@@ -138,13 +144,18 @@ class DifferenceLaw:
         errors.insert(0, e)  # e(k), e(k−1), … newest first
         u = sum(map(mul, g.w, s.u))  # Σ w[i]·u(k−i)
         u += sum(map(mul, g.b, errors))  # Σ kp[i]·e(k−i) + kd·Σ f[i]·e(k−i) / (p·Δt)
-        integral = s.integral + g.ki_dt * (errors[-1] if g.oldest else e)  # errata #2, #3
+        u += g.kv * velocity  # velocity feed-forward (chapter 6)
+        step = g.ki_dt * (errors[-1] if g.oldest else e)  # errata #2, #3
+        integral = s.integral + step
         if integral > g.integral_limit:
             integral = g.integral_limit
         elif integral < -g.integral_limit:
             integral = -g.integral_limit
+        if not g.windup and ((step > 0.0 and u + integral > SATURATION)
+                             or (step < 0.0 and u + integral < -SATURATION)):
+            integral = s.integral  # section 3.6.1: no windup while saturated (errata #31)
         s.integral = integral
-        u += integral + g.kv * velocity  # velocity feed-forward (chapter 6)
+        u += integral
         if u > SATURATION:
             u = SATURATION
         elif u < -SATURATION:
@@ -219,6 +230,7 @@ def _prepare(joint: Joint, c: Coefficients, j: int, dt: float,
                       "derivative" in slips),
         ki_dt=c.ki[j] * dt,
         oldest="integral_oldest" in slips,
+        windup="windup" in slips,
         integral_limit=c.integral_limit,
         pos_scale=1.0 if unscaled else 1.0 - up / 100.0,
         pmin=up,

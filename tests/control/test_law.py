@@ -255,3 +255,18 @@ def test_the_minimum_pwm_slip_adds_pmin_unscaled() -> None:
 def test_an_unknown_slip_is_refused() -> None:
     with pytest.raises(ValueError, match="unknown slips"):
         DifferenceLaw(plain_machine(), one_joint(kp=(1.0,)), 0.001, frozenset({"typo"}))
+
+
+def test_the_integral_does_not_wind_up_while_saturated() -> None:
+    # section 3.6.1's anti-windup intent (errata #31): 400 mm below the target the rig's
+    # PID is saturated, so the integral stays put; the listing's clamp alone (slip "windup")
+    # sums Ki·e·Δt = 0.01 · 4000 counts · 1 ms = 0.04 % a tick
+    pi_only = replace(preset("track", RIG), kd=(0.0,))  # no derivative kick on the step
+    law = DifferenceLaw(RIG, pi_only, 1e-3)
+    printed = DifferenceLaw(RIG, pi_only, 1e-3, slips=frozenset({"windup"}))
+    for _ in range(100):
+        assert law.update(0, 400.0) == printed.update(0, 400.0) == 100.0
+    assert law.state(0).integral == 0.0
+    assert printed.state(0).integral == pytest.approx(100 * 0.01 * 4000 * 1e-3)
+    law.update(0, 1.0)  # unsaturated (0.75 % per count): it integrates again
+    assert law.state(0).integral == pytest.approx(0.01 * 10 * 1e-3)
