@@ -5,13 +5,22 @@ rather than the command channel, so a full or frozen channel can delay neither:
 the controller holds when the heartbeat stops changing for ``timeout_ns``, exits
 when orphaned ``orphan_ns`` later, and latches the E-stop the tick after the
 E-stop count changes.
+
+The client's silence is counted only over time the controller was awake to hear it: a
+gap of more than ``STALL_NS`` between two checks means the controller itself was stopped
+(the machine stalled, or the hypervisor, or a SIGSTOP), and a client that had no CPU either
+is not blamed for it. A client that is really gone is still found: its channel closes at
+once (``gone``), and a frozen one is silent ``timeout_ns`` after the controller runs again.
 """
 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 
 from control.layout import ESTOP_WORD, HEARTBEAT_WORD
+
+STALL_NS = 20_000_000  # a gap between checks this long is the controller's own stall
 
 
 class ClientWatch:
@@ -19,11 +28,13 @@ class ClientWatch:
     and the wall clock. Outputs: ``lost`` once the client is silent past ``timeout_ns``,
     ``orphaned`` past ``orphan_ns`` more, ``estop_pressed`` when its E-stop count moved."""
 
-    def __init__(self, words: memoryview, timeout_ns: int, orphan_ns: int) -> None:
+    def __init__(self, words: memoryview, timeout_ns: int, orphan_ns: int,
+                 clock: Callable[[], int] = time.monotonic_ns) -> None:
         self.words = words
         self.timeout_ns = timeout_ns
         self.orphan_ns = orphan_ns
-        self.last_heard_ns = time.monotonic_ns()
+        self.clock = clock
+        self.last_heard_ns = self.last_check_ns = clock()
         self.last_beat = words[HEARTBEAT_WORD]
         self.estops_seen = words[ESTOP_WORD]
         self.lost_since = 0
@@ -31,7 +42,7 @@ class ClientWatch:
 
     def heard(self) -> None:
         """The client spoke (a message or a new heartbeat)."""
-        self.last_heard_ns = time.monotonic_ns()
+        self.last_heard_ns = self.clock()
 
     def gone(self) -> None:
         """The channel closed: the client will never be heard again."""
@@ -49,11 +60,15 @@ class ClientWatch:
     def check(self) -> tuple[bool, bool, bool]:
         """(just lost, back, orphaned): the client fell silent this tick; it was lost and has
         been heard since; it has been lost too long."""
+        wall = self.clock()
+        stalled = wall - self.last_check_ns
+        self.last_check_ns = wall
+        if stalled > STALL_NS and not (self.lost_since or self.closed):
+            self.last_heard_ns += stalled  # the controller's stall, not the client's silence
         beat = self.words[HEARTBEAT_WORD]
         if beat != self.last_beat and not self.closed:
             self.last_beat = beat
-            self.heard()
-        wall = time.monotonic_ns()
+            self.last_heard_ns = wall
         if not self.lost_since:
             if wall - self.last_heard_ns > self.timeout_ns:
                 self.lost_since = wall
