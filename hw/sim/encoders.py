@@ -34,9 +34,10 @@ spikes of Figure 6.1, and a joint whose word has fewer clear tracks risks fewer.
 
 One set of numbers (docs/simulator.md): with the thesis's timing, 1 ms per
 joint (each encoder every 6 ms), the light at the latch is 0.85 of full and
-the weakest cells fail now and then, about two or three readings a joint in 2000
-samples; at 6 ms per joint it is 0.97 and none fail; servodesk's own scan (all
-six every 1 ms, 1/6 ms each) latches at 0.81 and fails more often. The board
+the weakest cells fail now and then, about nine readings a run of 2000 samples
+over the six joints, as Figure 6.1 (1.1-2.3 a joint); at 6 ms per joint it is
+0.97 and none fail; servodesk's own scan (all six every 1 ms, 1/6 ms each)
+latches at 0.81 and fails more often. The board
 draws the gap to the next reading dim enough to fail the weakest cell
 (geometric), then keeps it with the chance the word's weakest clear cell fails,
 so a scan costs one encode per slot. ``glitch_scale`` multiplies every failure
