@@ -27,6 +27,7 @@ from app.desk import Desk
 from app.event_log import LogEntry, entries_of
 from app.history import History, Sampler
 from app.messages import ClientFailed, ClientReady, ControllerEvent, RunsChanged
+from app.priority import Priority, raise_priority, restore
 from app.tabs.identify import IdentifyTab
 from app.tabs.jog import JogTab
 from app.tabs.latency import LatencyTab
@@ -156,6 +157,7 @@ class ServodeskApp(App[None]):
                          timing.sample_time_s(self.machine))
         self.timing_text = "" if timing.name == "servodesk" else timing.describe(self.machine)
         self.client: ControlClient | None = None
+        self.priority: Priority | None = None  # the UI thread's, raised while the app runs
         self.client_problem = ""
         self.sampler: Sampler | None = None
         self._client_lock = threading.Lock()
@@ -196,6 +198,8 @@ class ServodeskApp(App[None]):
         self.set_interval(1.0 / HEADER_HZ, self._refresh_header)
         self.set_interval(FREEZE_S, self._freeze_long_lived)
         self._activate("jog")
+        if self.priority is not None and self.priority.notice:
+            self.notify(self.priority.notice, title="UI", severity="warning", timeout=10)
         early, self._early = self._early or [], None
         for message in early:  # the controller was quicker than the screen
             self._dispatch_client_message(message)
@@ -218,6 +222,7 @@ class ServodeskApp(App[None]):
 
     def on_load(self) -> None:
         gc.freeze()  # what is imported so far: building the screen collects only its own
+        self.priority = raise_priority()  # before any thread or process the UI starts
         self.start_client()  # the controller starts while the screen is built
         self.desk.events.open(self.data_dir, self.machine.name, self._log_problem)
 
@@ -316,6 +321,8 @@ class ServodeskApp(App[None]):
     def on_unmount(self) -> None:
         self.shutdown_client()
         self.desk.events.close()
+        if self.priority is not None:
+            restore(self.priority)
 
     # -- events from the controller ------------------------------------------------------------
 

@@ -78,6 +78,8 @@ SLOW_TESTS = (
     "tests/control/test_seqlock.py::test_reader_never_sees_a_torn_record",  # spawned writer
     "tests/control/test_shm.py::test_orphan_of_a_killed_process_is_cleaned_up",
     "tests/control/test_recorder.py::test_a_read_only_directory_raises_and_leaves_nothing",
+    "tests/app/test_priority.py::"
+    "test_without_the_privilege_the_ui_says_so_and_runs_at_its_own_priority",  # under setpriv
     "tests/control/motion/test_positions.py::"
     "test_a_writer_killed_between_temporary_and_rename_leaves_the_old_file",  # a killed writer
     # files at their size bound: 600,001 points parsed, 2-4 s each
