@@ -77,8 +77,8 @@ class ClientScript:
         env = {**os.environ, "PYTHONPATH": str(ROOT)}
         self.proc = subprocess.Popen(
             [sys.executable, "-c", CLIENT_SCRIPT, str(data_dir), str(orphan_timeout_s),
-             str(self.path_file), str(seconds), str(degrees)], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-            text=True, env=env)
+             str(self.path_file), str(seconds), str(degrees)],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env)
         first = self.answer()
         self.controller = int(first["controller"])
         self.segment = str(first["segment"])
