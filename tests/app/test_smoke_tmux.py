@@ -11,6 +11,7 @@ a step took (the time to a live screen is printed, not judged).
 
 from __future__ import annotations
 
+import json
 import os
 import shlex
 import shutil
@@ -22,6 +23,8 @@ from pathlib import Path
 
 import pytest
 
+from app.event_log import FILE as EVENT_FILE
+
 TMUX = shutil.which("tmux")
 REPO = Path(__file__).resolve().parents[2]
 WIDTH, HEIGHT = 160, 48
@@ -29,6 +32,9 @@ SOCKET = f"servodesk-smoke-{os.getpid()}"  # a tmux server of our own: no one el
 START_S = 120.0  # startup to a live screen: ~1.5 s measured, generous for a loaded machine
 WAIT_S = 60.0  # a key's effect on the screen: well under a second unloaded
 TMUX_S = 30.0  # one tmux command
+# issue 13's soak: every tab switched to, once a second, for five minutes beside a CPU burner
+SOAK_S = float(os.environ.get("SERVODESK_SOAK_S", "300"))
+TABS = 10  # F1 … F10
 
 pytestmark = pytest.mark.skipif(
     TMUX is None, reason="tmux is not installed: the real-terminal smoke test needs it "
@@ -132,3 +138,53 @@ def test_servodesk_runs_in_a_real_terminal(tmp_path: Path) -> None:
     finally:
         subprocess.run([TMUX, "-L", SOCKET, "kill-server"], capture_output=True, timeout=TMUX_S)
     print(f"live screen {live_after:.2f} s after the session started")
+
+
+def test_a_five_minute_soak_beside_a_burner_never_lets_the_controller_hold(tmp_path: Path) -> None:
+    """The app in tmux beside a busy loop in another process (someone else's work on this
+    two-core machine), every tab switched to in turn once a second for ``SOAK_S``: the
+    controller, with its real 250 ms heartbeat timeout, never finds the client silent (the
+    session's events.jsonl has no "UI lost"), and the app is live at the end: the E-stop
+    latches and is logged, and the app quits."""
+    session = f"servodesk-soak-{os.getpid()}"
+    status = tmp_path / "exit-status"
+    data = tmp_path / "data"
+    command = (f"cd {shlex.quote(str(REPO))} && PYTHONPATH={shlex.quote(str(REPO))} "
+               f"{shlex.quote(sys.executable)} -m app --data-dir {shlex.quote(str(data))}; "
+               f"echo $? > {shlex.quote(str(status))}")
+    burner = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+    switches = 0
+    try:
+        tmux("start-server", ";", "set-option", "-g", "remain-on-exit", "on", ";",
+             "new-session", "-d", "-s", session, "-x", str(WIDTH), "-y", str(HEIGHT), command)
+        term = Terminal(session, status)
+        term.wait(lambda s: " RUN" in s and "mode HOLD" in s, "a live screen", START_S)
+        end = time.monotonic() + SOAK_S
+        while time.monotonic() < end:
+            term.keys(f"F{switches % TABS + 1}")
+            switches += 1
+            time.sleep(1.0)  # the soak's pace, not a wait for an effect
+            assert term.exit_status() is None, term.screen()
+        term.keys("F1")
+        term.wait(lambda s: " RUN" in s and "a/z" in s, "the Jog tab, live, after the soak")
+        term.keys("Escape")  # an event for the log to show it was kept all along
+        term.wait(lambda s: "E-STOP LATCHED" in s, "the E-stop")
+        term.keys("C-q")
+        term.wait(lambda s: "Quit servodesk?" in s, "the quit question")
+        term.keys("y")
+        deadline = time.monotonic() + WAIT_S
+        while term.exit_status() is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert term.exit_status() == 0, term.screen()
+    finally:
+        subprocess.run([TMUX, "-L", SOCKET, "kill-server"], capture_output=True, timeout=TMUX_S)
+        burner.kill()
+        burner.wait()
+    logged = [json.loads(line) for path in data.glob(f"sessions/*/{EVENT_FILE}")
+              for line in path.read_text().splitlines()]
+    silent = [f"{e['time']} {e['what']}" for e in logged if e["kind"] == "UI lost"]
+    stalls = [f"{e['time']} {e['what']}" for e in logged if e["kind"] == "stall"]
+    print(f"soak {SOAK_S:g} s, {switches} tab switches: {len(silent)} client-silent, "
+          f"{len(stalls)} loop stalls, load average {os.getloadavg()[0]:.1f}")
+    assert any(e["kind"] == "E-stop" for e in logged), logged
+    assert silent == [], (silent, stalls)
