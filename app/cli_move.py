@@ -546,7 +546,7 @@ def _report(args: argparse.Namespace, result: MoveResult, machine: Machine) -> N
         }, ensure_ascii=False, allow_nan=False))
         return
     print(f"{plan.title}: {result.status}")
-    print(f"saved as {files.json} (and .csv, .tsv)" if files is not None else "not saved")
+    print(f"saved as {files.json} (and .csv.gz, .tsv.gz)" if files is not None else "not saved")
     if plan.approach:
         print(f"a {plan.approach * result.run.sample_time_s:.2f} s approach to the start came "
               "first (left out of the summary)")

@@ -10,12 +10,19 @@ from __future__ import annotations
 
 import argparse
 import json
-import shutil
 import sys
 from pathlib import Path
 
 from app.run_text import local_time, run_lines, summary_table
-from control.recorder import RecorderError, Run, RunFiles, default_data_dir, list_runs, load_run
+from control.recorder import (
+    RecorderError,
+    Run,
+    RunFiles,
+    csv_text,
+    default_data_dir,
+    list_runs,
+    load_run,
+)
 from hw.machine import Machine, MachineError, load_machine
 
 FORMATS = ("svg", "txt", "csv", "mcap")
@@ -161,7 +168,7 @@ def _export(args: argparse.Namespace, data_dir: Path) -> int:
     try:
         if args.format == "csv":
             out.parent.mkdir(parents=True, exist_ok=True)
-            shutil.copyfile(files.csv, out)
+            out.write_text(csv_text(run), encoding="utf-8")  # the saved CSV, unpacked
             written = [out]
         elif args.format == "mcap":
             out.parent.mkdir(parents=True, exist_ok=True)

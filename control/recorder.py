@@ -3,9 +3,9 @@
 A run is three files with one stem, ``YYYYMMDD-HHMMSS-<machine>-<kind>`` (start
 time in UTC; ``-2``, ``-3``… when the stem is taken):
 
-- ``.tsv`` — the thesis's layout (option.c SaveData): sample number, then
+- ``.tsv.gz`` — the thesis's layout (option.c SaveData): sample number, then
   desired, actual and duty of every joint, tab-separated, no header.
-- ``.csv`` — a time column in seconds and the same columns, under a header
+- ``.csv.gz`` — a time column in seconds and the same columns, under a header
   that names joints and units: ``t [s],Ram desired [mm],Ram actual [mm],Ram duty [%]``.
 - ``.json`` — machine, kind, status, start time, sample time, coefficients,
   joints (with each one's encoder resolution), sample count, the decimals the
@@ -22,6 +22,12 @@ differences at the sample time, where rounding a position to 10⁻⁶ already ad
 hundreds of units/s² (a path at its max_accel would be refused). A run that does
 not know its encoders writes its actual positions in full too. ``as_written`` is a
 run as it reads back.
+
+The two tables are gzipped (``gzip -d`` or ``servodesk runs export --format csv`` gives
+the plain text; numpy, pandas and servodesk's path files read them as they are): a 3.4 s
+six-joint run is 0.13 MB in all instead of 1.2 MB, a tenth, with every digit kept.
+Runs saved before (version 2 and older, plain ``.tsv`` and ``.csv``) read as they were:
+a run's JSON names its files.
 
 Each file is written to a temporary file in the same directory (named for the
 saving process, ``.<pid>-<random>.tmp``), fsynced, then hard-linked to its name,
@@ -41,12 +47,14 @@ import contextlib
 import csv
 import errno
 import glob
+import gzip
 import io
 import json
 import math
 import os
 import re
 import uuid
+import zlib
 from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field, replace
 from datetime import UTC, datetime
@@ -59,12 +67,13 @@ import platformdirs
 from hw.machine import Coefficients, Machine
 
 FORMAT = "servodesk-run"
-VERSION = 2  # 2: numbers at their precision (``decimals``), joints' encoder resolution
+VERSION = 3  # 2: numbers at their precision (``decimals``), joints' encoder resolution;
+#              3: the TSV and CSV gzipped
 TIME_DECIMALS = 6  # µs
 DUTY_DECIMALS = 2  # 0.01 %
 MAX_SUFFIX = 10_000  # stems tried before giving up: far beyond same-second saves
 _NO_HARD_LINKS = {errno.EPERM, errno.EOPNOTSUPP, errno.ENOTSUP, errno.ENOSYS, errno.EINVAL}
-_SUFFIXES = (".json", ".csv", ".tsv")
+_SUFFIX = re.compile(r"\.(?:json|csv|tsv)(?:\.gz)?$")  # a run's file name less its stem
 
 
 class RecorderError(OSError):
@@ -185,14 +194,21 @@ class RunFiles:
 
     @classmethod
     def at(cls, directory: Path, stem: str) -> RunFiles:
-        return cls(stem, directory / f"{stem}.tsv", directory / f"{stem}.csv",
+        return cls(stem, directory / f"{stem}.tsv.gz", directory / f"{stem}.csv.gz",
                    directory / f"{stem}.json")
 
     @classmethod
     def from_json(cls, path: Path) -> RunFiles:
-        """The files of a run from its JSON's (or any of its files') path."""
+        """The files of a run from its JSON's (or any of its files', or its stem's) path."""
         path = Path(path)
-        return cls.at(path.parent, path.stem if path.suffix in _SUFFIXES else path.name)
+        return cls.at(path.parent, _SUFFIX.sub("", path.name))
+
+    def named_in(self, doc: Mapping[str, Any]) -> RunFiles:
+        """The files as the run's JSON names them (a run saved before version 3: plain)."""
+        names = doc.get("files", {})
+        directory = self.json.parent
+        return replace(self, **{part: directory / names[part] for part in ("tsv", "csv")
+                                if isinstance(names.get(part), str)})
 
 
 @dataclass(frozen=True)
@@ -236,7 +252,7 @@ def save_run(run: Run, data_dir: Path) -> RunFiles:
     still holds ``run``.
     """
     data_dir = Path(data_dir)
-    tsv, table = _tsv(run).encode(), _csv(run).encode()
+    tsv, table = (gzip.compress(text.encode(), mtime=0) for text in (_tsv(run), csv_text(run)))
     base = stem_base(run)
     placed: list[Path] = []
     try:
@@ -262,8 +278,8 @@ def stem_base(run: Run) -> str:
 def _stems(data_dir: Path, base: str) -> list[RunFiles]:
     """The runs (or parts of runs) in ``data_dir`` under ``base`` or ``base-N``."""
     pattern = re.compile(re.escape(base) + r"(-\d+)?")
-    stems = {p.stem for p in data_dir.glob(f"{glob.escape(base)}*")
-             if p.suffix in _SUFFIXES and pattern.fullmatch(p.stem)}
+    stems = {stem for p in data_dir.glob(f"{glob.escape(base)}*")
+             if _SUFFIX.search(p.name) and pattern.fullmatch(stem := _SUFFIX.sub("", p.name))}
     return [RunFiles.at(data_dir, stem) for stem in sorted(stems)]
 
 
@@ -313,6 +329,7 @@ def load_run(path: Path) -> Run:
     """Read a run back from its JSON and CSV; ``path`` may be any of its files or the stem."""
     files = RunFiles.from_json(Path(path))
     doc = _read_json(files.json)
+    files = files.named_in(doc)
     try:
         joints = doc["joints"]
         names = tuple(j["name"] for j in joints)
@@ -326,7 +343,7 @@ def load_run(path: Path) -> Run:
 def as_written(run: Run) -> Run:
     """``run`` as ``load_run`` reads it back: its numbers at the precision they are saved
     with (what a saved run is compared with)."""
-    table = _parse_table(_csv(run).splitlines()[1:], 1 + 3 * len(run.joint_names))
+    table = _parse_table(csv_text(run).splitlines()[1:], 1 + 3 * len(run.joint_names))
     by_joint = table[:, 1:].reshape(len(table), len(run.joint_names), 3)
     return replace(run, t=table[:, 0], desired=by_joint[:, :, 0], actual=by_joint[:, :, 1],
                    duty=by_joint[:, :, 2])
@@ -360,6 +377,7 @@ def _info(path: Path) -> RunInfo:
     files = RunFiles.from_json(path)
     try:
         doc = _read_json(path)
+        files = files.named_in(doc)
         return RunInfo(files, str(doc["machine"]), str(doc["kind"]), str(doc["status"]),
                        _utc(doc["start_time"]).isoformat(), int(doc["samples"]))
     except (RecorderError, KeyError, TypeError, ValueError) as exc:
@@ -400,15 +418,22 @@ def _read_json(path: Path) -> dict[str, Any]:
 
 
 def _read_table(path: Path, columns: int, rows: int) -> np.ndarray:
-    try:
-        lines = path.read_text(encoding="utf-8").splitlines()[1:]
-    except OSError as exc:
-        raise RecorderError(f"{path}: cannot read ({exc.strerror or exc})") from exc
+    lines = table_text(path).splitlines()[1:]
     table = _parse_table(lines, columns)
     if table.shape != (rows, columns):
         raise ValueError(f"{path.name} holds {table.shape[0]}×{table.shape[1]} numbers, "
                          f"the metadata says {rows}×{columns}")
     return table
+
+
+def table_text(path: Path) -> str:
+    """The text of a run's TSV or CSV, gzipped (``.gz``) or plain (version 2 and older)."""
+    try:
+        data = path.read_bytes()
+        return (gzip.decompress(data) if path.suffix == ".gz" else data).decode()
+    except (OSError, EOFError, zlib.error) as exc:  # gzip: not one, cut short, damaged
+        raise RecorderError(f"{path}: cannot read ({getattr(exc, 'strerror', None) or exc})"
+                            ) from exc
 
 
 def _parse_table(lines: list[str], columns: int) -> np.ndarray:
@@ -423,8 +448,9 @@ def _tsv(run: Run) -> str:
     return _table(rows, "\t", ("d", *_formats(run)))
 
 
-def _csv(run: Run) -> str:
-    """``t [s]`` then desired, actual, duty per joint, under a header with names and units."""
+def csv_text(run: Run) -> str:
+    """The run's CSV: ``t [s]`` then desired, actual, duty per joint, under a header with
+    names and units."""
     header = ["t [s]"]
     for name, unit in zip(run.joint_names, run.joint_units, strict=True):
         header += [f"{name} desired [{unit}]", f"{name} actual [{unit}]", f"{name} duty [%]"]

@@ -4,14 +4,18 @@ errors name the line.
 A file is read in chunks and refused as soon as it holds more lines or bytes than its
 ``FileBound`` allows, so neither the time nor the memory spent on a huge file grows with
 it: a move file's bound is one line per sample of the longest move allowed (and a
-header), at ``BYTES_PER_ROW`` bytes a line (``move_file_bound``).
+header), at ``BYTES_PER_ROW`` bytes a line (``move_file_bound``). A file whose name ends
+in ``.gz`` (a saved run's ``.csv.gz``) is read through gzip, and the bound holds for what
+it unpacks to: a small file that unpacks to a huge one is stopped at the bound too.
 """
 
 from __future__ import annotations
 
 import csv
+import gzip
 import math
 import os
+import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -55,14 +59,23 @@ def read_text_file(path: str | Path, bound: FileBound,
     cannot be read or is past the bound (how far, the bound and why)."""
     path = Path(path).expanduser()
     try:
-        with path.open("rb") as file:
+        with (gzip.open(path, "rb") if gzipped(path) else path.open("rb")) as file:
             data = _read_bounded(file, bound, path, error)
-    except OSError as exc:
-        raise error(f"{path}: cannot read: {exc.strerror or exc}") from None
+    except (OSError, EOFError, zlib.error) as exc:  # gzip: not one, cut short, damaged
+        raise error(f"{path}: cannot read: {getattr(exc, 'strerror', None) or exc}") from None
     try:
         return path, data.decode("utf-8")
     except UnicodeDecodeError:
         raise error(f"{path}: not a text file") from None
+
+
+def gzipped(path: Path) -> bool:
+    return path.suffix.lower() == ".gz"
+
+
+def format_suffix(path: Path) -> str:
+    """The suffix that names a file's format, under any ``.gz``: ``.csv`` for ``x.csv.gz``."""
+    return (path.with_suffix("") if gzipped(path) else path).suffix.lower()
 
 
 def _read_bounded(file: BinaryIO, bound: FileBound, path: Path,

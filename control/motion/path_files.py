@@ -9,7 +9,8 @@
   run saved by servodesk can be played back: its ``<joint> desired [unit]``
   columns are used and its actual and duty columns ignored.
 
-Times are seconds, positions mm or degrees. Every malformed line is reported
+Either may be gzipped (``.tsv.gz``, ``.csv.gz``: a saved run's files are). Times are
+seconds, positions mm or degrees. Every malformed line is reported
 with its line number. A file is bounded before it is parsed (``path_file_bound``):
 at most one line per sample of the longest move allowed (``MAX_MOVE_S``) and a
 header, at ``file_fields.BYTES_PER_ROW`` bytes a line; reading stops at the bound.
@@ -43,6 +44,7 @@ from control.motion.file_fields import (
     FileBound,
     csv_lines,
     field_number,
+    format_suffix,
     move_file_bound,
     read_text_file,
 )
@@ -108,7 +110,7 @@ def read_path(path: str | Path, machine: Machine, hold: tuple[float, ...]) -> Pa
     """Read a path file for ``machine``, within ``path_file_bound``; joints the file leaves
     out stay at ``hold``."""
     path, text = read_text_file(path, path_file_bound(machine), PathFileError)
-    if path.suffix.lower() in CSV_SUFFIXES:
+    if format_suffix(path) in CSV_SUFFIXES:
         return parse_csv(text, machine, hold, str(path))
     return parse_tsv(text, machine, hold, str(path))
 

@@ -25,7 +25,7 @@ from control.identify.sysid import DeadbandModel
 from control.layout import ControlLayout
 from control.motion import moves
 from control.motion.acceptance import check_path
-from control.recorder import as_written, load_run
+from control.recorder import as_written, load_run, table_text
 from control.seqlock import SeqlockReader
 from hw.machine import load_machine
 
@@ -76,7 +76,7 @@ def test_follow_track_completes_and_the_run_is_saved(lockstep: ControlClient,
     assert saved == as_written(result.run)
     np.testing.assert_allclose(result.run.desired, path, atol=1e-9)
     assert saved.coefficients["track"]["kp"] == [list(k) for k in UNIMATE.track.kp]
-    tsv_rows = result.files.tsv.read_text().strip().splitlines()
+    tsv_rows = table_text(result.files.tsv).strip().splitlines()
     assert len(tsv_rows) == len(path) and len(tsv_rows[0].split("\t")) == 1 + 3 * 6
     status = lockstep.status()
     assert status.mode == Mode.HOLD and not status.moving

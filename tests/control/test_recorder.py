@@ -4,6 +4,7 @@ overwritten, clear failures."""
 from __future__ import annotations
 
 import errno
+import gzip
 import json
 import os
 import subprocess
@@ -22,10 +23,12 @@ from control.recorder import (
     Run,
     RunFiles,
     as_written,
+    csv_text,
     default_data_dir,
     list_runs,
     load_run,
     save_run,
+    table_text,
 )
 from hw.machine import load_machine
 
@@ -55,7 +58,7 @@ def test_round_trip_is_exact_at_the_written_precision(tmp_path: Path) -> None:
     run = make_run()
     files = save_run(run, tmp_path)
     assert files.stem == "20240301-093015-unimate2000b-step"
-    assert visible(tmp_path) == [f"{files.stem}.{ext}" for ext in ("csv", "json", "tsv")]
+    assert visible(tmp_path) == [f"{files.stem}.{ext}" for ext in ("csv.gz", "json", "tsv.gz")]
     back = load_run(files.json)
     assert back == as_written(run)
     assert load_run(files.csv) == back and load_run(tmp_path / files.stem) == back
@@ -78,16 +81,16 @@ def test_numbers_are_written_at_the_precision_that_matters(tmp_path: Path) -> No
     run = Run.from_machine(UNIMATE, "step", "complete", UNIMATE.track, t, desired, desired,
                            duty, start_time="2024-03-01T09:30:15+00:00")
     files = save_run(run, tmp_path)
-    row = files.csv.read_text().splitlines()[2].split(",")
+    row = table_text(files.csv).splitlines()[2].split(",")
     assert row[0] == "0.001"  # to the µs, trailing zeros dropped
     # desired in full, actual to a tenth of a count: In/Out's 0.26 mm to 0.01 mm
     assert row[1:4] == ["1508.4405000000002", "1508.44", "0"]
     assert row[4:7] == ["0.0056", "0.006", "-17.21"]  # Rotate's 0.03° to 0.001°; duty 0.01 %
     assert row[10:13] == ["-0.00488", "-0.005", "0"]  # −0.001 % is written as 0, not −0
     assert row[16:19] == ["100", "100", "0"]
-    assert files.tsv.read_text().splitlines()[2].split("\t") == ["2", *row[1:]]
+    assert table_text(files.tsv).splitlines()[2].split("\t") == ["2", *row[1:]]
     doc = json.loads(files.json.read_text())
-    assert doc["version"] == 2
+    assert doc["version"] == 3
     assert doc["decimals"] == {"t": 6, "desired": None, "actual": [2, 3, 3, 3, 3, 3],
                                "duty": 2}
     assert doc["joints"][0] == {"name": "In/Out", "unit": "mm", "resolution": 0.2617}
@@ -117,6 +120,46 @@ def test_a_version_1_run_still_loads(tmp_path: Path) -> None:
     assert back.joint_resolution == () and back.samples == 50
 
 
+def test_a_version_2_run_with_plain_tables_still_loads(tmp_path: Path) -> None:
+    """Runs saved before the tables were gzipped: the JSON names plain .tsv and .csv."""
+    files = save_run(make_run(), tmp_path)
+    doc = json.loads(files.json.read_text())
+    doc["version"] = 2
+    doc["files"].update(tsv=f"{files.stem}.tsv", csv=f"{files.stem}.csv")
+    files.json.write_text(json.dumps(doc))
+    for packed in (files.tsv, files.csv):
+        packed.with_suffix("").write_text(table_text(packed))
+        packed.unlink()
+    back = load_run(files.json)
+    assert back == as_written(make_run())
+    (listed,) = list_runs(tmp_path)
+    assert listed.files.csv.name == f"{files.stem}.csv" and listed.files.csv.exists()
+
+
+def test_the_tables_are_a_tenth_of_what_they_were(tmp_path: Path) -> None:
+    """A six-joint 3.4 s sine on Rotate, as the simulator records one (actual positions in
+    whole encoder counts, lagging): its gzipped TSV and CSV take at most a tenth of the same
+    tables written as version 1 did, every number in 17 digits (issue 13: 0.8 MB each for
+    3.4 s), and the precision that matters is kept (the round trip above)."""
+    n, dt = 3_400, UNIMATE.sample_time_s
+    start = np.array([1508.4405, 0.0055, 1.4968, -0.00488, 2.49876, -0.00895])
+    end = start + np.array([0.0, 20.0, 0.0, 0.0, 0.0, 0.0])
+    desired = moves.sine(start, end, period=n * dt, duration=n * dt, machine=UNIMATE)[:n]
+    counts = np.array(recorder.resolution(UNIMATE))
+    actual = np.round(np.roll(desired, 40, axis=0) / counts) * counts  # lagging, in counts
+    duty = np.clip(np.gradient(desired, dt, axis=0) * 3.0 + 1e-3 * (desired - actual), -100, 100)
+    run = Run.from_machine(UNIMATE, "sine", "complete", UNIMATE.track, np.arange(n) * dt,
+                           desired, actual, duty, start_time="2024-03-01T09:30:15+00:00")
+    files = save_run(run, tmp_path)
+    packed = files.tsv.stat().st_size + files.csv.stat().st_size
+    columns = np.column_stack([run.t, run.desired, run.actual, run.duty])
+    in_full = 2 * sum(len(repr(v)) + 1 for v in columns.ravel().tolist())
+    plain = len(table_text(files.tsv)) + len(csv_text(run))
+    print(f"tables: {packed / 1e3:.0f} kB gzipped, {plain / 1e3:.0f} kB plain, "
+          f"{in_full / 1e3:.0f} kB in 17 digits")
+    assert packed <= in_full / 10, (packed, in_full)
+
+
 def test_rig_counts_survive(tmp_path: Path) -> None:
     run = make_run(RIG)
     counts = np.round(run.actual / 0.1) + np.arange(run.samples)[:, None]  # 0.1 mm counts
@@ -129,7 +172,7 @@ def test_rig_counts_survive(tmp_path: Path) -> None:
 
 def test_tsv_has_the_columns_of_option_c_savedata(tmp_path: Path) -> None:
     run = make_run()
-    rows = save_run(run, tmp_path).tsv.read_text().splitlines()
+    rows = table_text(save_run(run, tmp_path).tsv).splitlines()
     written = as_written(run)
     assert len(rows) == run.samples
     for k in (0, 17, run.samples - 1):
@@ -144,7 +187,7 @@ def test_tsv_has_the_columns_of_option_c_savedata(tmp_path: Path) -> None:
 
 def test_csv_header_names_joints_and_units(tmp_path: Path) -> None:
     files = save_run(make_run(), tmp_path)
-    header = files.csv.read_text().splitlines()[0].split(",")
+    header = table_text(files.csv).splitlines()[0].split(",")
     assert header[:4] == ["t [s]", "In/Out desired [mm]", "In/Out actual [mm]", "In/Out duty [%]"]
     assert header[-1] == "Swivel duty [%]" and len(header) == 19
 
@@ -158,7 +201,7 @@ def test_json_carries_the_metadata(tmp_path: Path) -> None:
     assert doc["start_time"] == "2024-03-01T09:30:15.250000+00:00"
     assert doc["joints"][2] == {"name": "Up/Down", "unit": "deg", "resolution": 0.01432}
     assert doc["coefficients"]["name"] == "track"
-    assert doc["files"] == {"tsv": f"{files.stem}.tsv", "csv": f"{files.stem}.csv",
+    assert doc["files"] == {"tsv": f"{files.stem}.tsv.gz", "csv": f"{files.stem}.csv.gz",
                             "json": f"{files.stem}.json"}
 
 
@@ -166,12 +209,12 @@ def test_same_second_saves_never_overwrite(tmp_path: Path) -> None:
     first = save_run(make_run(), tmp_path)
     second = save_run(make_run(), tmp_path)
     assert second.stem == f"{first.stem}-2"
-    assert json.loads(second.json.read_text())["files"]["csv"] == f"{first.stem}-2.csv"
-    (tmp_path / f"{first.stem}-3.csv").write_text("someone else's file")
+    assert json.loads(second.json.read_text())["files"]["csv"] == f"{first.stem}-2.csv.gz"
+    (tmp_path / f"{first.stem}-3.csv.gz").write_text("someone else's file")
     third = save_run(make_run(), tmp_path)  # -3 is partly taken: skipped, the stray file kept
     assert third.stem == f"{first.stem}-4"
-    assert (tmp_path / f"{first.stem}-3.csv").read_text() == "someone else's file"
-    assert not (tmp_path / f"{first.stem}-3.tsv").exists()
+    assert (tmp_path / f"{first.stem}-3.csv.gz").read_text() == "someone else's file"
+    assert not (tmp_path / f"{first.stem}-3.tsv.gz").exists()
 
 
 def test_concurrent_saves_do_not_collide(tmp_path: Path) -> None:
@@ -290,8 +333,12 @@ def test_list_order_of_many_same_second_saves_follows_the_suffix(tmp_path: Path)
 
 def test_loading_a_damaged_run_says_what_is_wrong(tmp_path: Path) -> None:
     files = save_run(make_run(), tmp_path)
-    files.csv.write_text(files.csv.read_text().rsplit("\n", 2)[0] + "\n")  # last row lost
+    cut = table_text(files.csv).rsplit("\n", 2)[0] + "\n"  # last row lost
+    files.csv.write_bytes(gzip.compress(cut.encode()))
     with pytest.raises(RecorderError, match=r"damaged run .*49×19 numbers, the metadata says 50"):
+        load_run(files.json)
+    files.csv.write_bytes(files.csv.read_bytes()[:-20])  # the gzip stream cut short
+    with pytest.raises(RecorderError, match=r"\.csv\.gz: cannot read"):
         load_run(files.json)
     with pytest.raises(RecorderError, match="cannot read"):
         load_run(tmp_path / "nothing.json")

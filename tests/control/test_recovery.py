@@ -100,8 +100,8 @@ def test_a_save_killed_before_its_json_is_redone_and_its_leftovers_cleared(left,
     runs = tmp_path / "runs"
     runs.mkdir(parents=True)
     base = stem_base(segment.run())
-    (runs / f"{base}.tsv").write_text("half")
-    (runs / f"{base}.csv").write_text("half")
+    (runs / f"{base}.tsv.gz").write_text("half")
+    (runs / f"{base}.csv.gz").write_text("half")
     (runs / f".{dead_pid()}-0123.tmp").write_text("half")
     (runs / f".{os.getpid()}-4567.tmp").write_text("a live saver's")
     recover_runs(tmp_path / "fallback")
@@ -109,8 +109,9 @@ def test_a_save_killed_before_its_json_is_redone_and_its_leftovers_cleared(left,
     assert load_run(info.files.json).samples == ROWS
     assert not (runs / f".{dead_pid()}-0123.tmp").exists()
     assert (runs / f".{os.getpid()}-4567.tmp").exists(), "a live process's temp file went"
-    assert not [p for p in runs.iterdir() if p.suffix in (".tsv", ".csv")
-                and not p.with_suffix(".json").exists()]
+    assert sorted(p.name for p in runs.iterdir()) == [f".{os.getpid()}-4567.tmp", *(
+        f"{info.files.stem}{ext}" for ext in (".csv.gz", ".json", ".tsv.gz"))], \
+        "the halves are gone, the run saved in their place"
 
 
 def test_a_save_killed_after_its_json_is_not_saved_twice(left, tmp_path) -> None:

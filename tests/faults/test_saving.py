@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 
 from control import shm
-from control.recorder import list_runs, load_run
+from control.recorder import RunFiles, list_runs, load_run
 from control.recovery import recover_runs
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -91,7 +91,7 @@ def test_a_saver_killed_anywhere_loses_no_run(tmp_path: Path, measured, where: s
         assert info.status == "recovered: complete" and run.meta["recovered"] is True
         assert any("recovered a step run" in n for n in notices), notices
     leftovers = sorted(p.name for p in runs.iterdir()
-                       if p.suffix == ".tmp" or not p.with_suffix(".json").exists())
+                       if p.suffix == ".tmp" or not RunFiles.from_json(p).json.exists())
     assert leftovers == [], "a killed save left parts behind"
     assert [n for n in shm.leftover_segments() if shm.owner_pid(n) == saver.pid] == []
     measured("recovered", 0.0 if before else 1.0)

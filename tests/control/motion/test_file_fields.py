@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gzip
 import re
 from pathlib import Path
 
@@ -93,3 +94,29 @@ def test_a_file_that_cannot_be_read_or_is_not_text_names_itself(tmp_path: Path) 
         read_text_file(write(tmp_path, b"\xff\xfe1\n"), BOUND)
     with pytest.raises(ValueError, match=r": cannot read: Is a directory"):
         read_text_file(tmp_path, BOUND)
+
+
+def test_a_gzipped_file_is_read_through_gzip_and_bounded_by_what_it_unpacks_to(
+        tmp_path: Path) -> None:
+    """A saved run's ``.csv.gz`` plays again as a path file: read as its text. The bound holds
+    for the text: 100 MB of zeros packed into 100 kB is stopped a chunk past the bound, and a
+    packed file cut short or not gzip at all is refused naming the file."""
+    text = "header\n1\n2\n3\n"
+    packed = tmp_path / "run.csv.gz"
+    packed.write_bytes(gzip.compress(text.encode()))
+    assert read_text_file(packed, BOUND) == (packed, text)
+    assert file_fields.format_suffix(packed) == ".csv"
+    bomb = tmp_path / "bomb.tsv.gz"
+    bomb.write_bytes(gzip.compress(bytes(100 * 10**6)))
+    assert bomb.stat().st_size < 200_000
+    megabyte = FileBound("a test file", 10, 10**6, "why", "fix")
+    with pytest.raises(ValueError, match=r"bomb\.tsv\.gz: more than 1\.0 MB; a test file"):
+        read_text_file(bomb, megabyte)
+    cut = tmp_path / "cut.csv.gz"
+    cut.write_bytes(packed.read_bytes()[:-12])
+    with pytest.raises(ValueError, match=r"cut\.csv\.gz: cannot read: Compressed file ended"):
+        read_text_file(cut, BOUND)
+    plain = tmp_path / "plain.csv.gz"
+    plain.write_text(text)
+    with pytest.raises(ValueError, match=r"plain\.csv\.gz: cannot read: Not a gzipped file"):
+        read_text_file(plain, BOUND)
