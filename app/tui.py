@@ -21,7 +21,7 @@ from typing import ClassVar
 from textual.app import App, ComposeResult
 from textual.binding import Binding
 from textual.screen import ModalScreen
-from textual.widgets import Footer, TabbedContent, TabPane
+from textual.widgets import TabbedContent, TabPane
 
 from app.desk import Desk
 from app.event_log import LogEntry, entries_of
@@ -42,6 +42,7 @@ from app.tabs.tab import TabPage
 from app.tabs.tuning import TuningTab
 from app.widgets.dialogs import ConfirmScreen
 from app.widgets.header import FaultBanner, StatusHeader
+from app.widgets.key_bar import KeyBar
 from control.attached import AttachedClient
 from control.client import ControlClient, ControllerError, Event
 from control.events import Commander, Died, EStop, Fault, Initialised, Notice, Refused
@@ -186,7 +187,7 @@ class ServodeskApp(App[None]):
             for i, (name, cls) in enumerate(TABS):
                 with TabPane(f"F{i + 1} {cls.TITLE}", id=f"pane-{name}"):
                     yield cls(self.desk, id=f"tab-{name}")
-        yield Footer()
+        yield KeyBar()
 
     def on_mount(self) -> None:
         # kept, not queried: a controller event may still arrive while the screen is torn down
