@@ -75,6 +75,11 @@ NO_CARTESIAN = ("no Cartesian jog on this machine: {name} has no closed-form kin
 RIG_ARROW_STEP = 10.0  # function.c Manual(): each arrow press changes the duty by 10 %
 HOLD_DUTY_PER_STEP = 10.0  # hold-to-move duty is 10 × increment %,
 HOLD_DUTY_MAX = 50.0  # at most this: a held key is for placing a joint, not for speed
+HEADERS = ("keys", "joint", "command %", "min PWM +/−", "controller %", "valve %", "position",
+           "target")
+NARROW_HEADERS = ("keys", "joint", "cmd", "min ±", "ctrl", "valve", "pos", "target")
+JUSTIFY = ("center", "left", "right", "right", "right", "right", "right", "right")
+NARROW = 100  # the table's width (columns) below which it takes NARROW_HEADERS
 # Position-jog steps, keys 1-9, per unit: the same 1-2-5 ladder, up to 20 mm or 5° a press
 # (a Unimate joint's range is 57° to 1,065 mm). The first steps are finer than one encoder
 # count on some joints (In/Out 0.26 mm, Bend 0.06°): the hold target adds them up.
@@ -605,9 +610,13 @@ class JogTab(TabPage):
         if status is None:
             return Text("tool pose  –", "dim")
         x, y, z, g, b, a = self.model.pose(status.position)
-        parts: list[str | tuple[str, str]] = [
-            ("tool  ", "dim"), f"x {x:8.1f}  y {y:8.1f}  z {z:8.1f} mm   ",
-            f"γ {g:7.2f}°  β {b:7.2f}°  α {a:7.2f}°"]
+        if self.size.width < NARROW:  # every number whole at 80 columns
+            position = f"x {x:.1f}  y {y:.1f}  z {z:.1f} mm  "
+            angles = f"γ {g:.2f}°  β {b:.2f}°  α {a:.2f}°"
+        else:
+            position, angles = (f"x {x:8.1f}  y {y:8.1f}  z {z:8.1f} mm   ",
+                                f"γ {g:7.2f}°  β {b:7.2f}°  α {a:7.2f}°")
+        parts: list[str | tuple[str, str]] = [("tool  ", "dim"), position, angles]
         if self.pad.frame != "joint":
             keys = "  ".join(f"{p}/{m} {axis}" for (p, m), axis in zip(JOG_KEYS, AXES,
                                                                      strict=True))
@@ -635,12 +644,14 @@ class JogTab(TabPage):
                              ", ".join(parts))
 
     def _table(self, status: Status | None) -> Table:
+        """Keys, joint, command, min PWM, controller and valve duty, position, target and a
+        limit bar; under ``NARROW`` columns (80×24) the headers are short and the values
+        carry no unit, so that every number is whole."""
+        narrow = self.size.width < NARROW
         table = Table(expand=True, box=None, padding=(0, 1), header_style="bold")
-        for name, justify in (("keys", "center"), ("joint", "left"), ("command %", "right"),
-                              ("min PWM +/−", "right"), ("controller %", "right"),
-                              ("valve %", "right"), ("position", "right"), ("target", "right")):
+        for name, justify in zip(NARROW_HEADERS if narrow else HEADERS, JUSTIFY, strict=True):
             table.add_column(name, justify=justify, no_wrap=True)
-        table.add_column("within limits", ratio=1, no_wrap=True)
+        table.add_column("limits" if narrow else "within limits", ratio=1, no_wrap=True)
         rig = self.machine.n_joints == 1
         for j, joint in enumerate(self.machine.joints):
             keys = "↑/↓  a/z" if rig else "/".join(JOG_KEYS[j])
@@ -650,10 +661,11 @@ class JogTab(TabPage):
                 table.add_row(keys, joint.name, self._command(j), least, "–", "–", "–", "–", "")
                 continue
             q, d = status.position[j], status.desired[j]
+            unit = "" if narrow else f" {joint.symbol}"
             table.add_row(
                 keys, joint.name, self._command(j), least, f"{status.duty[j]:+6.1f}",
                 f"{status.valve[j]:+6.1f}",
-                f"{q:9.2f} {joint.symbol}", "–" if d != d else f"{d:9.2f} {joint.symbol}",
+                f"{q:.2f}{unit}", "–" if d != d else f"{d:.2f}{unit}",
                 LimitBar(q, joint.lower, joint.upper, d))
         return table
 

@@ -97,6 +97,21 @@ def test_every_tab_shows_what_it_is_for(tui, size: tuple[int, int]) -> None:
                     widget.scroll_visible(animate=False, immediate=True)
                     await pilot.pause()
                     on_screen(widget)
+                if name == "jog":  # every number whole, every joint's limit bar drawn
+                    table = app.query_one("#jog-table", LiveText)
+                    await tui.until(lambda table=table: "Swivel" in tui.text(table),
+                                    what="the jog table")
+                    text = tui.text(table)
+                    assert "…" not in text, text
+                    here = app.client.status().position
+                    for j, joint in enumerate(app.machine.joints):
+                        (row,) = [r for r in text.splitlines() if f" {joint.name} " in r]
+                        assert row.count("├") == 1 and row.rstrip().endswith("┤"), row
+                        numbers = [float(w) for w in row.split()[2:] if w[-1].isdigit()
+                                   and w.lstrip("+-").replace(".", "", 1).isdigit()]
+                        assert any(abs(v - here[j]) < 0.2 for v in numbers), row  # position
+                    pose = tui.text(app.query_one("#jog-pose", LiveText))
+                    assert "…" not in pose and pose.count("°") == 3, pose
                 if name == "status":
                     joints = app.query_one("#status-joints", LiveText)
                     await tui.until(lambda joints=joints: "Swivel" in tui.text(joints),
