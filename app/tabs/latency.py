@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from typing import ClassVar, Literal
 
 import numpy as np
+from rich.bar import Bar
 from rich.table import Table
 from rich.text import Text
 from textual.app import ComposeResult
@@ -38,7 +39,6 @@ TEST_S = 10.0
 FINE_ROWS = 20  # 5 µs rows: 0-100 µs at most
 BULK_FRACTION = 0.995  # the fine rows cover this share of the ticks
 TAIL_EDGES_US = (50.0, 100.0, 200.0, 500.0, 1000.0)  # wider rows for the tail
-BAR_WIDTH = 40
 STALL_CHECK_S = 0.5  # the stall watch reads the histogram this often, shown or not
 OVER_US = HIST_BINS * HIST_BIN_NS / 1e3  # the last bin: every tick this late or later
 THESIS = "thesis, Table 2.1 (486-66, RTLinux): min 11.5 µs · average 13.97 µs · max 54 µs · " \
@@ -253,17 +253,17 @@ def _table(h: Lateness, title: str) -> Table:
     approx = "" if h.exact_extremes else "≈"
     table = Table(title=f"{title}: {h.ticks:,} ticks", title_justify="left", title_style="bold",
                   box=None, padding=(0, 1), caption_justify="left", header_style="bold",
+                  expand=True,
                   caption=f"min {approx}{h.min_us:.1f} µs · average {h.mean_us:.2f} µs · max "
                           f"{h.max_text()} · overruns {h.overruns}")
     table.add_column("lateness µs", justify="right", no_wrap=True)
     table.add_column("ticks", justify="right")
     table.add_column("%", justify="right")
-    table.add_column("", no_wrap=True)
+    table.add_column("", no_wrap=True, ratio=1)  # the bars take the width there is
     rows = histogram_rows(h.counts)
     peak = max((n for *_, n in rows), default=0)
     for lo, hi, n in rows:
         span = f"{lo:g}–{hi:g}" if math.isfinite(hi) else f"≥ {lo:g}"
         share = 100.0 * n / h.ticks if h.ticks else 0.0
-        bar = "█" * (round(BAR_WIDTH * n / peak) if peak else 0)
-        table.add_row(span, f"{n:,}", f"{share:.2f}", Text(bar, "cyan"))
+        table.add_row(span, f"{n:,}", f"{share:.2f}", Bar(peak or 1, 0, n, color="cyan"))
     return table

@@ -112,6 +112,11 @@ def test_every_tab_shows_what_it_is_for(tui, size: tuple[int, int]) -> None:
                         assert any(abs(v - here[j]) < 0.2 for v in numbers), row  # position
                     pose = tui.text(app.query_one("#jog-pose", LiveText))
                     assert "…" not in pose and pose.count("°") == 3, pose
+                if name == "latency":  # every bin's span, count and share whole
+                    total = app.query_one("#latency-total")
+                    await tui.until(lambda total=total: "0–5" in tui.text(total),
+                                    what="the histogram")
+                    assert "…" not in tui.text(total), tui.text(total)
                 if name == "status":
                     joints = app.query_one("#status-joints", LiveText)
                     await tui.until(lambda joints=joints: "Swivel" in tui.text(joints),
