@@ -664,7 +664,7 @@ class JogTab(TabPage):
             unit = "" if narrow else f" {joint.symbol}"
             table.add_row(
                 keys, joint.name, self._command(j), least, f"{status.duty[j]:+6.1f}",
-                f"{status.valve[j]:+6.1f}",
+                f"{status.valve[j] + 0.0:+6.1f}",  # a closed valve is +0.0, never -0.0
                 f"{q:.2f}{unit}", "–" if d != d else f"{d:.2f}{unit}",
                 LimitBar(q, joint.lower, joint.upper, d))
         return table

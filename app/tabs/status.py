@@ -73,7 +73,7 @@ class StatusTab(TabPage):
             e = d - q if math.isfinite(d) else math.nan
             table.add_row(
                 joint.name, f"{q:10.3f} {joint.symbol}", _num(d, joint.symbol),
-                _num(e, joint.symbol), f"{status.duty[j]:+7.1f}", f"{status.valve[j]:+7.1f}",
+                _num(e, joint.symbol), _pct(status.duty[j], 7), _pct(status.valve[j], 7),
                 f"{status.raw[j]:#06x}",
                 Text(str(status.glitches[j]), "yellow" if status.glitches[j] else "dim"),
                 LimitBar(q, joint.lower, joint.upper, d))
@@ -93,7 +93,7 @@ class StatusTab(TabPage):
             e = d - q if math.isfinite(d) else math.nan
             table.add_row(
                 joint.name, f"{q:.2f} {joint.symbol}", _num(d, joint.symbol, ".2f"),
-                _num(e, "", "+.3f"), f"{status.duty[j]:+.1f}", f"{status.valve[j]:+.1f}",
+                _num(e, "", "+.3f"), _pct(status.duty[j]), _pct(status.valve[j]),
                 LimitBar(q, joint.lower, joint.upper, d))
         return table
 
@@ -123,8 +123,8 @@ class StatusTab(TabPage):
             ("controller time", f"{status.time_s:.3f} s"),
             ("mode", MODE_NAMES.get(status.mode, str(status.mode))),
             ("move", progress),
-            ("lateness", f"{status.late_last_us:.1f} µs (max {status.late_max_us:.1f})"),
-            ("compute", f"{status.compute_last_us:.1f} µs (max {status.compute_max_us:.1f})"),
+            ("lateness", f"{status.late_last_us:.1f} µs, max {status.late_max_us:.0f}"),
+            ("compute", f"{status.compute_last_us:.1f} µs, max {status.compute_max_us:.0f}"),
             ("loop CPU", _share(status.compute_total_s, status.tick * self.machine.sample_time_s)),
             ("overruns", f"{status.overruns}"),
             ("supply", _supply(status.supply_mpa, self.machine)),
@@ -144,9 +144,14 @@ class StatusTab(TabPage):
         return Group(Text(f"link ({self.desk.backend})", "bold"), table)
 
 
+def _pct(duty: float, width: int = 0) -> str:
+    """A duty in %, signed; a closed valve reads +0.0, never −0.0 (a polarity of −1 on 0)."""
+    return f"{duty + 0.0:+{width or ''}.1f}"
+
+
 def _share(busy_s: float, elapsed_s: float) -> str:
     """The share of the period the loop's work takes (the thesis: under half the CPU at 1 ms)."""
-    return f"{100.0 * busy_s / elapsed_s:.1f} % of the period" if elapsed_s > 0 else "–"
+    return f"{100.0 * busy_s / elapsed_s:.1f} %" if elapsed_s > 0 else "–"
 
 
 def _supply(mpa: float, machine: Machine) -> Text:
