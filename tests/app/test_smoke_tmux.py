@@ -140,6 +140,7 @@ def test_servodesk_runs_in_a_real_terminal(tmp_path: Path) -> None:
     print(f"live screen {live_after:.2f} s after the session started")
 
 
+@pytest.mark.timeout(SOAK_S + START_S + 4 * WAIT_S)
 def test_a_five_minute_soak_beside_a_burner_never_lets_the_controller_hold(tmp_path: Path) -> None:
     """The app in tmux beside a busy loop in another process (someone else's work on this
     two-core machine), every tab switched to in turn once a second for ``SOAK_S``: the
