@@ -112,6 +112,9 @@ def test_every_tab_shows_what_it_is_for(tui, size: tuple[int, int]) -> None:
                         assert any(abs(v - here[j]) < 0.2 for v in numbers), row  # position
                     pose = tui.text(app.query_one("#jog-pose", LiveText))
                     assert "…" not in pose and pose.count("°") == 3, pose
+                if name == "moves":  # each kind on one line, the feed hold's label whole
+                    assert "Multi-step" in tui.text(app.query_one("#move-kinds"))
+                    assert app.query_one("#feed-hold").region.height == 1
                 if name == "latency":  # every bin's span, count and share whole
                     total = app.query_one("#latency-total")
                     await tui.until(lambda total=total: "0–5" in tui.text(total),
