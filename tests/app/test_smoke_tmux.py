@@ -83,6 +83,31 @@ class Terminal:
             time.sleep(0.05)
 
 
+    def quit_latched(self) -> None:
+        """Quit with the E-stop latched: the app asks first, then exits with status 0."""
+        self.keys("C-q")
+        self.wait(lambda s: "Quit servodesk?" in s and "E-stop is latched" in s,
+                  "the quit question")
+        self.keys("y")
+        deadline = time.monotonic() + WAIT_S
+        while self.exit_status() is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert self.exit_status() == 0, self.screen()
+
+
+def launch(session: str, tmp_path: Path) -> Terminal:
+    """``python -m app`` in a new detached tmux session of WIDTH × HEIGHT, saving under
+    ``tmp_path/data``; remain-on-exit keeps the last screen for a failure message if the app
+    exits early."""
+    status = tmp_path / "exit-status"
+    command = (f"cd {shlex.quote(str(REPO))} && PYTHONPATH={shlex.quote(str(REPO))} "
+               f"{shlex.quote(sys.executable)} -m app --data-dir "
+               f"{shlex.quote(str(tmp_path / 'data'))}; echo $? > {shlex.quote(str(status))}")
+    tmux("start-server", ";", "set-option", "-g", "remain-on-exit", "on", ";",
+         "new-session", "-d", "-s", session, "-x", str(WIDTH), "-y", str(HEIGHT), command)
+    return Terminal(session, status)
+
+
 def jog_duty(screen: str, duty: str) -> bool:
     """Whether the Jog tab's In/Out row (keys a/z) shows ``duty``."""
     return any(line.lstrip().startswith("a/z") and duty in line for line in screen.splitlines())
@@ -90,15 +115,8 @@ def jog_duty(screen: str, duty: str) -> bool:
 
 def test_servodesk_runs_in_a_real_terminal(tmp_path: Path) -> None:
     session = f"servodesk-smoke-{os.getpid()}"
-    status = tmp_path / "exit-status"
-    command = (f"cd {shlex.quote(str(REPO))} && PYTHONPATH={shlex.quote(str(REPO))} "
-               f"{shlex.quote(sys.executable)} -m app --data-dir "
-               f"{shlex.quote(str(tmp_path / 'runs'))}; echo $? > {shlex.quote(str(status))}")
     started = time.monotonic()
-    # remain-on-exit keeps the last screen for the failure message if the app exits early
-    tmux("start-server", ";", "set-option", "-g", "remain-on-exit", "on", ";",
-         "new-session", "-d", "-s", session, "-x", str(WIDTH), "-y", str(HEIGHT), command)
-    term = Terminal(session, status)
+    term = launch(session, tmp_path)
     assert tmux("display", "-p", "-t", session, "#{window_width}x#{window_height}").strip() \
         == f"{WIDTH}x{HEIGHT}"
     try:
@@ -127,14 +145,7 @@ def test_servodesk_runs_in_a_real_terminal(tmp_path: Path) -> None:
         term.wait(lambda s: " RUN" in s and "E-STOP LATCHED" not in s, "the release")
         term.keys("C-e")
         term.wait(lambda s: "E-STOP LATCHED" in s, "the E-stop from ctrl+e")
-        term.keys("C-q")  # latched: it asks first
-        term.wait(lambda s: "Quit servodesk?" in s and "E-stop is latched" in s,
-                  "the quit question")
-        term.keys("y")
-        deadline = time.monotonic() + WAIT_S
-        while term.exit_status() is None and time.monotonic() < deadline:
-            time.sleep(0.05)
-        assert term.exit_status() == 0, term.screen()
+        term.quit_latched()
     finally:
         subprocess.run([TMUX, "-L", SOCKET, "kill-server"], capture_output=True, timeout=TMUX_S)
     print(f"live screen {live_after:.2f} s after the session started")
@@ -147,18 +158,10 @@ def test_a_five_minute_soak_beside_a_burner_never_lets_the_controller_hold(tmp_p
     controller, with its real 250 ms heartbeat timeout, never finds the client silent (the
     session's events.jsonl has no "UI lost"), and the app is live at the end: the E-stop
     latches and is logged, and the app quits."""
-    session = f"servodesk-soak-{os.getpid()}"
-    status = tmp_path / "exit-status"
-    data = tmp_path / "data"
-    command = (f"cd {shlex.quote(str(REPO))} && PYTHONPATH={shlex.quote(str(REPO))} "
-               f"{shlex.quote(sys.executable)} -m app --data-dir {shlex.quote(str(data))}; "
-               f"echo $? > {shlex.quote(str(status))}")
     burner = subprocess.Popen([sys.executable, "-c", "while True: pass"])
     switches = 0
     try:
-        tmux("start-server", ";", "set-option", "-g", "remain-on-exit", "on", ";",
-             "new-session", "-d", "-s", session, "-x", str(WIDTH), "-y", str(HEIGHT), command)
-        term = Terminal(session, status)
+        term = launch(f"servodesk-soak-{os.getpid()}", tmp_path)
         term.wait(lambda s: " RUN" in s and "mode HOLD" in s, "a live screen", START_S)
         end = time.monotonic() + SOAK_S
         while time.monotonic() < end:
@@ -170,18 +173,12 @@ def test_a_five_minute_soak_beside_a_burner_never_lets_the_controller_hold(tmp_p
         term.wait(lambda s: " RUN" in s and "a/z" in s, "the Jog tab, live, after the soak")
         term.keys("Escape")  # an event for the log to show it was kept all along
         term.wait(lambda s: "E-STOP LATCHED" in s, "the E-stop")
-        term.keys("C-q")
-        term.wait(lambda s: "Quit servodesk?" in s, "the quit question")
-        term.keys("y")
-        deadline = time.monotonic() + WAIT_S
-        while term.exit_status() is None and time.monotonic() < deadline:
-            time.sleep(0.05)
-        assert term.exit_status() == 0, term.screen()
+        term.quit_latched()
     finally:
         subprocess.run([TMUX, "-L", SOCKET, "kill-server"], capture_output=True, timeout=TMUX_S)
         burner.kill()
         burner.wait()
-    logged = [json.loads(line) for path in data.glob(f"sessions/*/{EVENT_FILE}")
+    logged = [json.loads(line) for path in (tmp_path / "data").glob(f"sessions/*/{EVENT_FILE}")
               for line in path.read_text().splitlines()]
     silent = [f"{e['time']} {e['what']}" for e in logged if e["kind"] == "UI lost"]
     stalls = [f"{e['time']} {e['what']}" for e in logged if e["kind"] == "stall"]

@@ -15,7 +15,7 @@ from textual.widget import Widget
 from textual.widgets import OptionList
 
 from app.tabs.runs import RunsTab
-from app.tui import TABS
+from app.tui import TABS, ServodeskApp
 from app.widgets.fields import NumberField
 from app.widgets.figure_plot import MIN_ROWS, FigurePlot
 from app.widgets.live_text import LiveText
@@ -67,6 +67,22 @@ def on_screen(widget: Widget) -> Region:
     return region
 
 
+async def joints_whole(tui, app: ServodeskApp, selector: str) -> None:
+    """A tab's table of joints (Jog's, Status'): nothing cut short, a limit bar on each
+    joint's row, and its position among the row's numbers."""
+    table = app.query_one(selector, LiveText)
+    await tui.until(lambda: "Swivel" in tui.text(table), what=f"the table {selector}")
+    text = tui.text(table)
+    assert "…" not in text, text
+    here = app.client.status().position
+    for j, joint in enumerate(app.machine.joints):
+        (row,) = [r for r in text.splitlines() if f" {joint.name} " in f" {r.strip()} "]
+        assert row.count("├") == 1 and row.rstrip().endswith("┤"), row
+        numbers = [float(w) for w in row.split() if w[-1].isdigit()
+                   and w.lstrip("+-").replace(".", "", 1).isdigit()]
+        assert any(abs(v - here[j]) < 0.2 for v in numbers), row  # its position
+
+
 def braille(plot: FigurePlot, region: tuple[int, int, int, int]) -> int:
     """How many braille cells (curves) one panel of ``plot`` shows."""
     x, y, w, h = region
@@ -97,19 +113,8 @@ def test_every_tab_shows_what_it_is_for(tui, size: tuple[int, int]) -> None:
                     widget.scroll_visible(animate=False, immediate=True)
                     await pilot.pause()
                     on_screen(widget)
-                if name == "jog":  # every number whole, every joint's limit bar drawn
-                    table = app.query_one("#jog-table", LiveText)
-                    await tui.until(lambda table=table: "Swivel" in tui.text(table),
-                                    what="the jog table")
-                    text = tui.text(table)
-                    assert "…" not in text, text
-                    here = app.client.status().position
-                    for j, joint in enumerate(app.machine.joints):
-                        (row,) = [r for r in text.splitlines() if f" {joint.name} " in r]
-                        assert row.count("├") == 1 and row.rstrip().endswith("┤"), row
-                        numbers = [float(w) for w in row.split()[2:] if w[-1].isdigit()
-                                   and w.lstrip("+-").replace(".", "", 1).isdigit()]
-                        assert any(abs(v - here[j]) < 0.2 for v in numbers), row  # position
+                if name == "jog":
+                    await joints_whole(tui, app, "#jog-table")
                     pose = tui.text(app.query_one("#jog-pose", LiveText))
                     assert "…" not in pose and pose.count("°") == 3, pose
                 if name == "moves":  # each kind on one line, the feed hold's label whole
@@ -121,18 +126,7 @@ def test_every_tab_shows_what_it_is_for(tui, size: tuple[int, int]) -> None:
                                     what="the histogram")
                     assert "…" not in tui.text(total), tui.text(total)
                 if name == "status":
-                    joints = app.query_one("#status-joints", LiveText)
-                    await tui.until(lambda joints=joints: "Swivel" in tui.text(joints),
-                                    what="the joints' table")
-                    text = tui.text(joints)
-                    assert "…" not in text, text
-                    here = app.client.status().position
-                    for j, joint in enumerate(app.machine.joints):
-                        (row,) = [r for r in text.splitlines() if r.strip().startswith(
-                            joint.name)]
-                        assert row.count("├") == 1 and row.rstrip().endswith("┤"), row
-                        shown = float(row.strip().removeprefix(joint.name).split()[0])
-                        assert shown == pytest.approx(here[j], abs=0.2), row  # its value
+                    await joints_whole(tui, app, "#status-joints")
                 if name == "runs":
                     plot = app.query_one("#runs-plot", FigurePlot)
                     await tui.until(lambda plot=plot: plot.drawn is not None, what="run plot")
