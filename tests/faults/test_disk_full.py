@@ -77,12 +77,13 @@ def assert_kept_and_saved_elsewhere(client: ControlClient, result: MoveResult,
 
 def test_a_full_disk_keeps_the_run_in_memory_and_leaves_nothing_half_written(
         controller, tmp_path: Path, measured) -> None:
-    """The data directory is a full 64 KiB tmpfs when a 3 s move ends: the move completes,
+    """The data directory is an 8 KiB tmpfs when a 3 s move ends, smaller than its gzipped
+    tables (about 12 kB each): the move completes,
     the result says the run was not saved and why (no space left), the run is whole in
     memory and saves elsewhere, and the full directory holds no partial file. Then, with
     room for the first of the run's three files but not the second, a save fails the same
     way and removes the file it had placed."""
-    with tiny_tmpfs(tmp_path / "full", "64k") as full:
+    with tiny_tmpfs(tmp_path / "full", "8k") as full:
         client, result, path = run_a_step(controller, full)
         assert_kept_and_saved_elsewhere(client, result, path, tmp_path / "elsewhere",
                                         "No space left on device")
