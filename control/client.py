@@ -705,8 +705,11 @@ class ControlClient:
         meta = {"displacement": jog.displacement.tolist(), "frame": frame, "speed": speed,
                 "asked": [float(v) for v in displacement], "stopped": jog.stopped,
                 "start_pose": jog.poses[0].tolist(), "end_pose": jog.poses[-1].tolist()}
-        return self.run(MovePlan("cartesian_jog", f"Cartesian jog ({frame})", jog.q, meta=meta,
-                                 moving=moving_joints(jog.q)))
+        plan = MovePlan("cartesian_jog", f"Cartesian jog ({frame})", jog.q, meta=meta,
+                        moving=moving_joints(jog.q))
+        # judged from the snapshot it was planned from: a second look (run) at a joint still
+        # settling could find it past its tolerance and put an approach in front of the jog
+        return self._start(accept(plan, start, self.machine, self.dt))
 
     def run(self, plan: MovePlan) -> MoveHandle:
         """Run a planned move (``control.motion.plan``): its path, with an approach from where
