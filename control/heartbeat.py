@@ -11,6 +11,9 @@ gap of more than ``STALL_NS`` between two checks means the controller itself was
 (the machine stalled, or the hypervisor, or a SIGSTOP), and a client that had no CPU either
 is not blamed for it. A client that is really gone is still found: its channel closes at
 once (``gone``), and a frozen one is silent ``timeout_ns`` after the controller runs again.
+Only ``STALLS_FORGIVEN`` stalls are forgiven within one silence: a controller that stalls
+tick after tick is overloaded (its overrun watch holds), and a client silent through that
+is lost as usual.
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ from collections.abc import Callable
 from control.layout import ESTOP_WORD, HEARTBEAT_WORD
 
 STALL_NS = 20_000_000  # a gap between checks this long is the controller's own stall
+STALLS_FORGIVEN = 3  # stalls not counted against the client within one silence
 
 
 class ClientWatch:
@@ -39,6 +43,7 @@ class ClientWatch:
         self.estops_seen = words[ESTOP_WORD]
         self.lost_since = 0
         self.closed = False
+        self.forgiven = 0  # stalls not counted against the client since it was last heard
 
     def heard(self) -> None:
         """The client spoke (a message or a new heartbeat)."""
@@ -63,12 +68,15 @@ class ClientWatch:
         wall = self.clock()
         stalled = wall - self.last_check_ns
         self.last_check_ns = wall
-        if stalled > STALL_NS and not (self.lost_since or self.closed):
+        if (stalled > STALL_NS and self.forgiven < STALLS_FORGIVEN
+                and not (self.lost_since or self.closed)):
             self.last_heard_ns += stalled  # the controller's stall, not the client's silence
+            self.forgiven += 1
         beat = self.words[HEARTBEAT_WORD]
         if beat != self.last_beat and not self.closed:
             self.last_beat = beat
             self.last_heard_ns = wall
+            self.forgiven = 0
         if not self.lost_since:
             if wall - self.last_heard_ns > self.timeout_ns:
                 self.lost_since = wall

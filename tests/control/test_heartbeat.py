@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from control.heartbeat import STALL_NS, ClientWatch
+from control.heartbeat import STALL_NS, STALLS_FORGIVEN, ClientWatch
 from control.layout import HEARTBEAT_WORD
 
 MS = 1_000_000
@@ -89,3 +89,26 @@ def test_a_closed_channel_is_lost_at_once_even_after_a_stall(watch) -> None:
     w.gone()
     clock.ns += 10 * STALL_NS
     assert w.check()[0]
+
+
+def test_a_controller_that_stalls_tick_after_tick_still_finds_a_silent_client(watch) -> None:
+    """Gaps of 25 ms at every check are an overloaded controller, not a stall: after
+    STALLS_FORGIVEN of them the silence counts, and a client that never beats is lost."""
+    w, clock, words = watch
+    run(w, clock, 1, 1, words)
+    lost_at = None
+    for k in range(100):
+        clock.ns += STALL_NS + 5 * MS
+        if w.check()[0]:
+            lost_at = k
+            break
+    assert lost_at is not None, "an overloaded controller never found the silent client"
+    assert lost_at <= STALLS_FORGIVEN + TIMEOUT // (STALL_NS + 5 * MS) + 1, lost_at
+
+
+def test_a_client_heard_again_is_forgiven_the_next_stall(watch) -> None:
+    w, clock, words = watch
+    for _ in range(3 * STALLS_FORGIVEN):
+        run(w, clock, 10, 5, words)
+        clock.ns += 400 * MS  # a stall, then the client beats again
+        assert w.check() == (False, False, False)
