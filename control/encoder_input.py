@@ -13,8 +13,10 @@ are believed: the present belief was the wrong reading. The
 thesis saw two or three wrong readings at a time (Figure 6.1); ``glitch_limit``
 rejections in a row are not a glitch but a lying encoder (a stuck bit, a cut
 cable), and a feedback fault: no jump is ever believed, except the first
-reading and the first after a reset (``resync``), and no believed position may
-lie past the joint's range by more than ``range_margin_counts`` once homed. The
+reading and the first after a reset (``resync``). A reading past the joint's range by more than
+``range_margin_counts`` (once homed) is never believed, however long since the last (a
+stalled controller's reach spans the whole range): ``glitch_limit`` of them in a row are a
+feedback fault, the joint outside its range or its encoder lying. The
 believed actuator coordinates then become joint positions (the Yaw reading
 includes Bend), so a wrong Bend word leaves Yaw's position as right as Bend's.
 """
@@ -79,9 +81,10 @@ class EncoderInput:
         speed, floor, confirmed = self.speed_per_ns, self.step_floor, self.confirmed
         for j in range(self.n) if joints is None else joints:
             a = reading[j]
+            inside = not self.homed or self.low[j] <= a <= self.high[j]
             agrees = abs(a - actuator[j]) <= speed[j] * (now - last_ok[j]) + floor[j]
-            believable = believe[j] and (not self.homed or self.low[j] <= a <= self.high[j])
-            if agrees or believable or self.believed_wrong(j, a, now) or self.recalled(j, a, now):
+            if inside and (agrees or believe[j] or self.believed_wrong(j, a, now)
+                           or self.recalled(j, a, now)):
                 confirmed[j] = agrees and not believe[j]
                 earlier = self.earlier[j]
                 self.recall[j] = 0
@@ -94,14 +97,14 @@ class EncoderInput:
                 last_ok[j] = now
                 rejects[j] = 0
                 believe[j] = False
-                if self.homed and not self.low[j] <= a <= self.high[j]:
-                    self.implausible(j, f"reads {a:.2f}{self.joints[j].symbol}, outside its "
-                                        f"range {self.joints[j].limit_text()}")
             else:
                 rejects[j] += 1
                 self.glitches[j] += 1
                 self.last_reject[j], self.last_reject_ns[j] = a, now
-                if rejects[j] >= self.glitch_limit:
+                if rejects[j] >= self.glitch_limit and not inside:
+                    self.implausible(j, f"reads {a:.2f}{self.joints[j].symbol}, outside its "
+                                        f"range {self.joints[j].limit_text()}")
+                elif rejects[j] >= self.glitch_limit:
                     self.implausible(j, f"read {rejects[j]} jumps in a row (to "
                                         f"{a:.2f}{self.joints[j].symbol} from "
                                         f"{actuator[j]:.2f}{self.joints[j].symbol}), more than "

@@ -76,3 +76,32 @@ def backend_word(backend: SimBackend, joint: int) -> int:
     raw = [0] * 6
     SimBackend.read(backend, raw)
     return raw[joint]
+
+
+def test_after_a_long_stall_a_wrong_word_outside_the_range_is_a_glitch_not_a_fault() -> None:
+    """A controller stopped for 3 s gives every joint a reach across its whole range; a
+    wrong word then read outside the range is rejected, and the true words go on."""
+    backend, encoders, truth = started()
+    ticks(backend, encoders, 2)
+    backend.clock.sleep_until(backend.clock.now_ns() + 3000 * MS)  # the stall
+    top = 1 << 12  # the Gray word's top bit: half the disk away
+    backend.stick_bit(BEND, 12, 0 if backend_word(backend, BEND) & top else 1)
+    encoders.read(backend)
+    backend.stick_bit(BEND, 12, None)
+    wrong = encoders.reading[BEND]
+    assert not UNIMATE.joints[BEND].lower <= wrong <= UNIMATE.joints[BEND].upper
+    assert encoders.fault == "" and encoders.glitches[BEND] == 1
+    ticks(backend, encoders, 10)
+    assert encoders.fault == "" and abs(encoders.position[BEND] - truth) < 0.1
+
+
+def test_words_outside_the_range_that_go_on_are_a_feedback_fault() -> None:
+    backend, encoders, truth = started()
+    top = 1 << 12
+    backend.stick_bit(BEND, 12, 0 if backend_word(backend, BEND) & top else 1)
+    ticks(backend, encoders, UNIMATE.supervision.glitch_limit - 1)
+    assert encoders.fault == ""
+    ticks(backend, encoders, 1)
+    assert encoders.fault.startswith("feedback fault: Bend's encoder reads")
+    assert "outside its range" in encoders.fault
+    assert abs(encoders.position[BEND] - truth) < 0.1  # never believed
