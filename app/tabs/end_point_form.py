@@ -26,6 +26,8 @@ POSE_FIELDS = (("x", "mm", "x"), ("y", "mm", "y"), ("z", "mm", "z"), ("γ", "°"
 class EndPointForm(MoveForm):
     KIND = "end_point"
     LABEL = "End point"
+    LATER = ("#pose-gamma, #pose-beta, #pose-alpha, #ramp_time", "#pose-current, #ik-state",
+             "#ik-solutions")
     HELP = ("End-effector position and X-Y-Z fixed angles (section 4.3); every inverse "
             "solution inside the limits is listed, nearest first — pick another with the "
             "cursor.")

@@ -112,6 +112,8 @@ class IdentifyTab(TabPage):
     """Excite one joint, fit its model, propose and apply gains."""
 
     TITLE = "Identify"
+    LATER = ("#identify-amplitude, #identify-duration, #identify-run",
+             "#identify-error, #identify-ff-row, #identify-apply", "#identify-right")
 
     class Fitting(Message, bubble=False):
         """The excitation ran to its end; the fit has started (from the worker)."""
@@ -169,7 +171,7 @@ class IdentifyTab(TabPage):
                                   placeholder="auto", id="identify-duration")
                 yield Button("Run identification", id="identify-run", variant="success")
                 yield Static(id="identify-error")
-                with Horizontal(classes="field"):
+                with Horizontal(classes="field", id="identify-ff-row"):
                     yield Label("feed-forward", classes="field-label")
                     yield Switch(value=False, id="identify-ff")
                 with Horizontal(id="identify-apply"):

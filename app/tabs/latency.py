@@ -156,6 +156,7 @@ class LatencyTab(TabPage):
 
     REFRESH_HZ = 2.0
     TITLE = "Latency"
+    LATER = ("#latency-tables",)
     BINDINGS: ClassVar = [Binding("t", "fresh_test", f"fresh {TEST_S:g} s test")]
 
     @dataclass

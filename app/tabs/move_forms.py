@@ -36,6 +36,7 @@ from app.widgets.fields import (
     seconds_check,
     set_position_limits,
 )
+from app.widgets.staged import Staged
 from control.motion import form_plans
 from control.motion.fields import (
     DWELL_S,
@@ -62,11 +63,12 @@ def mid_range(machine: Machine) -> np.ndarray:
     return np.array([(j.lower + j.upper) / 2 for j in machine.joints])
 
 
-class MoveForm(VerticalScroll):
+class MoveForm(Staged, VerticalScroll):
     """One kind of move: fields, and ``plan`` from them and the current position.
 
     ``here`` is where the joints are, set by the tab as the controller reports it (empty
     until then); a form reads it, never the tab. Placeholders follow it (``show_here``).
+    A big form draws its ``LATER`` parts after the rest the first time it is shown (``Staged``).
     """
 
     KIND: ClassVar[str] = ""
@@ -106,6 +108,7 @@ class MoveForm(VerticalScroll):
 
     def on_mount(self) -> None:
         self.show_here()
+        self.hide_later()
 
     def show_here(self) -> None:
         """Put the live position in the placeholders of the fields that default to it."""

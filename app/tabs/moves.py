@@ -92,6 +92,7 @@ class MovesTab(TabPage):
 
     REFRESH_HZ = 10.0
     TITLE = "Moves"
+    LATER = ("#move-forms", "#moves-right", "#moves-bottom")
 
     class HoldRequested(Message):
         """Abort was pressed: abort the move and hold every joint where it is."""
@@ -198,6 +199,7 @@ class MovesTab(TabPage):
         event.stop()
         kind = next(k for k in forms_for(self.machine) if k.__name__ == event.option.id)
         self.query_one("#move-forms", ContentSwitcher).current = f"form-{kind.KIND}"
+        self.form.reveal_later()
         self.query_one("#move-error", Static).update("")
         self._fill_form()
         self.schedule_preview()

@@ -56,6 +56,7 @@ class PositionsTab(TabPage):
 
     REFRESH_HZ = 5.0
     TITLE = "Positions"
+    LATER = ("#positions-lower",)
     BINDINGS: ClassVar = [
         Binding("t", "teach", "teach here"),
         Binding("g", "go_to", "go to"),

@@ -36,6 +36,7 @@ class RunsTab(TabPage):
     """The list of runs and the plot of the one opened."""
 
     TITLE = "Runs"
+    LATER = ("#runs-right",)
     BINDINGS: ClassVar = [
         Binding("v", "next_view", "next plot"),
         Binding("x", "export", "export plot"),

@@ -80,6 +80,7 @@ class ScopeTab(TabPage, can_focus=True):
 
     REFRESH_HZ = 25.0
     TITLE = "Scope"
+    LATER = ("#scope-joint-2, #scope-joint-3", "#scope-joint-4, #scope-joint-5")
     BINDINGS: ClassVar = [
         *[Binding(str(k), f"toggle({k - 1})", "joints", show=k == 1,
                   key_display="1-6" if k == 1 else None) for k in range(1, 7)],

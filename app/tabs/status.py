@@ -35,6 +35,7 @@ class StatusTab(TabPage):
 
     REFRESH_HZ = 10.0
     TITLE = "Status"
+    LATER = ("#status-lower",)
 
     def compose(self) -> ComposeResult:
         with VerticalScroll(id="status-scroll"):

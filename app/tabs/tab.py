@@ -11,14 +11,16 @@ from textual.containers import Container
 from textual.timer import Timer
 
 from app.desk import Desk
+from app.widgets.staged import Staged
 from control.client import ControlClient, ControllerError
 from control.layout import Status
 from hw.machine import Machine
 from kinematics.unimate import Unimate2000B
 
 
-class TabPage(Container):
-    """A tab's content. ``REFRESH_HZ > 0`` calls ``refresh_live`` at that rate while shown."""
+class TabPage(Staged, Container):
+    """A tab's content. ``REFRESH_HZ > 0`` calls ``refresh_live`` at that rate while shown;
+    its ``LATER`` parts are drawn after the rest the first time (``Staged``)."""
 
     REFRESH_HZ: ClassVar[float] = 0.0
     TITLE: ClassVar[str] = ""
@@ -74,6 +76,7 @@ class TabPage(Container):
     def on_mount(self) -> None:
         if self.REFRESH_HZ > 0:
             self._timer = self.set_interval(1.0 / self.REFRESH_HZ, self.refresh_live, pause=True)
+        self.hide_later()
 
     def shown(self) -> None:
         """The tab became the visible one."""
@@ -81,6 +84,7 @@ class TabPage(Container):
         if self._timer is not None:
             self._timer.resume()
         self.refresh_live()
+        self.reveal_later()
 
     def hidden(self) -> None:
         """Another tab became visible; no key may reach this one's widgets any more."""

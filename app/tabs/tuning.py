@@ -105,6 +105,7 @@ class TuningTab(TabPage):
     """Hold and track sets in a table; Enter on a cell edits it and applies it live."""
 
     TITLE = "Tuning"
+    LATER = ("#tuning-joints", "#tuning-common, #tuning-files")
     REFRESH_HZ = 2.0
     BINDINGS: ClassVar = [Binding("ctrl+z", "undo", "undo last apply", key_display="^Z")]
 

@@ -184,7 +184,9 @@ def test_a_controller_stall_outside_a_move_goes_into_the_log(tui) -> None:
                 time.sleep(0.12)  # the stall itself, not a wait for something
             finally:
                 os.kill(pid, signal.SIGCONT)
-            await tui.until(lambda: logged(app, "stall", "ms late"), what="the stall logged")
+            await tui.until(lambda: logged(app, "stall", "ms late"), what=lambda: (
+                f"the stall logged; the log holds {[e.what for e in app.desk.events.entries]}, "
+                f"the loop's histogram {app.client.histogram()}"))
             (stall,) = logged(app, "stall", "ms late")
             assert stall.data["late_max_us"] >= 100_000
 
