@@ -457,6 +457,8 @@ class ServodeskApp(App[None]):
     # -- tabs ----------------------------------------------------------------------------------
 
     def on_tabbed_content_tab_activated(self, event: TabbedContent.TabActivated) -> None:
+        if not self.screen_stack:  # a switch still queued as the app closes
+            return
         name = (event.pane.id or "pane-jog").removeprefix("pane-")
         self._activate(name)
         self.call_after_refresh(self._focus_active)

@@ -21,6 +21,7 @@ class Staged(Widget):
 
     LATER: ClassVar[tuple[str, ...]] = ()
     _unrevealed: list[str] | tuple[()] = ()
+    _revealing = False
 
     def hide_later(self) -> None:
         self._unrevealed = list(self.LATER)
@@ -28,7 +29,8 @@ class Staged(Widget):
             self.query(selector).set_styles("visibility: hidden;")
 
     def reveal_later(self) -> None:
-        if self._unrevealed:
+        if self._unrevealed and not self._revealing:  # shown again before the first refresh
+            self._revealing = True
             self.call_after_refresh(self._reveal_next)
 
     def _reveal_next(self) -> None:
