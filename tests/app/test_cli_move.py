@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import select
 import signal
 import subprocess
@@ -104,7 +105,9 @@ def test_every_kind_runs_and_leaves_its_run_on_disk(kind: str, tmp_path: Path) -
     assert lines[1].startswith(f"saved as {tmp_path}"), done.stdout
     assert "running " in done.stderr and "Ctrl+C is the E-stop" in done.stderr
     [run] = listed(tmp_path)
-    assert (run["kind"], run["status"]) == (run_kind, "complete")
+    assert run["kind"] == run_kind
+    # a loaded machine may stall the controller past stall_ms: the run says so, complete
+    assert re.fullmatch(r"complete(, with a [\d.]+ s controller stall)?", run["status"]), run
     # the result table as the Moves tab's for the kind: a step's response, a sine's
     # fundamentals, else a smooth path's tracking error
     second = {"multistep": "step", "sine": "amplitude"}.get(kind, "travel")
