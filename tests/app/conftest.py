@@ -19,7 +19,10 @@ from textual.widget import Widget
 
 from app.tui import ServodeskApp
 from control.layout import Status
+from tests.app.soak import BackgroundSoak
+from tests.app.terminal import TMUX
 
+SOAK_TEST = "test_a_five_minute_soak_beside_a_burner_never_lets_the_controller_hold"
 START_S = 30.0  # a loaded machine can take a while to spawn the controller
 SIZE = (160, 48)
 
@@ -100,3 +103,33 @@ def data_dir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
 @pytest.fixture
 def tui(data_dir: Path) -> Tui:
     return Tui(data_dir)
+
+
+# -- the soak: five minutes in tmux, run beside the rest of the suite (tests/app/soak.py) ----
+
+_soaks: list[BackgroundSoak] = []
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """The soak's test last: by then its five minutes have passed beside the other tests."""
+    soaks = [item for item in items if item.name == SOAK_TEST]
+    for item in soaks:
+        items.remove(item)
+        items.append(item)
+
+
+def pytest_collection_finish(session: pytest.Session) -> None:
+    if TMUX is not None and any(item.name == SOAK_TEST for item in session.items):
+        _soaks.append(BackgroundSoak(session.config._tmp_path_factory.mktemp("soak")))
+
+
+def pytest_sessionfinish() -> None:
+    for soak in _soaks:
+        soak.stop()
+
+
+@pytest.fixture(scope="session")
+def soak_in_background() -> BackgroundSoak:
+    """The soak started when its test was collected."""
+    (soak,) = _soaks
+    return soak
