@@ -105,20 +105,29 @@ def tui(data_dir: Path) -> Tui:
     return Tui(data_dir)
 
 
-# -- the soak: five minutes in tmux, run beside the rest of the suite (tests/app/soak.py) ----
+# -- the soak: five minutes in tmux, beside the quick tests (tests/app/soak.py) ----------
 
 _soaks: list[BackgroundSoak] = []
 
 
+@pytest.hookimpl(trylast=True)  # after tests/conftest.py has marked the slow tests
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """The soak's test last: by then its five minutes have passed beside the other tests."""
+    """The soak runs from collection on; the quick tests (one busy core, no process of their
+    own) first, beside it, then its test, which waits for it to end, then the slow tests:
+    their controllers, UIs and burners would have added to the load its five minutes are
+    meant to withstand (one burner) and make it a different test."""
     soaks = [item for item in items if item.name == SOAK_TEST]
-    for item in soaks:
-        items.remove(item)
-        items.append(item)
+    if not soaks:
+        return
+    rest = [item for item in items if item.name != SOAK_TEST]
+    quick = [item for item in rest if item.get_closest_marker("slow") is None]
+    slow = [item for item in rest if item.get_closest_marker("slow") is not None]
+    items[:] = quick + soaks + slow
 
 
 def pytest_collection_finish(session: pytest.Session) -> None:
+    if session.config.option.collectonly:
+        return
     if TMUX is not None and any(item.name == SOAK_TEST for item in session.items):
         _soaks.append(BackgroundSoak(session.config._tmp_path_factory.mktemp("soak")))
 

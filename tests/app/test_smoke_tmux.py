@@ -75,7 +75,7 @@ def test_a_five_minute_soak_beside_a_burner_never_lets_the_controller_hold(
         soak_in_background: BackgroundSoak) -> None:
     """The app in tmux beside a busy loop in another process (someone else's work on this
     two-core machine), every tab switched to in turn once a second for ``SOAK_S``
-    (tests/app/soak.py, running since the suite was collected, beside the rest of it too):
+    (tests/app/soak.py, running since the suite was collected, beside the quick tests):
     the controller, with its real 250 ms heartbeat timeout, never finds the client silent
     (the session's events.jsonl has no "UI lost"), and the app is live at the end: the Jog
     tab shows, the E-stop latches and is logged, and the app quits when asked."""
