@@ -108,21 +108,29 @@ def tui(data_dir: Path) -> Tui:
 # -- the soak: five minutes in tmux, beside the quick tests (tests/app/soak.py) ----------
 
 _soaks: list[BackgroundSoak] = []
+# Slow tests that mostly wait (one controller at real time, a client that sleeps, a saver
+# killed): they run beside the soak too, adding a fraction of a core.
+BESIDE_SOAK = (
+    "tests/faults/test_client_loss.py::test_a_client_killed_30_s_into_a_60_s_move",
+    "tests/faults/test_saving.py::",
+    "tests/faults/test_controller_freeze.py::",
+)
 
 
 @pytest.hookimpl(trylast=True)  # after tests/conftest.py has marked the slow tests
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     """The soak runs from collection on; the quick tests (one busy core, no process of their
-    own) first, beside it, then its test, which waits for it to end, then the slow tests:
-    their controllers, UIs and burners would have added to the load its five minutes are
-    meant to withstand (one burner) and make it a different test."""
+    own) and those ``BESIDE_SOAK`` first, beside it, then its test, which waits for it to
+    end, then the other slow tests: their controllers, UIs, browsers and burners would add
+    to the load its five minutes are meant to withstand (one burner) and make it another
+    test (beside the whole suite, its UI missed a heartbeat at load 4-5)."""
     soaks = [item for item in items if item.name == SOAK_TEST]
     if not soaks:
         return
     rest = [item for item in items if item.name != SOAK_TEST]
-    quick = [item for item in rest if item.get_closest_marker("slow") is None]
-    slow = [item for item in rest if item.get_closest_marker("slow") is not None]
-    items[:] = quick + soaks + slow
+    first = [item for item in rest if item.get_closest_marker("slow") is None
+             or item.nodeid.startswith(BESIDE_SOAK)]
+    items[:] = first + soaks + [item for item in rest if item not in first]
 
 
 def pytest_collection_finish(session: pytest.Session) -> None:

@@ -4,9 +4,10 @@ shows, the E-stop latches, quit asks and exits 0. What it saw goes into ``soak.j
 session's events.jsonl (under ``data``) holds what the controller and the app logged.
 
 It runs in a process of its own, started as soon as the soak test is collected
-(tests/app/conftest.py), so its five minutes pass while the quick tests run (a minute or
-two of one busy core, besides its own burner) and CI stays under 15 minutes; the test,
-ordered after them and before the slow ones, waits for it and reads the result::
+(tests/app/conftest.py), so its five minutes pass while the quick tests and a few slow
+ones that mostly wait run (one busy core at most, besides its own burner) and CI stays
+under 15 minutes; the test, ordered after them and before the other slow ones, waits for
+it and reads the result::
 
     python -m tests.app.soak DIRECTORY [SECONDS]
 """
