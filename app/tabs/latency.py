@@ -98,25 +98,33 @@ class Lateness:
 @dataclass
 class StallWatch:
     """Wake-ups later than ``threshold_us`` from successive histograms: a rise of the run's
-    maximum past it is one such stall, measured; more than ``threshold_us`` of missed
+    maximum past it is one such stall, measured; so is a rise of the longest tick's compute
+    past it (``compute_max_us``: the loop stopped or starved mid-tick, its next deadlines
+    skipped as overruns, so no wake-up was late); more than ``threshold_us`` of missed
     ticks between two looks, with ticks in the last (≥ 2 ms) bin, is at least one stall
     shorter than the maximum so far, known only that well."""
 
     threshold_us: float
     period_us: float
     max_us: float = 0.0
+    compute_max_us: float = 0.0
     overruns: int = 0
     over: int = 0
 
-    def sample(self, h: LatencyHistogram) -> str:
+    def sample(self, h: LatencyHistogram, compute_max_us: float = 0.0) -> str:
         """What the loop did since the last sample, if it stalled; else ""."""
         missed, over = h.overruns - self.overruns, int(h.counts[-1]) - self.over
         rose = h.max_us > max(self.max_us, self.threshold_us)
+        held = compute_max_us > max(self.compute_max_us, self.threshold_us)
         self.max_us, self.overruns, self.over = max(self.max_us, h.max_us), h.overruns, int(
             h.counts[-1])
+        self.compute_max_us = max(self.compute_max_us, compute_max_us)
         if rose:
             return (f"controller loop stalled: a tick woke {h.max_us / 1e3:,.1f} ms late, the "
                     "longest since it started")
+        if held:
+            return (f"controller loop stalled: a tick ended {compute_max_us / 1e3:,.1f} ms late "
+                    f"(held up mid-tick, {missed} ticks skipped), the longest since it started")
         if over and missed * self.period_us > self.threshold_us:
             return (f"controller loop stalled: {missed} ticks missed since the last look, "
                     f"{over} woke ≥ 2 ms late (none later than the longest so far, "
@@ -161,7 +169,8 @@ class LatencyTab(TabPage):
 
     @dataclass
     class Stalled(Message):
-        """The loop woke later than the machine's ``stall_ms`` (``what`` says how late)."""
+        """The loop woke, or ended a tick, later than the machine's ``stall_ms`` (``what``
+        says how late)."""
 
         what: str
         late_max_us: float
@@ -182,12 +191,12 @@ class LatencyTab(TabPage):
         if client is None:
             return
         try:
-            histogram = client.histogram()
+            histogram, status = client.histogram(), client.status()
         except (ValueError, TimeoutError):  # closed while we asked
             return
-        what = self.stalls.sample(histogram)
+        what = self.stalls.sample(histogram, status.compute_max_us)
         if what:
-            self.post_message(self.Stalled(what, histogram.max_us))
+            self.post_message(self.Stalled(what, max(histogram.max_us, status.compute_max_us)))
 
     def compose(self) -> ComposeResult:
         with Horizontal(id="latency-controls"):

@@ -225,6 +225,17 @@ def test_the_stall_watch_reports_a_new_maximum_and_a_burst_of_missed_ticks() -> 
     assert watch.sample(histogram(2, 120_000.0, overruns=240)) == ""  # no tick ≥ 2 ms
 
 
+def test_the_stall_watch_reports_a_tick_held_up_mid_tick() -> None:
+    """SIGSTOP while the loop computes: the deadlines passed meanwhile are skipped as
+    overruns and the next wake-up is on time, so only the tick's compute shows the stall."""
+    watch = StallWatch(threshold_us=50_000.0, period_us=1_000.0)
+    assert watch.sample(histogram(0, 200.0), compute_max_us=300.0) == ""
+    held = watch.sample(histogram(0, 210.0, overruns=121), compute_max_us=121_000.0)
+    assert "ended 121.0 ms late" in held and "121 ticks skipped" in held
+    assert watch.sample(histogram(0, 210.0, overruns=121), compute_max_us=121_000.0) == ""
+    assert watch.sample(histogram(0, 210.0, overruns=122), compute_max_us=40_000.0) == ""
+
+
 def test_the_event_log_writes_on_its_own_thread_and_says_when_it_cannot(tmp_path: Path
                                                                         ) -> None:
     log = EventLog()
