@@ -67,6 +67,7 @@ class AttachedClient(ControlClient):
         self.heartbeat_on = False
         self.notice, self.realtime = hello.notice, hello.realtime
         self._controller_pid = hello.controller_pid
+        self.service_pid = hello.service_pid
         self._ids = itertools.count(hello.id_base)
         self._answers: queue.Queue[Commander | Refused] = queue.Queue()
         self._conn = conn

@@ -96,6 +96,7 @@ class Hello:
     data_dir: str
     id_base: int
     controller_pid: int
+    service_pid: int  # the service's process: an attached TUI never outranks it
     realtime: bool
     notice: str
     holder: str  # who holds command now ("" nobody)

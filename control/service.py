@@ -195,8 +195,8 @@ class ControllerService:
                 port=client.port, dt=client.dt, timing=client.timing.name,
                 interrupt_ms=client.timing.interrupt_ms, slips=client.timing.slips,
                 data_dir=str(client.data_dir), id_base=number * rendezvous.ID_SPAN,
-                controller_pid=client.pid, realtime=client.realtime, notice=client.notice,
-                holder=holder)
+                controller_pid=client.pid, service_pid=os.getpid(), realtime=client.realtime,
+                notice=client.notice, holder=holder)
             try:
                 conn.send(hello)
             except OSError:
