@@ -15,6 +15,7 @@ import sys
 import time
 from pathlib import Path
 
+from app.priority import raise_priority
 from control.timing import TIMINGS, Timing
 from hw.factory import BACKENDS
 
@@ -62,6 +63,10 @@ def run(args: argparse.Namespace) -> int:
         print("servodesk controller: --backend serial needs --port URL", file=sys.stderr)
         return 2
     started = time.monotonic()
+    # before the control process and the service's threads start, which inherit it: while
+    # nobody commands, the service beats the controller's heartbeat, and a UI attached to it
+    # never takes a higher priority than this
+    priority = raise_priority(who="controller service")
     try:
         timing = Timing(args.timing, args.interrupt_ms, tuple(args.slip))
         client = ControlClient(
@@ -79,9 +84,10 @@ def run(args: argparse.Namespace) -> int:
         client.close()
         print(f"servodesk controller: {exc}", file=sys.stderr)
         return 2
-    log.info("listening on %s: %s, %s backend, controller pid %d, ready in %.2f s%s",
-             service.socket_path, client.machine.title, client.backend, client.pid,
-             time.monotonic() - started, f"; {client.notice}" if client.notice else "")
+    notices = "".join(f"; {notice}" for notice in (priority.notice, client.notice) if notice)
+    log.info("listening on %s: %s, %s backend, controller pid %d, service nice %d, ready in "
+             "%.2f s%s", service.socket_path, client.machine.title, client.backend, client.pid,
+             priority.now, time.monotonic() - started, notices)
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: service.stopped.set())
     while not service.stopped.wait(0.5):

@@ -13,10 +13,16 @@ privilege), so a test process that runs the app goes on at its own priority.
 
 Where the OS refuses (no root, no CAP_SYS_NICE, no ``ulimit -e``), the UI runs at its
 normal priority and says so, like the controller's SCHED_FIFO notice.
+
+The controller service (``servodesk controller``) takes the same nice value for its own threads:
+while nobody commands, it beats the controller's heartbeat itself. A UI attached to it never
+outranks it (``raise_priority_under``): twenty browser sessions at nice -10 beside a service at
+0 starved its heartbeat for 4.5 s, the controller held and then stopped (issue 22).
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import threading
 from dataclasses import dataclass
@@ -35,9 +41,9 @@ class Priority:
     notice: str = ""
 
 
-def raise_priority(nice: int = UI_NICE) -> Priority:
+def raise_priority(nice: int = UI_NICE, who: str = "UI") -> Priority:
     """Give the calling thread ``nice`` if that is higher priority than it has; never raises
-    for lack of privilege."""
+    for lack of privilege (``who`` names the thread's program in the notice)."""
     thread = threading.get_native_id()
     before = os.getpriority(os.PRIO_PROCESS, thread)
     if before <= nice:
@@ -46,13 +52,31 @@ def raise_priority(nice: int = UI_NICE) -> Priority:
         os.setpriority(os.PRIO_PROCESS, thread, nice)
     except OSError as exc:
         return Priority(thread, before, before,
-                        f"UI priority (nice {nice}) refused ({exc.strerror}): a busy machine may "
-                        "delay its heartbeat and the controller then holds; allow it with "
+                        f"{who} priority (nice {nice}) refused ({exc.strerror}): a busy machine "
+                        "may delay its heartbeat and the controller then holds; allow it with "
                         "CAP_SYS_NICE or a nice limit (ulimit -e)")
     return Priority(thread, before, nice)
 
 
+def raise_priority_under(service_pid: int) -> Priority:
+    """``raise_priority`` for a UI attached to the controller service ``service_pid``: UI_NICE,
+    but never a higher priority than the service's (its main thread's nice value). A thread
+    that starts above the service is lowered to it; nothing changes when the service is gone."""
+    thread = threading.get_native_id()
+    before = os.getpriority(os.PRIO_PROCESS, thread)
+    try:
+        nice = max(UI_NICE, os.getpriority(os.PRIO_PROCESS, service_pid))
+    except ProcessLookupError:  # the service is gone: the UI says so as its client fails
+        return Priority(thread, before, before)
+    if before < nice:
+        os.setpriority(os.PRIO_PROCESS, thread, nice)  # lowering a priority needs no privilege
+        return Priority(thread, before, nice)
+    return raise_priority(nice)
+
+
 def restore(priority: Priority) -> None:
-    """Give the thread its nice value back (only ever lowering its priority)."""
+    """Give the thread its nice value back."""
     if priority.now != priority.before:
-        os.setpriority(os.PRIO_PROCESS, priority.thread, priority.before)
+        # a thread lowered under its service may lack the privilege to go back up
+        with contextlib.suppress(PermissionError):
+            os.setpriority(os.PRIO_PROCESS, priority.thread, priority.before)

@@ -27,7 +27,7 @@ from app.desk import Desk
 from app.event_log import LogEntry, entries_of
 from app.history import History, Sampler
 from app.messages import ClientFailed, ClientReady, ControllerEvent, RunsChanged
-from app.priority import Priority, raise_priority, restore
+from app.priority import Priority, raise_priority, raise_priority_under, restore
 from app.tabs.identify import IdentifyTab
 from app.tabs.jog import JogTab
 from app.tabs.latency import LatencyTab
@@ -223,7 +223,9 @@ class ServodeskApp(App[None]):
 
     def on_load(self) -> None:
         gc.freeze()  # what is imported so far: building the screen collects only its own
-        self.priority = raise_priority()  # before any thread or process the UI starts
+        # before any thread or process the UI starts; attached, never above the service's
+        self.priority = (raise_priority() if self._attached is None
+                         else raise_priority_under(self._attached.service_pid))
         self.start_client()  # the controller starts while the screen is built
         self.desk.events.open(self.data_dir, self.machine.name, self._log_problem)
 

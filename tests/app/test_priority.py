@@ -1,5 +1,7 @@
 """The UI's thread takes a higher CPU priority while the app runs and gives it back; where the
-OS refuses, it says so and runs on. Nice values are read back from the OS."""
+OS refuses, it says so and runs on; a UI attached to a controller service never outranks the
+service (a thread of this process stands for the service's main thread: a nice value is per
+thread, and read by its id as a process's is). Nice values are read back from the OS."""
 
 from __future__ import annotations
 
@@ -9,11 +11,13 @@ import shutil
 import subprocess
 import sys
 import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
 
-from app.priority import UI_NICE, Priority, raise_priority, restore
+from app.priority import UI_NICE, Priority, raise_priority, raise_priority_under, restore
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -30,6 +34,38 @@ def in_a_thread(work) -> object:
 
 def nice_of(thread: int) -> int:
     return os.getpriority(os.PRIO_PROCESS, thread)
+
+
+@contextmanager
+def service_at(nice: int) -> Iterator[int]:
+    """A thread at ``nice`` while the block runs, standing for a service's main thread; its
+    id."""
+    ready, done = threading.Event(), threading.Event()
+    ids: list[int] = []
+
+    def wait() -> None:
+        ids.append(threading.get_native_id())
+        os.setpriority(os.PRIO_PROCESS, ids[0], nice)
+        ready.set()
+        done.wait()
+
+    thread = threading.Thread(target=wait)
+    thread.start()
+    ready.wait()
+    try:
+        yield ids[0]
+    finally:
+        done.set()
+        thread.join()
+
+
+def attached_to(service: int) -> tuple[Priority, int]:
+    """A UI thread's priority under ``service``, and its nice value read back."""
+    def work() -> tuple[Priority, int]:
+        taken = raise_priority_under(service)
+        return taken, nice_of(taken.thread)
+
+    return in_a_thread(work)
 
 
 @pytest.mark.skipif(os.geteuid() != 0, reason="raising a priority needs root or CAP_SYS_NICE; "
@@ -72,3 +108,26 @@ def test_without_the_privilege_the_ui_says_so_and_runs_at_its_own_priority() -> 
     before, now, notice, nice = json.loads(done.stdout)
     assert before == now == nice
     assert "refused" in notice and "ulimit -e" in notice
+
+
+def test_an_attached_ui_takes_no_higher_priority_than_a_service_that_has_less_than_it() -> None:
+    with service_at(5) as service:  # lowering: always allowed
+        taken, nice = attached_to(service)
+    assert taken.now == nice == 5  # lowered from this test's own, not raised to UI_NICE
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="a service above nice 0 needs root or "
+                    "CAP_SYS_NICE")
+@pytest.mark.parametrize(("service", "ui"), [(UI_NICE, UI_NICE), (UI_NICE - 5, UI_NICE)])
+def test_an_attached_ui_takes_its_own_priority_under_a_service_at_or_above_it(service, ui
+                                                                              ) -> None:
+    with service_at(service) as pid:
+        taken, nice = attached_to(pid)
+    assert taken.now == nice == ui and taken.notice == ""
+
+
+def test_an_attached_ui_whose_service_is_gone_keeps_its_priority() -> None:
+    with service_at(0) as gone:
+        pass
+    taken, nice = attached_to(gone)
+    assert taken.before == taken.now == nice
