@@ -19,6 +19,13 @@ stalled controller's reach spans the whole range): ``glitch_limit`` of them in a
 feedback fault, the joint outside its range or its encoder lying. The
 believed actuator coordinates then become joint positions (the Yaw reading
 includes Bend), so a wrong Bend word leaves Yaw's position as right as Bend's.
+
+Each sample is judged once. A serial board's late reply leaves ``read`` returning the words
+it returned before (the backend's ``sample_ns`` unchanged): judged again, one wrong word would
+be rejected once a tick and make ``glitch_limit`` "jumps in a row" by itself in a few ms, and
+re-read during a resync it would confirm itself. So a joint's reading is judged only when its
+sample is new to it; until then the joint keeps its belief, and its rejections in a row count
+samples, not ticks.
 """
 
 from __future__ import annotations
@@ -28,7 +35,8 @@ from hw.machine import Machine
 from hw.transmission import Transmission
 
 AGREE_READS = 3  # rejected readings in a row that agree, to replace an unconfirmed belief
-SETTLE_READS = 8  # readings a resync takes at most to confirm every joint's belief
+SETTLE_READS = 8  # new samples a resync takes at most to confirm every joint's belief
+RESYNC_READS = 3 * SETTLE_READS  # reads it takes at most: a late serial board's answers too
 EARLIER = 2  # beliefs before the present one that a rejected reading is also judged from
 RECALL_READS = 2  # rejected readings in a row within reach of an earlier belief, to believe
 
@@ -69,17 +77,23 @@ class EncoderInput:
         self.speed_per_ns = [j.full_duty_speed * 1e-9 * margin for j in machine.joints]
         self.step_floor = [3 * abs(j.encoder.gradient) for j in machine.joints]  # 3 counts
         self.homed = machine.encoder_kind == "gray"
+        self.judged_ns: list[int | None] = [None] * n  # the sample each joint was last judged on
 
     def read(self, backend: Backend, joints: range | None = None) -> None:
         """Read the board and judge the readings of ``joints`` (all; in the thesis's timing
-        the one joint whose encoder this tick switched on); the others keep their belief."""
+        the one joint whose encoder this tick switched on) that come from a sample not judged
+        yet; the others keep their belief."""
         raw, reading, actuator = self.raw, self.reading, self.actuator
         backend.read(raw)
         now = backend.sample_ns  # a late serial reply re-reads old words: time them so
         self.transmission.actuators_from_words(raw, self.offset, reading)
         rejects, last_ok, believe = self.rejects, self.last_ok_ns, self.believe
         speed, floor, confirmed = self.speed_per_ns, self.step_floor, self.confirmed
+        judged = self.judged_ns
         for j in range(self.n) if joints is None else joints:
+            if judged[j] == now:
+                continue  # judged already: a late reply's words again
+            judged[j] = now
             a = reading[j]
             inside = not self.homed or self.low[j] <= a <= self.high[j]
             agrees = abs(a - actuator[j]) <= speed[j] * (now - last_ok[j]) + floor[j]
@@ -143,21 +157,29 @@ class EncoderInput:
 
     def resync(self, backend: Backend, period_ns: int) -> None:
         """Believe the readings anew (the joints may have moved while nobody watched) and
-        forget a feedback fault: read until a second reading confirms every joint's belief,
-        ``period_ns`` apart, at most ``SETTLE_READS`` times. A wrong reading believed outright
-        is replaced by the readings that agree against it on the way (``believed_wrong``).
-        A few milliseconds, before the loop starts or in a reset, every valve closed."""
+        forget a feedback fault: read until a second sample confirms every joint's belief,
+        ``period_ns`` apart, at most ``SETTLE_READS`` new samples after the first (and
+        ``RESYNC_READS`` reads). A wrong reading believed outright is replaced by the
+        readings that agree against it on the way (``believed_wrong``). The words in hand
+        are believed whether judged before or not, but only a new sample confirms them: a
+        read that returns them again (a serial board that has not answered yet) would
+        confirm a wrong word by itself. A few milliseconds, before the loop starts or in a
+        reset, every valve closed."""
         self.believe = [True] * self.n
         self.rejects = [0] * self.n
         self.recall = [0] * self.n
+        self.judged_ns = [None] * self.n
         self.fault, self.fault_joint = "", -1
         self.read(backend)
         clock = backend.clock
-        for _ in range(SETTLE_READS):
-            if all(self.confirmed):
+        sampled, samples = backend.sample_ns, 0
+        for _ in range(RESYNC_READS):
+            if all(self.confirmed) or samples >= SETTLE_READS:
                 break
             clock.sleep_until(clock.now_ns() + period_ns)
             self.read(backend)
+            if backend.sample_ns != sampled:
+                sampled, samples = backend.sample_ns, samples + 1
 
     def zero(self) -> None:
         """Rig, section 3.5: where the actuators rest now becomes the encoders' zero."""

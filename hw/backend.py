@@ -92,7 +92,10 @@ class Backend(Protocol):
     clock: Clock
     counters: LinkCounters
     sample_ns: int
-    """When the words the last ``read`` returned were sampled, on ``clock``."""
+    """When the words the last ``read`` returned were sampled, on ``clock``. It changes with
+    every new sample and only then: a ``read`` that returns the last sample's words again (a
+    serial board whose answer is late) leaves it as it was, so that the encoder input judges
+    each sample once, never a late answer's words once a tick."""
     supply_mpa: float
     """The hydraulic supply pressure at the last ``read``, MPa; NaN when the backend cannot
     measure it (the I/O board has no pressure input; the simulator knows it)."""
@@ -110,7 +113,8 @@ class Backend(Protocol):
         ...
 
     def read(self, raw: list[int]) -> None:
-        """Fill ``raw`` (one entry per joint) with the current raw encoder words."""
+        """Fill ``raw`` (one entry per joint) with the newest raw encoder words; set
+        ``sample_ns`` to when they were sampled."""
         ...
 
     def write(self, duty_pct: Sequence[float]) -> None:

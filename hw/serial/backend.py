@@ -6,7 +6,10 @@ and answers with one REPORT. ``read`` drains the link and returns the newest
 REPORT's words, so the control loop's reading at tick k+1 is the board's
 answer to the command of tick k: one tick of latency, by design. If that
 answer is not in yet, ``read`` waits for it at most ``reply_wait_s``, then
-uses the previous one (counted in ``late_replies``).
+uses the previous one (counted in ``late_replies``) and leaves ``sample_ns``
+as it was: the same words, the same sample. A ``read`` with nothing sent since
+the last one (a resync reading the joints before the loop writes) asks for a
+new sample with a HEARTBEAT, so that it does not re-read the same words.
 
 Faults never raise out of ``read`` or ``write``; they set ``fault`` (the
 control loop then stops motion) and count in ``counters``. A lost link (the
@@ -132,6 +135,7 @@ class SerialBackend:
         self._fault = ""
         self._fresh = True
         self._awaiting = False
+        self._sent_since_read = False  # a frame went out since the last read: its answer is due
         self._sent_ns = 0
         self._last_rx_ns = 0
         self._watchdog_ns = round(watchdog_s * 1e9)
@@ -200,8 +204,12 @@ class SerialBackend:
     # -- the tick -----------------------------------------------------------------------------
 
     def read(self, raw: list[int]) -> None:
-        """Fill ``raw`` with the newest reported encoder words (kept while the link is lost)."""
+        """Fill ``raw`` with the newest reported encoder words (kept while the link is lost);
+        ``sample_ns`` says when they were latched, and changes only with a new REPORT."""
         if self._port is not None:
+            if not self._awaiting and not self._sent_since_read:
+                self._send(Heartbeat())  # nothing asked since the last read: ask for a sample
+            self._sent_since_read = False
             self._service(self._reply_wait_ns if self._awaiting else 0)
             if self._awaiting:
                 self.late_replies += 1
@@ -324,6 +332,7 @@ class SerialBackend:
             return
         self.counters.frames_tx += 1
         self._awaiting = True
+        self._sent_since_read = True
         self._sent_ns = time.monotonic_ns()
 
     def _service(self, wait_ns: int) -> None:

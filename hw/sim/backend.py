@@ -100,7 +100,11 @@ class SimBackend:
         """A simulator has no link to lose."""
 
     def read(self, raw: list[int]) -> None:
-        """Fill ``raw`` with the encoder words: Gray words (Unimate) or signed counts (rig)."""
+        """Fill ``raw`` with the encoder words: Gray words (Unimate) or signed counts (rig).
+
+        ``sample_ns`` is the plant's time: a new sample whenever the clock has moved since
+        the last read (the encoders latched on the way), the same one when it has not (a
+        lockstep clock read twice between two sleeps)."""
         self._advance()
         self.sample_ns = self._t_ns
         if self._board is not None:
