@@ -1,13 +1,18 @@
 """What the app hands every tab when it builds it. The client comes later, when the controller
-is up: the app hands it down with ``TabPage.client_ready``."""
+is up: the app hands it down with ``TabPage.client_ready``; a client attached to a controller
+service is known from the start, and with it whether this TUI may change the files the
+controller and the commander read (``Desk.refusal``, ``Desk.typed_path``)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from app.event_log import EventLog
+from app.event_log import EventLog, entries_of
 from app.history import History
+from control.attached import AttachedClient
+from control.client import ControlClient
+from control.events import Refused
 from hw.machine import Machine
 from kinematics.unimate import Unimate2000B
 
@@ -15,7 +20,8 @@ from kinematics.unimate import Unimate2000B
 @dataclass(frozen=True)
 class Desk:
     """The machine and its kinematics, the backend's name, where runs are saved, the
-    status history the sampler fills (200 Hz) and the session's event log."""
+    status history the sampler fills (200 Hz), the session's event log, and the client
+    attached to a controller service (None: the app starts its own controller)."""
 
     machine: Machine
     model: Unimate2000B | None  # the closed-form kinematics; None for a machine without (the rig)
@@ -24,3 +30,50 @@ class Desk:
     history: History
     dt: float  # between a path's rows: the machine's sample time, or the thesis timing's
     events: EventLog = field(default_factory=EventLog)
+    attached: ControlClient | None = None
+
+    @property
+    def commanding(self) -> bool:
+        """Whether this TUI commands: one that started its own controller always does."""
+        client = self.attached
+        return not isinstance(client, AttachedClient) or client.commanding
+
+    def refusal(self, what: str) -> str:
+        """Why ``what`` (a change to taught positions or gains, which the commander's moves
+        use) is refused, logged as a refusal; "" when this TUI commands and may."""
+        if self.commanding:
+            return ""
+        return self._refused(what, f"{self._role()}; take it first")
+
+    def typed_path(self, text: str, what: str) -> Path:
+        """The path the operator typed for ``what``, ``~`` expanded. A TUI that does not
+        command may name only a path inside the data directory once ``..`` and symlinks are
+        resolved (it gets that resolved path): ValueError, logged as a refusal, otherwise."""
+        try:
+            path = Path(text).expanduser()
+        except RuntimeError as exc:  # ~somebody unknown
+            raise ValueError(f"{what}: {exc}") from None
+        if self.commanding:
+            return path
+        inside = self.data_dir.resolve()
+        try:
+            resolved = path.resolve()
+        except (OSError, RuntimeError) as exc:  # a symlink loop
+            raise ValueError(self._refused(what, f"{text!r}: {exc}")) from None
+        if not resolved.is_relative_to(inside):
+            raise ValueError(self._refused(what, (
+                f"{self._role()}, so only a file inside the data directory {self.data_dir} "
+                f"may be named; {text!r} is outside it: choose one inside, or take command "
+                "first")))
+        return resolved
+
+    def _role(self) -> str:
+        client = self.attached
+        return client.role if isinstance(client, AttachedClient) else "commanding"
+
+    def _refused(self, what: str, reason: str) -> str:
+        """Log the refusal of ``what`` as the controller's refusals are; its sentence."""
+        record = Refused(what, reason)
+        for entry in entries_of(record, self.machine):
+            self.events.add(entry)
+        return record.message

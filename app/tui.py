@@ -155,7 +155,7 @@ class ServodeskApp(App[None]):
         self.history = History(self.machine.n_joints)
         timing = self.client_options.get("timing") or Timing()
         self.desk = Desk(self.machine, self.model, backend, self.data_dir, self.history,
-                         timing.sample_time_s(self.machine))
+                         timing.sample_time_s(self.machine), attached=client)
         self.timing_text = "" if timing.name == "servodesk" else timing.describe(self.machine)
         self.client: ControlClient | None = None
         self.priority: Priority | None = None  # the UI thread's, raised while the app runs
@@ -448,13 +448,14 @@ class ServodeskApp(App[None]):
         self.header.link = replace(self.header.link, **changes)  # type: ignore[arg-type]
 
     def _refresh_header(self) -> None:
-        if not self.header.is_mounted:
+        if not self.is_running or not self.header.is_mounted:  # the screen may be torn down
             return
         client = self.client
         if client is not None and client.dead and self.header.link.state == "live":
             self._died()
         if self.sampler is not None and self.sampler.latest is not None:
             self.header.status = self.sampler.latest
+        self.header.latest = self.desk.events.latest  # a tab's refusal logs without the app
 
     # -- tabs ----------------------------------------------------------------------------------
 

@@ -10,9 +10,9 @@ models (``tuning.simulate``). Then a fresh PRBS the fit never saw is played from
 where the joint stopped, and both models' fit on it is shown: the held-out
 figure to judge a model by (the fit on its own run flatters it). "Apply to
 track" / "Apply to hold" send the proposal to the controller, with velocity
-feed-forward (``with_feed_forward``) when the switch is on. Joints identified
-earlier in the session keep their models, so the proposal covers every joint
-identified so far.
+feed-forward (``with_feed_forward``) when the switch is on, and only from a TUI
+that commands (``Desk.refusal``). Joints identified earlier in the session keep
+their models, so the proposal covers every joint identified so far.
 """
 
 from __future__ import annotations
@@ -400,6 +400,11 @@ class IdentifyTab(TabPage):
             Figure(f"predicted step response · {spec.name}", (panel,)))
 
     def apply(self, which: str) -> None:
+        refusal = self.desk.refusal(f"apply to {which}")
+        if refusal:
+            self._state(Text(refusal, "bold red"))
+            self.notify(refusal, severity="error", timeout=8)
+            return
         outcome = self.outcome
         client = self.client
         if outcome is None:

@@ -156,6 +156,8 @@ class MovesTab(TabPage):
 
     def on_mount(self) -> None:
         self.forms = list(self.query(MoveForm))
+        for form in self.query(PathFileForm):
+            form.typed_path = self.desk.typed_path
         self._result_table([])
         self._state(Text("no move yet", "dim"))
 

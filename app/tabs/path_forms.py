@@ -4,7 +4,9 @@ tool's x y z with γ and β held (section 6.4)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from rich.text import Text
@@ -54,6 +56,9 @@ class PathFileForm(MoveForm):
         super().__init__(machine, model)
         self.points: PathPoints | None = None
         self.loaded_from = ""
+        # what a typed path names, or ValueError: the Moves tab hands down its desk's
+        # ``typed_path`` (a TUI that does not command previews only the data directory's files)
+        self.typed_path: Callable[[str, str], Path] = lambda text, what: Path(text)
 
     def fields(self) -> ComposeResult:
         with Horizontal(classes="field"):
@@ -64,24 +69,30 @@ class PathFileForm(MoveForm):
     @on(Input.Submitted, "#path-file")
     def _submitted(self, event: Input.Submitted) -> None:
         event.stop()
+        try:
+            path = self.typed_path(event.value, "read the path file")
+        except ValueError as exc:
+            self.on_path_file_form_refused(self.Refused(str(exc)))
+            return
         # the joints the file leaves out are checked where they are now, and played from
         # where they are when the move runs (``plan``)
-        self.load(event.value, np.array(self.here) if self.here else mid_range(self.machine))
+        self.load(path, event.value,
+                  np.array(self.here) if self.here else mid_range(self.machine))
 
     @work(thread=True, exclusive=True, group="path-file")
-    def load(self, text: str, current: np.ndarray) -> None:
+    def load(self, path: Path, text: str, current: np.ndarray) -> None:
         try:
-            points = read_path(text, self.machine, tuple(current))
+            points = read_path(path, self.machine, tuple(current))
         except PathFileError as exc:
-            self.post_message(self.Refused(str(exc)))
+            self.post_message(self.Refused(f"{exc}. Fix the file and press Enter in the field "
+                                           "again."))
             return
         self.post_message(self.Loaded(points, text))
 
     def on_path_file_form_refused(self, message: Refused) -> None:
         self.points = None
         self.loaded_from = ""
-        self.query_one("#path-state", Static).update(Text(
-            f"{message.problem}. Fix the file and press Enter in the field again.", "bold red"))
+        self.query_one("#path-state", Static).update(Text(message.problem, "bold red"))
 
     def on_path_file_form_loaded(self, message: Loaded) -> None:
         points = self.points = message.points

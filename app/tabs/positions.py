@@ -5,10 +5,12 @@ The table lists every position with its joints and, for the Unimate, its pose
 tab) teaches where the joints are under a name; ``g`` goes to the selected one: a
 joint-space move at the speed fraction typed (``ControlClient.go_to``: every joint
 within that fraction of its max_speed and max_accel). ``r`` renames, Delete deletes,
-``l`` reads the file again after an edit by hand. Taught positions are kept in the
-data directory (``control/motion/positions.py``, ``docs/motion.md``); every change
-reads the file, changes it and writes it atomically in a worker, so an edit made by
-hand meanwhile is kept, and a damaged file is reported, never overwritten.
+``l`` reads the file again after an edit by hand. Only a TUI that commands may teach,
+rename or delete (``Desk.refusal``): the commander's go-tos use these names. Taught
+positions are kept in the data directory (``control/motion/positions.py``,
+``docs/motion.md``); every change reads the file, changes it and writes it atomically in a
+worker, so an edit made by hand meanwhile is kept, and a damaged file is reported, never
+overwritten.
 """
 
 from __future__ import annotations
@@ -222,10 +224,26 @@ class PositionsTab(TabPage):
     def action_reload(self) -> None:
         self._change(None, f"read {self.path.name} again")
 
+    def _refused(self, what: str) -> bool:
+        """Say so and log it if this TUI may not ``what`` (it does not command)."""
+        refusal = self.desk.refusal(what)
+        if refusal:
+            self._state(Text(refusal, "bold red"))
+            self.notify(refusal, severity="error", timeout=8)
+        return bool(refusal)
+
+    def _write(self, what: str, change: Callable[[PositionBook], PositionBook], done: str,
+               select: str | None = None) -> None:
+        """``change`` the file, if this TUI still commands (it may have released meanwhile)."""
+        if not self._refused(what):
+            self._change(change, done, select)
+
     # -- teach, rename, delete -----------------------------------------------------------------
 
     def action_teach(self) -> None:
         """Teach where the joints are now, under a name the operator types."""
+        if self._refused("teach"):
+            return
         status = self.status()
         if status is None:
             self.command("teach", ControlClient.check)
@@ -237,7 +255,7 @@ class PositionsTab(TabPage):
         def taught(name: str | None) -> None:
             if name is not None:
                 name = name.strip()
-                self._change(lambda book: book.teach(name, q), f"taught {name}", name)
+                self._write("teach", lambda book: book.teach(name, q), f"taught {name}", name)
 
         self.app.push_screen(EditValueScreen(
             "Teach the current position", self._free_name(), self.book.check_name,
@@ -248,6 +266,8 @@ class PositionsTab(TabPage):
         return next(f"p{n}" for n in range(1, len(names) + 2) if f"p{n}" not in names)
 
     def action_rename(self) -> None:
+        if self._refused("rename"):
+            return
         p = self._taught_selected("rename")
         if p is None:
             return
@@ -255,21 +275,23 @@ class PositionsTab(TabPage):
         def renamed(name: str | None) -> None:
             if name is not None:
                 name = name.strip()
-                self._change(lambda book: book.rename(p.name, name),
-                             f"renamed {p.name} to {name}", name)
+                self._write("rename", lambda book: book.rename(p.name, name),
+                            f"renamed {p.name} to {name}", name)
 
         self.app.push_screen(EditValueScreen(
             f"Rename {p.name}", p.name, lambda text: self.book.check_name(text, p.name)),
             renamed)
 
     def action_delete(self) -> None:
+        if self._refused("delete"):
+            return
         p = self._taught_selected("delete")
         if p is None:
             return
 
         def deleted(yes: bool | None) -> None:
             if yes:
-                self._change(lambda book: book.delete(p.name), f"deleted {p.name}")
+                self._write("delete", lambda book: book.delete(p.name), f"deleted {p.name}")
 
         self.app.push_screen(ConfirmScreen(
             f"Delete the position {p.name}?",

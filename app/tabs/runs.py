@@ -273,7 +273,13 @@ class RunsTab(TabPage):
         if self.run is None or not any(r is self.run for r in self.unsaved):
             self.notify("select a NOT SAVED run first", severity="warning")
             return
-        self._save(self.run, Path(self.query_one("#runs-save-dir", Input).value).expanduser())
+        try:  # a TUI that does not command saves only inside the data directory
+            directory = self.desk.typed_path(self.query_one("#runs-save-dir", Input).value,
+                                             "save the run")
+        except ValueError as exc:
+            self.notify(str(exc), severity="error", timeout=10)
+            return
+        self._save(self.run, directory)
 
     @work(thread=True, group="runs-save")
     def _save(self, run: Run, directory: Path) -> None:

@@ -9,7 +9,9 @@ With care: every apply goes through the client's gain check, and a set it
 refuses is shown with the reason in the tab, nothing applied; Load shows what
 the file's sets would change in the live ones and applies them only when
 confirmed (all or none); Save asks before replacing a file; ctrl+z puts back
-the set in use before the last apply.
+the set in use before the last apply. A TUI that does not command changes nothing here
+(``Desk.refusal``): no edit, apply or Save; its Load reads only files inside the data
+directory (``Desk.typed_path``) and offers their sets as presets.
 """
 
 from __future__ import annotations
@@ -217,15 +219,25 @@ class TuningTab(TabPage):
             if isinstance(name, str) and name in self.presets:
                 self.apply({self.which: replace(self.presets[name])}, f"preset {name}")
         elif event.button.id == "tuning-load":
-            self.load(self.query_one("#tuning-path", Input).value)
+            self.action_load()
         elif event.button.id == "tuning-save":
-            self.save(self.query_one("#tuning-path", Input).value)
+            self.action_save()
+
+    def _refused(self, what: str) -> bool:
+        """Say so in the tab and log it if this TUI may not ``what`` (it does not command)."""
+        refusal = self.desk.refusal(what)
+        if refusal:
+            self._outcome(Text(refusal, "bold red"))
+            self.notify(refusal, severity="error", timeout=8)
+        return bool(refusal)
 
     # -- applying, and undoing ----------------------------------------------------------------
 
     def apply(self, sets: dict[str, Coefficients], what: str) -> bool:
         """Apply ``sets`` (hold and/or track) through the client's gain check: all of them,
         or, if the check refuses one, none, with the reason shown in the tab."""
+        if self._refused(f"apply {what}"):
+            return False
         client = self.client
         if client is None:
             self.notify(f"apply {what}: the controller is not running — "
@@ -305,6 +317,8 @@ class TuningTab(TabPage):
         self.edit(event.data_table.id or "", event.coordinate.row, event.coordinate.column)
 
     def edit(self, table: str, row: int, column: int) -> None:
+        if self._refused(f"edit the {self.which} set"):
+            return
         c = self.current
         if table == "tuning-joints":
             if column == 0:
@@ -356,14 +370,24 @@ class TuningTab(TabPage):
 
     # -- files --------------------------------------------------------------------------------
 
+    def action_load(self) -> None:
+        """Read the typed file; a TUI that does not command only inside the data directory."""
+        try:
+            path = self.desk.typed_path(self.query_one("#tuning-path", Input).value, "load")
+        except ValueError as exc:
+            self._outcome(Text(str(exc), "bold red"))
+            self.notify(str(exc), severity="error", timeout=10)
+            return
+        self.load(path)
+
     @work(thread=True, group="tuning-file")
-    def load(self, path: str) -> None:
+    def load(self, path: Path) -> None:
         try:
             sets = load_coefficients(path, self.machine)
         except CoefficientFileError as exc:
             self.notify(f"{exc}. Fix the file or choose another.", severity="error", timeout=10)
             return
-        self.post_message(self.Loaded(Path(path), sets))
+        self.post_message(self.Loaded(path, sets))
 
     def on_tuning_tab_loaded(self, message: Loaded) -> None:
         """Offer the file's sets as presets, show what applying it would change, and apply
@@ -376,6 +400,13 @@ class TuningTab(TabPage):
         select.value = f"{path.stem}:{next(iter(sets))}"
         assigned = {which: sets[name] for which, name in self._assign(sets).items()}
         review, changes = self._review(path, sets, assigned)
+        if changes and not self.desk.commanding:  # read, but never offered to apply
+            refusal = self.desk.refusal(f"apply {path.name}")
+            said = (f"{path.name}: {changes} change(s) to the live sets, offered as presets "
+                    f"only; {refusal}")
+            self._outcome(Text(said, "bold yellow"))
+            self.notify(said, severity="warning", timeout=8)
+            return
         if not changes:
             self._outcome(Text(f"{path.name}: the same as the sets in use; nothing to apply",
                                "green"))
@@ -425,6 +456,11 @@ class TuningTab(TabPage):
                         "dim")
         return text, count
 
+    def action_save(self) -> None:
+        """Save the sets in use to the typed file, if this TUI commands (it is a gain file)."""
+        if not self._refused("save"):
+            self.save(self.query_one("#tuning-path", Input).value)
+
     @work(thread=True, group="tuning-file")
     def save(self, path: str, overwrite: bool = False) -> None:
         target = coefficient_path(path)
@@ -443,10 +479,10 @@ class TuningTab(TabPage):
 
     def on_tuning_tab_overwrite_asked(self, message: OverwriteAsked) -> None:
         def answer(yes: bool | None) -> None:
-            if yes:
-                self.save(str(message.path), overwrite=True)
-            else:
+            if not yes:
                 self.notify(f"not saved: {message.path} left as it was")
+            elif not self._refused("save"):  # command may have been released meanwhile
+                self.save(str(message.path), overwrite=True)
 
         self.app.push_screen(ConfirmScreen(
             f"Overwrite {message.path.name}?",
