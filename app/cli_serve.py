@@ -6,7 +6,9 @@ starts one (a subprocess given ``--machine``, ``--backend``, ``--port``, ``--dat
 ``python -m app --attach SOCKET``: observe-only (^K refused with the reason), or, with
 ``--command``, taking command at start (refused, with who holds it, if another client does).
 Any session's E-stop latches. It listens on 127.0.0.1 unless told otherwise: from another
-machine, forward the port over SSH (``ssh -L 8000:127.0.0.1:8000 host``).
+machine, forward the port over SSH (``ssh -L 8000:127.0.0.1:8000 host``). Its gate
+(``app/web_gate.py``) wants the token it prints at start, a websocket from its own page (Origin)
+at a name of this machine (Host), and no more than ``--max-sessions`` sessions at once.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from hw.factory import BACKENDS
 TEMPLATES = Path(__file__).with_name("serve_templates")  # textual-serve's page, offline
 CONTROLLER_START_S = 60.0  # a cold start on a loaded machine imports numpy, scipy…
 CONTROLLER_STOP_S = 30.0
+MAX_SESSIONS = 4  # each a TUI process of about 85 MB beside the controller service
 
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
@@ -34,7 +37,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                     "TUI attached to the controller service on --socket, started here if none "
                     "runs. Sessions observe only, unless --command: then each takes command "
                     "at start (one at a time holds it). Any session's E-stop latches. Bound to "
-                    "127.0.0.1: from elsewhere, forward it (ssh -L 8000:127.0.0.1:8000 host).")
+                    "127.0.0.1: from elsewhere, forward it (ssh -L 8000:127.0.0.1:8000 host). "
+                    "Open the address it prints: the page wants its token (new each start).")
     # SUPPRESS: an unset subcommand option must not hide the global one
     p.add_argument("--machine", default=argparse.SUPPRESS,
                    help="for a controller started here: built-in machine (unimate2000b, rig) or "
@@ -59,12 +63,14 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--command", action="store_true",
                    help="each browser session takes command at start (default: observe only; "
                         "E-stop works either way)")
+    p.add_argument("--max-sessions", type=_sessions, default=MAX_SESSIONS, metavar="N",
+                   help=f"browser sessions open at once, each a TUI process (default "
+                        f"{MAX_SESSIONS}); one more is refused until one closes")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from textual_serve.server import Server
-
+    from app.web_gate import Gate, GatedServer
     from control import rendezvous
 
     if args.backend == "serial" and not args.port:
@@ -84,11 +90,14 @@ def run(args: argparse.Namespace) -> int:
             return 2
     role = "--take-command" if args.command else "--observe-only"
     command = shlex.join([sys.executable, "-m", "app", "--attach", str(socket), role])
-    server = Server(command, host=args.host, port=args.http_port, title=f"servodesk: {title}",
-                    templates_path=TEMPLATES)
-    print(f"servodesk serve: http://{args.host}:{args.http_port}/ ({title}; controller "
+    gate = Gate.listening_on(args.host)
+    server = GatedServer(command, host=args.host, port=args.http_port,
+                         title=f"servodesk: {title}", templates_path=TEMPLATES, gate=gate,
+                         max_sessions=args.max_sessions)
+    print(f"servodesk serve: {gate.page_url(args.host, args.http_port)} ({title}; controller "
           f"{'started here' if controller else 'attached'} at {socket}; sessions "
-          f"{'take command' if args.command else 'observe only'})", file=sys.stderr, flush=True)
+          f"{'take command' if args.command else 'observe only'}, at most "
+          f"{args.max_sessions} at once)", file=sys.stderr, flush=True)
     try:
         server.serve()
     except OSError as exc:  # the port is taken, the address is not this machine's
@@ -99,6 +108,13 @@ def run(args: argparse.Namespace) -> int:
         if controller is not None:
             _stop(controller)
     return 0
+
+
+def _sessions(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be 1 or more, got {text}")
+    return value
 
 
 def _title(socket: Path) -> str | None:

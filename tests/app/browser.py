@@ -6,10 +6,14 @@ What the browser received is: a wrapper around ``window.WebSocket``, injected be
 page loads (CDP ``Page.addScriptToEvaluateOnNewDocument``), keeps every binary message (the
 TUI's output bytes); ``Browser.text`` decodes them and strips the escape sequences. Used by
 tests/app/test_serve.py and ``benchmarks/ui.py --browser``.
+
+``ScriptedSessions`` opens sessions without a browser, as the page does (aiohttp, which
+textual-serve depends on): many at once, or with a foreign Origin or a wrong token.
 """
 
 from __future__ import annotations
 
+import asyncio
 import base64
 import codecs
 import contextlib
@@ -20,11 +24,14 @@ import socket
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 import urllib.request
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Coroutine, Iterator
 from pathlib import Path
+from typing import Any, TypeVar
 
+import aiohttp
 from selenium import webdriver
 from selenium.webdriver.chrome.service import Service
 from selenium.webdriver.common.action_chains import ActionChains
@@ -36,6 +43,7 @@ CHROMIUM = "/usr/bin/chromium"
 CHROMEDRIVER = "/usr/bin/chromedriver"
 WINDOW = (1600, 1000)  # about 166 × 50 cells at the page's 16 px font
 START_S = 60.0
+T = TypeVar("T")
 
 # Every binary message the page's websockets receive, base64 (the TUI's output bytes).
 RECORDER = """
@@ -63,6 +71,13 @@ TAKE = "return window.__servodeskReceived ? window.__servodeskReceived.splice(0)
 # escape sequence (colours, modes, OSC) goes
 CURSOR_MOVE = re.compile(r"\x1b\[[0-9;]*[Hf]")
 ESCAPE = re.compile(r"\x1b\[[0-?]*[ -/]*[@-~]|\x1b\][^\x07\x1b]*(?:\x07|\x1b\\)|\x1b[@-Z\\-_]")
+PAGE_URL = re.compile(r"servodesk serve: (http://127\.0\.0\.1:\d+/\?token=([\w-]+))")
+SAME = "the page's"  # ScriptedSessions.open's Origin: serve's own page's
+
+
+def screen_text(raw: str) -> str:
+    """What a terminal's output bytes (decoded) show, as text."""
+    return ESCAPE.sub("", CURSOR_MOVE.sub("\n", raw))
 
 
 def free_port() -> int:
@@ -73,11 +88,13 @@ def free_port() -> int:
 
 class Served:
     """``servodesk serve`` on a free port, in a private runtime directory (its controller's
-    socket there); its output in ``log``."""
+    socket there); its output in ``log``; ``url``, the page's address with the token it
+    printed."""
 
     def __init__(self, log: Path, *args: str, runtime: Path | None = None) -> None:
         self.port = free_port()
-        self.url = f"http://127.0.0.1:{self.port}/"
+        self.origin = f"http://127.0.0.1:{self.port}"  # its own page's
+        self.url = self.token = ""  # once serve has printed them
         self._own_runtime = runtime is None
         self.runtime = runtime or Path(tempfile.mkdtemp(prefix="sd-"))
         self.socket = self.runtime / "servodesk" / "controller.sock"
@@ -90,11 +107,22 @@ class Served:
         wait_until(self._answers, START_S, f"servodesk serve at {self.url}", self._failed)
 
     def _answers(self) -> bool:
+        if not self.token:
+            if (printed := PAGE_URL.search(self.log.read_text(errors="replace"))) is None:
+                return False
+            self.url, self.token = printed.groups()
         try:
             with urllib.request.urlopen(self.url, timeout=2) as response:
                 return response.status == 200
         except OSError:
             return False
+
+    def websocket_url(self, token: str | None = None) -> str:
+        """A session's websocket, as the page asks for it (``token``: serve's unless told; ""
+        is textual-serve's own path, without one)."""
+        token = self.token if token is None else token
+        path = f"/ws/{token}" if token else "/ws"
+        return f"ws://127.0.0.1:{self.port}{path}?width=120&height=40"
 
     def _failed(self) -> str:
         if self.proc.poll() is not None:
@@ -140,7 +168,7 @@ class Browser:
         """All the text received so far (what arrived since the last call added)."""
         for chunk in self.driver.execute_script(TAKE):
             self._raw += self._decoder.decode(base64.b64decode(chunk))
-        self.received = ESCAPE.sub("", CURSOR_MOVE.sub("\n", self._raw))
+        self.received = screen_text(self._raw)
         return self.received
 
     def mark(self) -> int:
@@ -179,6 +207,95 @@ class Browser:
     def close(self) -> None:
         with contextlib.suppress(Exception):
             self.driver.quit()
+
+
+class Session:
+    """A session a script opened: what its TUI sent, as text."""
+
+    def __init__(self, websocket: aiohttp.ClientWebSocketResponse) -> None:
+        self.websocket = websocket
+        self._chunks: list[bytes] = []  # appended on the sessions' event loop
+
+    async def receive(self) -> None:
+        async for message in self.websocket:
+            if message.type == aiohttp.WSMsgType.BINARY:
+                self._chunks.append(message.data)
+
+    def text(self) -> str:
+        return screen_text(b"".join(self._chunks[:]).decode(errors="replace"))
+
+    def wait_for(self, needle: str, timeout_s: float) -> None:
+        wait_until(lambda: needle in self.text(), timeout_s, f"{needle!r} in a scripted session")
+
+
+class ScriptedSessions:
+    """Sessions of ``servodesk serve`` opened by a script as its page opens them (aiohttp: a
+    websocket with the page's Origin and the token in its path), on an event loop in a thread
+    of their own; ``close`` ends them all."""
+
+    def __init__(self, served: Served) -> None:
+        self.served = served
+        self._loop = asyncio.new_event_loop()
+        self._thread = threading.Thread(target=self._loop.run_forever, daemon=True)
+        self._thread.start()
+        self._http: aiohttp.ClientSession = self._run(self._client())
+        self._open: dict[Session, asyncio.Task[None]] = {}
+
+    @staticmethod
+    async def _client() -> aiohttp.ClientSession:
+        return aiohttp.ClientSession()
+
+    def _run(self, coroutine: Coroutine[Any, Any, T]) -> T:
+        return asyncio.run_coroutine_threadsafe(coroutine, self._loop).result(START_S)
+
+    def open(self, count: int = 1, origin: str | None = SAME, token: str | None = None
+             ) -> list[Session | int]:
+        """``count`` sessions asked for at once, with ``origin`` (None: no Origin header) and
+        ``token`` (serve's unless told): each a ``Session``, or the HTTP status it was refused
+        with."""
+        sent = self.served.origin if origin == SAME else origin
+        url = self.served.websocket_url(token)
+
+        async def one() -> Session | int:
+            try:
+                websocket = await self._http.ws_connect(url, origin=sent)
+            except aiohttp.WSServerHandshakeError as refused:
+                return refused.status
+            session = Session(websocket)
+            self._open[session] = asyncio.get_running_loop().create_task(session.receive())
+            return session
+
+        async def all_at_once() -> list[Session | int]:
+            return list(await asyncio.gather(*(one() for _ in range(count))))
+
+        return self._run(all_at_once())
+
+    def close_session(self, session: Session) -> None:
+        """Close ``session``'s websocket, as a closed browser tab does."""
+        receiving = self._open.pop(session)
+
+        async def close() -> None:
+            await session.websocket.close()
+            await receiving
+
+        self._run(close())
+
+    def close(self) -> None:
+        for session in list(self._open):
+            self.close_session(session)
+        self._run(self._http.close())
+        self._loop.call_soon_threadsafe(self._loop.stop)
+        self._thread.join(timeout=START_S)
+        self._loop.close()
+
+
+@contextlib.contextmanager
+def scripted(served: Served) -> Iterator[ScriptedSessions]:
+    sessions = ScriptedSessions(served)
+    try:
+        yield sessions
+    finally:
+        sessions.close()
 
 
 @contextlib.contextmanager
