@@ -72,10 +72,7 @@ class Gate:
         """Why a request with this Host header is refused; "" if it names this machine."""
         if not host:
             return "no Host header: open the address servodesk serve printed at start"
-        try:
-            name = urlsplit(f"//{host}").hostname or ""
-        except ValueError:
-            name = ""
+        name = _host_name(host)
         if name in self.names or _this_machine(name, self.any_address):
             return ""
         return (f"Host {host!r} is not a name of this server (a foreign name pointed here is "
@@ -101,6 +98,16 @@ class Gate:
             return ("wrong token: open the address servodesk serve printed at start (the token "
                     "is new each time serve starts)")
         return ""
+
+
+def _host_name(host: str) -> str:
+    """The name in a Host header, lower case; "" where it is no name[:port]."""
+    try:
+        parts = urlsplit(f"//{host}")
+        _ = parts.port  # raises for a port that is no number
+    except ValueError:
+        return ""
+    return parts.hostname or ""
 
 
 def _this_machine(name: str, any_address: bool) -> bool:
