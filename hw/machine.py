@@ -21,6 +21,8 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
+from hw.user_files import TEXT_ENCODING, NotRegularFile, open_regular
+
 BUILTIN = {"unimate2000b": "unimate2000b.toml", "unimate": "unimate2000b.toml", "rig": "rig.toml"}
 JOINT_KINDS = {"prismatic": "mm", "revolute": "deg"}
 ENCODER_KINDS = ("gray", "quadrature")
@@ -301,30 +303,32 @@ def _check_path(path: Path) -> None:
 
 
 def read_text(path: Path, kind: str) -> str:
-    """The text of a ``kind`` (a machine file, a coefficient file) at ``path``; MachineError
-    naming it if it has none to give: missing, not a file, unreadable, too large, not UTF-8."""
+    """The text of a ``kind`` (a machine file, a coefficient file, a positions file) at
+    ``path``, a byte-order mark dropped (``hw.user_files``); MachineError naming it if it has
+    none to give: missing, not a regular file (a FIFO is refused at once), unreadable, too
+    large, not UTF-8."""
     try:
-        if path.is_dir():
-            raise MachineError(f"{path}: is a directory: give the {kind} inside it")
-        if not path.exists():
-            builtin = (f" (built-in machines: {', '.join(builtin_names())})"
-                       if kind == "machine file" else "")
-            raise MachineError(f"{path}: no such {kind}{builtin}")
-        if not path.is_file():
-            raise MachineError(f"{path}: not a regular file: give a {kind} (TOML)")
-        with path.open("rb") as file:
+        with open_regular(path) as file:
             data = file.read(MAX_FILE_BYTES + 1)
+    except FileNotFoundError:
+        builtin = (f" (built-in machines: {', '.join(builtin_names())})"
+                   if kind == "machine file" else "")
+        raise MachineError(f"{path}: no such {kind}{builtin}") from None
+    except NotRegularFile as exc:
+        if exc.kind == "a directory":
+            raise MachineError(f"{path}: is a directory: give the {kind} inside it") from None
+        raise MachineError(f"{path}: {exc.strerror}: give a {kind} (TOML)") from None
     except OSError as exc:
         raise MachineError(f"{path}: cannot read it: {exc.strerror or exc}") from None
     if len(data) > MAX_FILE_BYTES:
         raise MachineError(f"{path}: larger than {MAX_FILE_BYTES >> 10} kB, so not a {kind} "
                            f"(the Unimate's machine file is 8 kB)")
     try:
-        return data.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        line = data.count(b"\n", 0, exc.start) + 1
-        raise MachineError(f"{path}: line {line}: byte {data[exc.start]:#04x} is not UTF-8 "
-                           f"text: save the file as UTF-8") from None
+        return data.decode(TEXT_ENCODING)
+    except UnicodeDecodeError as exc:  # its object: the bytes after a byte-order mark
+        line = exc.object.count(b"\n", 0, exc.start) + 1
+        raise MachineError(f"{path}: line {line}: byte {exc.object[exc.start]:#04x} is not "
+                           f"UTF-8 text: save the file as UTF-8") from None
 
 
 def parse_toml(text: str, filename: str) -> dict[str, Any]:

@@ -1,12 +1,14 @@
-"""Reading path and pose files: the text, bounded before it is parsed, and numbers whose
-errors name the line.
+"""Reading path and pose files (and saved runs' tables, ``control/recorder.py``): the text,
+bounded before it is parsed, and numbers whose errors name the line.
 
 A file is read in chunks and refused as soon as it holds more lines or bytes than its
 ``FileBound`` allows, so neither the time nor the memory spent on a huge file grows with
 it: a move file's bound is one line per sample of the longest move allowed (and a
 header), at ``BYTES_PER_ROW`` bytes a line (``move_file_bound``). A file whose name ends
 in ``.gz`` (a saved run's ``.csv.gz``) is read through gzip, and the bound holds for what
-it unpacks to: a small file that unpacks to a huge one is stopped at the bound too.
+it unpacks to: a small file that unpacks to a huge one is stopped at the bound too. Only a
+regular file is read (a named pipe or a device is refused at once, ``hw.user_files``), as
+UTF-8 with or without a byte-order mark.
 """
 
 from __future__ import annotations
@@ -20,6 +22,8 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import BinaryIO
+
+from hw.user_files import TEXT_ENCODING, NotRegularFile, open_regular
 
 # Generous: a saved run's CSV row, 19 numbers written in full (-1.2345678901234567), is < 480.
 BYTES_PER_ROW = 512
@@ -59,12 +63,17 @@ def read_text_file(path: str | Path, bound: FileBound,
     cannot be read or is past the bound (how far, the bound and why)."""
     path = Path(path).expanduser()
     try:
-        with (gzip.open(path, "rb") if gzipped(path) else path.open("rb")) as file:
-            data = _read_bounded(file, bound, path, error)
+        with open_regular(path) as raw, (gzip.GzipFile(fileobj=raw) if gzipped(path)
+                                         else raw) as file:
+            # packed, its size on disk says nothing of its text's (a gzip's header is 20 bytes)
+            size = 0 if gzipped(path) else os.fstat(raw.fileno()).st_size
+            data = _read_bounded(file, size, bound, path, error)
+    except NotRegularFile as exc:
+        raise error(f"{path}: {exc.strerror}: give {bound.what}") from None
     except (OSError, EOFError, zlib.error) as exc:  # gzip: not one, cut short, damaged
         raise error(f"{path}: cannot read: {getattr(exc, 'strerror', None) or exc}") from None
     try:
-        return path, data.decode("utf-8")
+        return path, data.decode(TEXT_ENCODING)
     except UnicodeDecodeError:
         raise error(f"{path}: not a text file") from None
 
@@ -78,11 +87,10 @@ def format_suffix(path: Path) -> str:
     return (path.with_suffix("") if gzipped(path) else path).suffix.lower()
 
 
-def _read_bounded(file: BinaryIO, bound: FileBound, path: Path,
+def _read_bounded(file: BinaryIO, size: int, bound: FileBound, path: Path,
                   error: type[ValueError]) -> bytearray:
     """The bytes of ``file``, read a chunk at a time; ``error`` as soon as they pass
-    ``bound`` (at once from its size, for a regular file that says it is too big)."""
-    size = os.fstat(file.fileno()).st_size  # 0 for a pipe or a device: read to find out
+    ``bound`` (at once when its ``size``, if known, is already past it)."""
     if size > bound.size:
         raise error(_past(path, _bytes(size), bound))
     data, ends, counted = bytearray(), 0, 0

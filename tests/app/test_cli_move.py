@@ -176,6 +176,22 @@ def test_bad_input_exits_2_naming_the_field_and_moves_nothing(
     assert listed(tmp_path) == []
 
 
+@pytest.mark.timeout(90)
+def test_a_fifo_as_the_path_file_exits_2_at_once_naming_it(tmp_path: Path) -> None:
+    """``servodesk move path FIFO``: a named pipe no one writes to is refused as soon as it is
+    opened, in one line that says what it is; reading it would wait for ever (the subprocess
+    is given 60 s, the time a loaded machine may take to start the controller)."""
+    fifo = tmp_path / "path.csv"
+    os.mkfifo(fifo)
+    done = subprocess.run([sys.executable, "-m", "app", "move", "path", str(fifo),
+                           "--data-dir", str(tmp_path)], cwd=ROOT, env=ENV,
+                          capture_output=True, text=True, timeout=60)
+    assert (done.returncode, done.stdout) == (2, ""), done.stderr
+    assert done.stderr == (f"servodesk: FILE: {fifo}: not a regular file but a named pipe "
+                           "(FIFO): give a path file\n")
+    assert listed(tmp_path) == []
+
+
 def test_bad_usage_is_argparses_exit_2(tmp_path: Path) -> None:
     done = servodesk("move", "step", data_dir=tmp_path)  # --target is required
     assert done.returncode == 2 and "--target" in done.stderr

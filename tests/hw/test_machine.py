@@ -12,6 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from hw import machine as machine_module
 from hw.machine import MachineError, load_machine, parse_machine
 from hw.sim.backend import SimBackend
 
@@ -237,9 +238,9 @@ def test_an_unreadable_file_is_refused_naming_it(tmp_path: Path,
     path.write_text(UNIMATE_TEXT)
     path.chmod(0)
     if os.geteuid() == 0:
-        def refuse(self: Path, *args: object, **kwargs: object) -> None:
-            raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(self))
-        monkeypatch.setattr(Path, "open", refuse)
+        def refuse(path: Path) -> None:
+            raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(path))
+        monkeypatch.setattr(machine_module, "open_regular", refuse)
     with pytest.raises(MachineError, match=rf"^{re.escape(str(path))}: cannot read it: "
                                            r"Permission denied$"):
         load_machine(path)

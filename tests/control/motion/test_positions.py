@@ -153,6 +153,23 @@ def test_a_file_that_is_not_text_or_not_a_file_is_refused_naming_it(tmp_path: Pa
         load_positions(path, RIG)
 
 
+@pytest.mark.timeout(20)  # a FIFO opened for reading waits for a writer: for ever
+def test_a_file_saved_with_a_byte_order_mark_loads_and_a_fifo_is_refused(
+        tmp_path: Path) -> None:
+    """A positions file saved by Notepad (a UTF-8 byte-order mark first, CRLF line ends)
+    loads as the same file without them; a named pipe in its place is refused at once, naming
+    it and what it is."""
+    path = save_positions(book(), tmp_path / "unimate2000b.toml")
+    text = path.read_text()
+    path.write_bytes(b"\xef\xbb\xbf" + text.replace("\n", "\r\n").encode())
+    assert load_positions(path, UNIMATE) == book()
+    path.unlink()
+    os.mkfifo(path)
+    with pytest.raises(PositionsError, match=rf"^{path}: not a regular file but a named pipe "
+                                             r"\(FIFO\): give a positions file \(TOML\)$"):
+        load_positions(path, UNIMATE)
+
+
 def test_a_write_that_fails_leaves_the_old_file_and_no_temporary(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     path = save_positions(book(), tmp_path / "unimate2000b.toml")
