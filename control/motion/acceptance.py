@@ -29,12 +29,19 @@ the control process can read them too.
   at half of each joint's speed and acceleration limits, then a settle), and
   the approach is held to the smooth rules whatever the move's kind.
 
+- **The move limit.** A move lasts at most ``MAX_MOVE_S`` (600 s), its approach
+  included: it is sent and recorded whole (600,001 rows at 1 ms), and a saved run is read
+  back within that bound (``control/recorder.py``). Whatever plans a move from a speed (a
+  go to, a Cartesian jog) asks ``check_duration`` before it samples the path, so a crawl
+  is refused at once, not after gigabytes of samples.
+
 Every refusal is a ``MoveRefused`` (a ValueError) naming the joint, the sample
 and its time (for a file, the line), by how much, and how to fix it.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
@@ -47,10 +54,12 @@ from hw.transmission import Transmission
 if TYPE_CHECKING:
     from control.motion.plan import MovePlan
 
-__all__ = ["DUTY_KINDS", "MOVE_KINDS", "SAMPLING_TOLERANCE", "SMOOTH_KINDS", "STEP_KINDS",
-           "MoveRefused", "accept", "check_kind", "check_path", "check_profile", "check_rows",
-           "check_smooth", "check_speeds", "check_start", "starts_here"]
+__all__ = ["DUTY_KINDS", "MAX_MOVE_S", "MOVE_KINDS", "SAMPLING_TOLERANCE", "SMOOTH_KINDS",
+           "STEP_KINDS", "MoveRefused", "accept", "check_duration", "check_kind", "check_path",
+           "check_profile", "check_rows", "check_smooth", "check_speeds", "check_start",
+           "longest_samples", "starts_here"]
 
+MAX_MOVE_S = 600.0  # a move is sent and recorded whole: 600,001 rows at 1 ms is the most
 SAMPLING_TOLERANCE = 0.01  # a smooth path may exceed max_speed and max_accel by 1 % (rounding)
 DUTY_LIMIT_PCT = 100.0
 
@@ -64,6 +73,19 @@ class MoveRefused(ValueError):
     def __init__(self, message: str, index: int | None = None) -> None:
         super().__init__(message)
         self.index = index
+
+
+def longest_samples(dt: float) -> int:
+    """The rows of the longest move at sample time ``dt``, both ends included."""
+    return math.floor(MAX_MOVE_S / dt + 1e-9) + 1
+
+
+def check_duration(seconds: float, what: str, fix: str) -> None:
+    """Refuse ``what`` (a go to, a Cartesian jog) if it would last longer than a move may
+    (``MAX_MOVE_S``); ``fix`` says what to do instead."""
+    if not seconds <= MAX_MOVE_S:  # nan, too: a duration no one can say is no move
+        raise MoveRefused(f"{what} would take {seconds:,.3f} s, longer than a move may last "
+                          f"(the move limit, {MAX_MOVE_S:g} s): {fix}")
 
 
 def check_kind(kind: str, *, profile: bool) -> None:
@@ -214,6 +236,7 @@ def accept(plan: MovePlan, current: np.ndarray | None, machine: Machine,
     if plan.path is None:
         check_kind(plan.kind, profile=True)
         check_profile(np.asarray(plan.profile, dtype=np.float64), machine)
+        _check_rows_allowed(len(plan.profile), plan.kind, dt)
         return plan
     check_kind(plan.kind, profile=False)
     path = np.asarray(plan.path, dtype=np.float64)
@@ -225,10 +248,19 @@ def accept(plan: MovePlan, current: np.ndarray | None, machine: Machine,
         raise MoveRefused("a path needs the joints' current position to start from")
     here = np.asarray(current, dtype=np.float64)
     plan = plan.approached(here, machine, dt)
+    _check_rows_allowed(len(plan.path), plan.kind, dt, plan.approach)
     check_start(plan.path[0], here, machine)
     check_path(np.asarray(plan.path, dtype=np.float64), plan.kind, machine, dt,
                approach=plan.approach)
     return plan
+
+
+def _check_rows_allowed(rows: int, kind: str, dt: float, approach: int = 0) -> None:
+    """The move limit on a move of ``rows`` samples at ``dt``, ``approach`` of them its
+    approach."""
+    with_approach = f" with its {approach * dt:.1f} s approach" if approach else ""
+    check_duration((rows - 1) * dt, f"the {kind} move{with_approach}",
+                   "split it into shorter moves")
 
 
 def _limits(machine: Machine, name: str) -> np.ndarray:

@@ -50,7 +50,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from control.motion import cartesian
-from control.motion.path_files import MAX_MOVE_S
+from control.motion.acceptance import check_duration
 from control.motion.robot_model import unimate_model
 from hw.machine import Machine
 from kinematics import xyz_fixed
@@ -184,10 +184,10 @@ def _plan_line(line: _Line, q0: np.ndarray, machine: Machine, model: Unimate2000
         return problem
     least = 2
     for _ in range(MAX_PASSES):
+        # before the samples are made: at a crawl they would be gigabytes
+        check_duration(_trapezoid_time(rate, accel, dt, least), "the jog",
+                       "jog a shorter way, or faster")
         t, s = _trapezoid(rate, accel, dt, least)
-        if t[-1] > MAX_MOVE_S:
-            raise ValueError(f"the jog would take {t[-1]:.0f} s, longer than a move may "
-                             f"({MAX_MOVE_S:g} s): jog a shorter way")
         solved, problem = _solve(line, s, q0, machine, model, steepest)
         if problem is not None:
             return problem
@@ -230,17 +230,34 @@ def _trapezoid(rate: float, accel: float, dt: float, least: int
     """Times ``(N,)`` and fractions ``s (N,)`` of a rest-to-rest trapezoid from 0 to 1 at
     most ``rate`` (1/s) and ``accel`` (1/s²), stretched to end on a whole sample, at least
     ``least`` intervals long."""
-    if rate * rate >= accel:  # never reaches the rate: a triangle
-        rate = math.sqrt(accel)
-    ramp = rate / accel
-    duration = 1.0 / rate + ramp
-    n = max(math.ceil(duration / dt - 1e-9), least)
+    rate, ramp, duration = _trapezoid_shape(rate, accel)
+    n = round(_trapezoid_time(rate, accel, dt, least) / dt)
     t = np.arange(n + 1) * dt
     u = t * (duration / (n * dt))  # the trapezoid's own time
     s = np.where(u < ramp, 0.5 * accel * u**2, 0.5 * accel * ramp**2 + rate * (u - ramp))
     s = np.where(u > duration - ramp, 1.0 - 0.5 * accel * (duration - u) ** 2, s)
     s[-1] = 1.0
     return t, np.clip(s, 0.0, 1.0)
+
+
+def _trapezoid_shape(rate: float, accel: float) -> tuple[float, float, float]:
+    """The rate the trapezoid reaches (1/s), its ramp's time and its duration (s); an endless
+    one when ``accel`` is too small for a float (a speed below 1e-154)."""
+    if rate * rate >= accel:  # never reaches the rate: a triangle
+        rate = math.sqrt(accel)
+    if rate == 0.0:
+        return 0.0, math.inf, math.inf
+    ramp = rate / accel
+    return rate, ramp, 1.0 / rate + ramp
+
+
+def _trapezoid_time(rate: float, accel: float, dt: float, least: int) -> float:
+    """How long ``_trapezoid`` lasts: its duration stretched to whole samples of ``dt``, at
+    least ``least`` of them."""
+    duration = _trapezoid_shape(rate, accel)[2]
+    if not math.isfinite(duration):
+        return duration
+    return max(math.ceil(duration / dt - 1e-9), least) * dt
 
 
 def _first_problem(q: np.ndarray, s: np.ndarray, valid: np.ndarray, slot: int,

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from control.motion import moves
+from control.motion.acceptance import check_duration
 from control.motion.path_files import PathPoints, resample
 from control.motion.plan import APPROACH_SPEED, MovePlan, moving_joints
 from hw.machine import Machine
@@ -90,16 +91,36 @@ def sine(machine: Machine, current: np.ndarray, j: int, end: float, period: floa
 def go_to(machine: Machine, current: np.ndarray, target: Sequence[float], speed: float, *,
           dt: float) -> MovePlan:
     """A joint-space quintic move from ``current`` to ``target`` at ``speed`` of every joint's
-    max_speed and max_accel (0 < speed ≤ 1); ValueError for a target outside the limits."""
+    max_speed and max_accel (0 < speed ≤ 1); ValueError for a target outside the limits, a
+    bad speed, or a move longer than the move limit (``acceptance.MAX_MOVE_S``: refused
+    before it is sampled)."""
     from control.motion.trajectory import via_path
 
     q = machine.check_targets(tuple(float(v) for v in target))
+    if not 0.0 < speed <= 1.0:
+        raise ValueError(f"speed must be in (0, 1] of each joint's max_speed, got {speed}")
     # a joint resting just past a limit (the rig on its stop) starts on it; one farther out
     # is refused by the acceptance rules ("jog it back inside its limits first")
     start = np.clip(current, machine.lower, machine.upper)
+    fix = "raise the speed, or go part of the way first"
+    check_duration(_least_time(machine, start, np.array(q), speed), "the go to", fix)
     path = via_path(np.vstack([start, q]), machine, dt=dt, speed_fraction=speed).q
+    check_duration((len(path) - 1) * dt, "the go to", fix)
     return MovePlan("go_to", "go to", path, meta={"target": list(q), "speed_fraction": speed},
                     moving=moving_joints(path))
+
+
+def _least_time(machine: Machine, start: np.ndarray, target: np.ndarray, speed: float) -> float:
+    """The shortest a go to from ``start`` to ``target`` at ``speed`` can take: its slowest
+    joint's minimum-jerk time, where the trajectory's timing starts and which it only
+    stretches (``control.motion.trajectory``)."""
+    from control.motion.trajectory import PEAK_ACCEL, PEAK_SPEED
+
+    change = np.abs(target - start)
+    vmax = np.array([j.max_speed for j in machine.joints]) * speed
+    amax = np.array([j.max_accel for j in machine.joints]) * speed
+    return float(np.max(np.maximum(PEAK_SPEED * change / vmax,
+                                   np.sqrt(PEAK_ACCEL * change / amax))))
 
 
 def pulse(machine: Machine, duty: float, duration: float, *, dt: float) -> MovePlan:

@@ -12,8 +12,9 @@
 Either may be gzipped (``.tsv.gz``, ``.csv.gz``: a saved run's files are). Times are
 seconds, positions mm or degrees. Every malformed line is reported
 with its line number. A file is bounded before it is parsed (``path_file_bound``):
-at most one line per sample of the longest move allowed (``MAX_MOVE_S``) and a
-header, at ``file_fields.BYTES_PER_ROW`` bytes a line; reading stops at the bound.
+at most one line per sample of the longest move allowed (``acceptance.MAX_MOVE_S``) and a
+header, at ``file_fields.BYTES_PER_ROW`` bytes a line; reading stops at the bound. Only a
+regular file is read: a named pipe or a device is refused at once, naming what it is.
 A file is a ``path`` move, a smooth kind, so the points are held to the rules of
 ``control.motion.acceptance`` (``docs/motion.md``): every point inside the joint
 limits, no joint faster than its ``max_speed`` from one point to the next.
@@ -39,7 +40,13 @@ from pathlib import Path
 
 import numpy as np
 
-from control.motion.acceptance import MoveRefused, check_rows, check_smooth, check_speeds
+from control.motion.acceptance import (
+    MAX_MOVE_S,
+    MoveRefused,
+    check_rows,
+    check_smooth,
+    check_speeds,
+)
 from control.motion.file_fields import (
     FileBound,
     csv_lines,
@@ -51,7 +58,6 @@ from control.motion.file_fields import (
 from hw.machine import Machine
 
 TIME_NAMES = ("t", "time", "t [s]", "time [s]")
-MAX_MOVE_S = 600.0  # a move is sent and recorded whole: 600,000 samples at 1 ms is the most
 CSV_SUFFIXES = (".csv",)
 
 

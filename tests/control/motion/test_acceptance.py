@@ -152,6 +152,27 @@ def test_the_rules_name_the_callers_sample_not_the_approachs() -> None:
         accept(MovePlan.of_path(path, "path"), HOME, UNIMATE, DT)
 
 
+def test_a_move_longer_than_the_move_limit_is_refused_approach_and_all() -> None:
+    """600 s is the longest move (it is sent and recorded whole, and a saved run is read
+    back within that bound): a path of 600 s runs, one sample more does not, nor a 600 s
+    path with an approach in front, nor a duty profile past 600 s."""
+    still = np.tile(HOME, (600_001, 1))
+    assert len(accept(MovePlan.of_path(still, "path"), HOME, UNIMATE, DT).path) == 600_001
+    longer = np.tile(HOME, (600_002, 1))
+    with pytest.raises(MoveRefused, match=r"^the path move would take 600\.001 s, longer than "
+                                          r"a move may last \(the move limit, 600 s\): split "
+                                          r"it into shorter moves$"):
+        accept(MovePlan.of_path(longer, "path"), HOME, UNIMATE, DT)
+    away = HOME + np.array([50.0, 0, 0, 0, 0, 0])
+    with pytest.raises(MoveRefused, match=r"^the path move with its [\d.]+ s approach would "
+                                          r"take 60\d\.\d{3} s, longer than a move may "
+                                          r"last"):
+        accept(MovePlan.of_path(still, "path"), away, UNIMATE, DT)
+    with pytest.raises(MoveRefused, match="the move limit, 600 s"):
+        accept(MovePlan("set_pulse", "pulse", profile=np.zeros((600_002, 6))), None, UNIMATE,
+               DT)
+
+
 def test_a_joint_beyond_its_limit_cannot_start_a_move() -> None:
     here = HOME.copy()
     here[UPDOWN] = 33.0  # 3° past its upper limit, 0.3° tolerance

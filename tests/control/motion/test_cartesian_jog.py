@@ -148,6 +148,18 @@ def test_speed_scales_the_jog() -> None:
     assert half.duration == pytest.approx(2 * full.duration, rel=0.02)
 
 
+@pytest.mark.parametrize("speed", [1e-3, 1e-5, 1e-200])
+def test_a_jog_longer_than_a_move_may_last_is_refused_before_it_is_sampled(
+        speed: float) -> None:
+    """50 mm at a thousandth of the jog speed takes 2,250 s; at 1e-5 of it 225,000 s (225 M
+    samples at the machine's 1 ms: a MemoryError before); at 1e-200 its acceleration is no
+    float at all (a ZeroDivisionError before). Each is a ValueError naming the move limit."""
+    with pytest.raises(ValueError, match=r"^the jog would take [\d,.inf]+ s, longer than a move "
+                                         r"may last \(the move limit, 600 s\): jog a shorter "
+                                         r"way, or faster$"):
+        plan_jog(START, [50, 0, 0, 0, 0, 0], UNIMATE, speed=speed)
+
+
 def test_a_tool_z_jog_moves_along_the_approach_vector() -> None:
     plan = plan_jog(START, [0, 0, 10.0, 0, 0, 0], UNIMATE, frame="tool")
     t0, t1 = MODEL.forward(START), MODEL.forward(plan.q[-1])

@@ -57,6 +57,20 @@ def test_go_to_names_the_joint_outside_its_limits() -> None:
     assert np.allclose(plan.path[-1], MIDDLE + 1.0) and plan.kind == "go_to"
 
 
+@pytest.mark.parametrize("speed", [0.001, 1e-5])
+def test_a_go_to_longer_than_a_move_may_last_is_refused_naming_the_limit(speed: float) -> None:
+    """Rotate 40° at a thousandth of its speed would take 1,250 s (1.25 M samples, 60 MB of
+    path), at 1e-5 of it 125,000 s (a MemoryError): each is a ValueError naming the move
+    limit, found from the joints' limits before the path is sampled."""
+    target = MIDDLE.copy()
+    target[1] += 40.0
+    with pytest.raises(ValueError, match=r"^the go to would take [\d,.]+ s, longer than a "
+                                         r"move may last \(the move limit, 600 s\): raise the "
+                                         r"speed, or go part of the way first$"):
+        form_plans.go_to(UNIMATE, MIDDLE, target, speed, dt=1e-3)
+    assert len(form_plans.go_to(UNIMATE, MIDDLE, target, 0.01, dt=1e-3).path) < 600_001
+
+
 def test_go_to_starts_a_joint_resting_just_past_its_limit_on_it() -> None:
     resting = np.array([-0.1])  # the rig on its bottom stop, inside its 1 mm tolerance
     plan = form_plans.go_to(RIG, resting, RIG.home, 0.5, dt=1e-3)
