@@ -2,8 +2,9 @@
 lists, describes and exports them.
 
 A run is named by its stem (as ``list`` prints it), the path of any of its files, or
-``latest``. Exit 0 done, 2 bad input (no such run, a damaged run, an unknown view or
-format, an unwritable file), the message on stderr.
+``latest``. Exit 0 done, 2 bad input (no such run, a damaged run, one past its bounds or
+not a regular file, an unknown view or format, an unwritable file), the message on stderr
+in one line.
 """
 
 from __future__ import annotations
@@ -103,7 +104,7 @@ def _find(spec: str, data_dir: Path) -> RunFiles:
         return infos[0].files
     path = Path(spec).expanduser()
     files = RunFiles.from_json(path if path.parent != Path() else data_dir / spec)
-    if not files.json.is_file():
+    if not files.json.exists():  # anything else there is refused by the loader, saying what
         raise BadRun(f"RUN {spec}: no run {files.json} (`servodesk runs list` names them)")
     return files
 

@@ -27,7 +27,11 @@ The two tables are gzipped (``gzip -d`` or ``servodesk runs export --format csv`
 the plain text; numpy, pandas and servodesk's path files read them as they are): a 3.4 s
 six-joint run is 0.13 MB in all instead of 1.2 MB, a tenth, with every digit kept.
 Runs saved before (version 2 and older, plain ``.tsv`` and ``.csv``) read as they were:
-a run's JSON names its files.
+a run's JSON names its files. A run is read within bounds (``load_run``): its JSON at most
+``MAX_JSON_BYTES``, its CSV at most what its JSON says it holds (``table_bound``: a header
+and one row per sample, no more samples than the longest move has), checked as it is
+unpacked, so a damaged or hostile file (a gzip bomb, a FIFO in its place) is an error
+naming it, never a MemoryError or a hang.
 
 Each file is written to a temporary file in the same directory (named for the
 saving process, ``.<pid>-<random>.tmp``), fsynced, then hard-linked to its name,
@@ -53,23 +57,30 @@ import json
 import math
 import os
 import re
+import sys
 import uuid
-import zlib
 from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field, replace
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import platformdirs
 
-from hw.machine import Coefficients, Machine
+from hw.machine import SAMPLE_TIME_MS, Coefficients, Machine
+from hw.user_files import TEXT_ENCODING, NotRegularFile, open_regular
+
+if TYPE_CHECKING:
+    from control.motion.file_fields import FileBound
 
 FORMAT = "servodesk-run"
 VERSION = 3  # 2: numbers at their precision (``decimals``), joints' encoder resolution;
 #              3: the TSV and CSV gzipped
 TIME_DECIMALS = 6  # µs
+# A number of a run's table written in full, -2.2250738585072014e-308, and its separator
+BYTES_PER_NUMBER = 26
+MAX_JSON_BYTES = 64 << 20  # a run's metadata; a 600 s move's lists are under 1 MB
 DUTY_DECIMALS = 2  # 0.01 %
 MAX_SUFFIX = 10_000  # stems tried before giving up: far beyond same-second saves
 _NO_HARD_LINKS = {errno.EPERM, errno.EOPNOTSUPP, errno.ENOTSUP, errno.ENOSYS, errno.EINVAL}
@@ -326,14 +337,19 @@ def remove_stale_temps(data_dir: Path, alive: Callable[[int], bool]) -> list[Pat
 
 
 def load_run(path: Path) -> Run:
-    """Read a run back from its JSON and CSV; ``path`` may be any of its files or the stem."""
+    """Read a run back from its JSON and CSV; ``path`` may be any of its files or the stem.
+    The CSV is read within what the JSON says it holds (``table_bound``), so a damaged or
+    hostile table (a gzip bomb) is a RecorderError naming it, however much it unpacks to."""
     files = RunFiles.from_json(Path(path))
     doc = _read_json(files.json)
     files = files.named_in(doc)
     try:
         joints = doc["joints"]
         names = tuple(j["name"] for j in joints)
-        table = _read_table(files.csv, 1 + 3 * len(names), int(doc["samples"]))
+        columns, samples = 1 + 3 * len(names), int(doc["samples"])
+        header = _csv_header(names, tuple(j["unit"] for j in joints))
+        bound = table_bound(samples, columns, header, float(doc["sample_time_s"]))
+        table = _read_table(files.csv, columns, samples, bound)
         resolutions = tuple(j["resolution"] for j in joints if "resolution" in j)  # version 2
         return _run_of(doc, table, resolutions)
     except (KeyError, TypeError, ValueError) as exc:
@@ -407,9 +423,17 @@ def _mtime_ns(path: Path) -> int:
 
 def _read_json(path: Path) -> dict[str, Any]:
     try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
+        with open_regular(path) as file:  # a FIFO or a device is refused, not waited on
+            data = file.read(MAX_JSON_BYTES + 1)
+    except NotRegularFile as exc:
+        raise RecorderError(f"{path}: {exc.strerror}, so no saved run") from exc
     except OSError as exc:
         raise RecorderError(f"{path}: cannot read ({exc.strerror or exc})") from exc
+    if len(data) > MAX_JSON_BYTES:
+        raise RecorderError(f"{path}: larger than {MAX_JSON_BYTES >> 20} MB, so not a run's "
+                            "metadata (a 600 s move's is under 1 MB): remove it")
+    try:
+        doc = json.loads(data.decode(TEXT_ENCODING))
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise RecorderError(f"{path}: damaged run metadata ({exc})") from exc
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
@@ -417,8 +441,8 @@ def _read_json(path: Path) -> dict[str, Any]:
     return doc
 
 
-def _read_table(path: Path, columns: int, rows: int) -> np.ndarray:
-    lines = table_text(path).splitlines()[1:]
+def _read_table(path: Path, columns: int, rows: int, bound: FileBound) -> np.ndarray:
+    lines = table_text(path, bound).splitlines()[1:]
     table = _parse_table(lines, columns)
     if table.shape != (rows, columns):
         raise ValueError(f"{path.name} holds {table.shape[0]}×{table.shape[1]} numbers, "
@@ -426,14 +450,38 @@ def _read_table(path: Path, columns: int, rows: int) -> np.ndarray:
     return table
 
 
-def table_text(path: Path) -> str:
-    """The text of a run's TSV or CSV, gzipped (``.gz``) or plain (version 2 and older)."""
+def table_bound(samples: int, columns: int, header: str, sample_time_s: float) -> FileBound:
+    """The most a run's CSV of ``samples`` rows of ``columns`` numbers under ``header`` may
+    hold: that header and a row per sample, every number written in full
+    (``BYTES_PER_NUMBER``). ValueError for more samples than the longest move has at
+    ``sample_time_s`` (``acceptance.MAX_MOVE_S``; taken as no shorter than a machine's
+    shortest sample time, ``SAMPLE_TIME_MS``)."""
+    # the client's side: the control process only saves runs, and never imports control.motion
+    from control.motion.acceptance import MAX_MOVE_S, longest_samples
+    from control.motion.file_fields import FileBound
+
+    most = longest_samples(max(sample_time_s, SAMPLE_TIME_MS[0] / 1e3))
+    if not 0 <= samples <= most:
+        raise ValueError(f"{samples:,} samples; a run holds at most {most:,} at its sample "
+                         f"time (a move lasts at most {MAX_MOVE_S:g} s)")
+    return FileBound(f"the table of a run of {samples:,} samples", samples + 1,
+                     len(header.encode()) + 1 + samples * (columns * BYTES_PER_NUMBER + 1),
+                     "its header and a row per sample its metadata lists, every number in "
+                     "full", "the table is damaged or not this run's: remove the run")
+
+
+def table_text(path: Path, bound: FileBound | None = None) -> str:
+    """The text of a run's TSV or CSV, gzipped (``.gz``) or plain (version 2 and older),
+    within ``bound`` (``table_bound``: a file past it is refused as soon as it passes); with
+    none, whole (a table this process saved). RecorderError naming the file if it cannot
+    be read, is not a regular file or is past the bound."""
+    from control.motion.file_fields import FileBound, read_text_file  # as in table_bound
+
+    whole = FileBound("a run's table", sys.maxsize, sys.maxsize, "", "")
     try:
-        data = path.read_bytes()
-        return (gzip.decompress(data) if path.suffix == ".gz" else data).decode()
-    except (OSError, EOFError, zlib.error) as exc:  # gzip: not one, cut short, damaged
-        raise RecorderError(f"{path}: cannot read ({getattr(exc, 'strerror', None) or exc})"
-                            ) from exc
+        return read_text_file(path, bound or whole)[1]
+    except ValueError as exc:  # its message names the file and why
+        raise RecorderError(str(exc)) from None
 
 
 def _parse_table(lines: list[str], columns: int) -> np.ndarray:
@@ -451,13 +499,19 @@ def _tsv(run: Run) -> str:
 def csv_text(run: Run) -> str:
     """The run's CSV: ``t [s]`` then desired, actual, duty per joint, under a header with
     names and units."""
+    rows = np.concatenate([run.t[:, None], _interleaved(run)], axis=1)
+    return (_csv_header(run.joint_names, run.joint_units) + "\n"
+            + _table(rows, ",", (f".{TIME_DECIMALS}f", *_formats(run))))
+
+
+def _csv_header(names: tuple[str, ...], units: tuple[str, ...]) -> str:
+    """The CSV's header line (no line end): ``t [s]``, then desired, actual, duty per joint."""
     header = ["t [s]"]
-    for name, unit in zip(run.joint_names, run.joint_units, strict=True):
+    for name, unit in zip(names, units, strict=True):
         header += [f"{name} desired [{unit}]", f"{name} actual [{unit}]", f"{name} duty [%]"]
     out = io.StringIO()
-    csv.writer(out, lineterminator="\n").writerow(header)
-    rows = np.concatenate([run.t[:, None], _interleaved(run)], axis=1)
-    return out.getvalue() + _table(rows, ",", (f".{TIME_DECIMALS}f", *_formats(run)))
+    csv.writer(out, lineterminator="").writerow(header)
+    return out.getvalue()
 
 
 def _formats(run: Run) -> list[str]:

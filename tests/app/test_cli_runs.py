@@ -4,8 +4,10 @@ run that is not there, is damaged, or a view or place that cannot be used."""
 
 from __future__ import annotations
 
+import gzip
 import json
 import os
+import resource
 import subprocess
 import sys
 from pathlib import Path
@@ -13,17 +15,23 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from control.recorder import Run, save_run, table_text
+from control.recorder import RecorderError, Run, load_run, save_run, table_text
 from hw.machine import load_machine
 
 ROOT = Path(__file__).resolve().parents[2]
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 
 
-def servodesk(*args: str, data_dir: Path) -> subprocess.CompletedProcess[str]:
+def servodesk(*args: str, data_dir: Path, memory: int | None = None
+              ) -> subprocess.CompletedProcess[str]:
+    """``servodesk runs ARGS``; ``memory`` caps its address space (bytes): past it, MemoryError."""
+    def cap() -> None:
+        if memory is not None:
+            resource.setrlimit(resource.RLIMIT_AS, (memory, memory))
+
     return subprocess.run([sys.executable, "-m", "app", "runs", *args, "--data-dir",
                            str(data_dir)], cwd=ROOT, env=ENV, capture_output=True, text=True,
-                          timeout=60)
+                          timeout=60, preexec_fn=cap)
 
 
 def rig_step(start_time: str, status: str = "complete") -> Run:
@@ -151,3 +159,49 @@ def test_export_as_mcap_writes_the_whole_run(data_dir: Path, tmp_path: Path) -> 
     refused = servodesk("export", "latest", "--format", "mcap", "--view", "position",
                         data_dir=data_dir)
     assert refused.returncode == 2 and "MCAP export is the whole run" in refused.stderr
+
+
+def gzip_bomb(path: Path, gigabytes: int) -> None:
+    """A ``.csv.gz`` of a few MB that unpacks to ``gigabytes`` GB of rows of zeros: 64 MB
+    members, packed once and written again and again (a gzip file may hold many)."""
+    member = gzip.compress(b"0,0,0,0\n" * ((64 << 20) // 8), compresslevel=9)
+    with path.open("wb") as file:
+        for _ in range(gigabytes * 16):
+            file.write(member)
+
+
+def test_a_gzip_bomb_in_place_of_a_runs_table_is_exit_2_with_one_line(
+        data_dir: Path) -> None:
+    """The CSV of a 2,001-sample run replaced by 2 GB of rows packed into ~4 MB: ``runs show``
+    (whose address space is capped at 1 GB, as a small machine's memory would be) reads no
+    more than the run's metadata says its table holds and exits 2 in one line naming the
+    file and that bound; before, it unpacked the whole and died of MemoryError. The Runs
+    tab's loader, ``load_run``, raises the same RecorderError."""
+    stem = "20261121-100000-rig-step"
+    gzip_bomb(data_dir / f"{stem}.csv.gz", 2)
+    done = servodesk("show", stem, data_dir=data_dir, memory=1 << 30)
+    assert (done.returncode, done.stdout) == (2, ""), done.stderr[-2000:]
+    message = "the table of a run of 2,001 samples may hold at most 2,002 lines and "
+    assert done.stderr.startswith(f"servodesk: RUN {stem}: {data_dir / stem}.csv.gz: ")
+    assert message in done.stderr and done.stderr.count("\n") == 1, done.stderr[-2000:]
+    with pytest.raises(RecorderError, match=message):
+        load_run(data_dir / f"{stem}.json")
+    assert servodesk("show", "20261120-100000-rig-step", data_dir=data_dir).returncode == 0
+
+
+@pytest.mark.timeout(60)
+def test_a_fifo_in_place_of_a_runs_file_is_refused_not_waited_on(data_dir: Path) -> None:
+    """A named pipe in place of a run's JSON, and of another's CSV: ``runs list`` lists the
+    first as damaged, and ``runs show`` of either exits 2 at once naming the FIFO (each read
+    would wait for ever on a writer that never comes)."""
+    os.mkfifo(data_dir / "20261119-100000-rig-step.json")
+    (data_dir / "20261121-100000-rig-step.csv.gz").unlink()
+    os.mkfifo(data_dir / "20261121-100000-rig-step.csv.gz")
+    runs = json.loads(servodesk("list", "--json", data_dir=data_dir).stdout)
+    assert runs[2]["stem"] == "20261119-100000-rig-step"
+    assert "not a regular file but a named pipe (FIFO)" in runs[2]["problem"]
+    for run, fifo in (("latest", "20261121-100000-rig-step.csv.gz"),
+                      ("20261119-100000-rig-step", "20261119-100000-rig-step.json")):
+        done = servodesk("show", run, data_dir=data_dir)
+        assert done.returncode == 2 and done.stderr.count("\n") == 1, done.stderr
+        assert f"{fifo}: not a regular file but a named pipe (FIFO)" in done.stderr
