@@ -178,14 +178,15 @@ class ModeMachine:
 
     @property
     def held_too_long_text(self) -> str:
-        return (f"feed hold: the move was held longer than {self.max_pause_s:g} s; ended, "
-                "holding")
+        return (f"{self.feed.held_by}: the move was held longer than {self.max_pause_s:g} s; "
+                "ended, holding")
 
     def held_too_long(self, now: int) -> bool:
-        """A feed hold on the move for longer than ``max_pause_s``."""
-        move, feed = self.move, self.feed
-        return (move is not None and feed.paused
-                and (now - move.start_ns) / 1e9 - feed.paused_at > self.max_pause_s)
+        """The move held, by a feed hold or the feed override at 0, for longer than
+        ``max_pause_s``."""
+        move, since = self.move, self.feed.held_since
+        return (move is not None and since is not None
+                and (now - move.start_ns) / 1e9 - since > self.max_pause_s)
 
     def start_manual(self) -> None:
         self.mode = Mode.MANUAL_ACTUATE

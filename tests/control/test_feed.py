@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from control import ControlClient, Mode
+from control.feed import MAX_ENTRIES, SPACING_S
 from control.motion import moves
 from control.recorder import Run, load_run
 from hw.machine import load_machine
@@ -19,6 +20,7 @@ from hw.machine import load_machine
 UNIMATE = load_machine("unimate2000b")
 DT = UNIMATE.sample_time_s
 ROTATE = 1
+BATCH = 32  # commands sent before waiting for the controller to take them
 
 
 def wait_until(predicate: Callable[[], bool], what: str, timeout: float = 60.0) -> None:
@@ -64,6 +66,20 @@ def test_a_path_at_half_feed_takes_twice_as_long_on_the_same_path(
     assert per_tick_change(half.run).max() <= per_tick_change(full.run).max() / 2 * 1.001
     assert load_run(half.files.json).meta["feed"] == [[0.0, 0.5]]  # the run on disk says so
     assert lockstep.status().feed_override == 0.5  # it stays for the moves after
+
+
+def test_an_override_set_mid_move_slows_the_rest_of_it(lockstep: ControlClient) -> None:
+    """50 % set a tenth of the way into a ramp at full feed: the rest takes twice as long
+    (before, a move begun at 100 % kept its fast path and ignored the change)."""
+    path = ramp_on_rotate(lockstep)
+    handle = lockstep.move(path, kind="ramp")
+    wait_until(lambda: lockstep.status().move_done > len(path) // 10, "a tenth of the ramp")
+    lockstep.feed_override(0.5)
+    result = lockstep.wait(handle, timeout=60)
+    assert result.complete, result.status
+    (set_at, value), = result.run.meta["feed"]
+    rest = (len(path) - 1) * DT - set_at  # of the path's time, after the change
+    assert value == 0.5 and result.run.t[-1] - set_at == pytest.approx(2 * rest, rel=0.02)
 
 
 def test_pause_decelerates_along_the_path_and_resume_has_no_step(
@@ -116,6 +132,57 @@ def test_a_hold_past_max_pause_ends_the_move_holding(tmp_path: Path) -> None:
         result = client.wait(handle, timeout=60)
         assert not result.complete and "held longer than 1 s" in result.status
         assert client.status().mode == Mode.HOLD and not client.status().estop
+
+
+def test_an_override_of_0_past_max_pause_ends_the_move_holding(tmp_path: Path) -> None:
+    """feed_override(0) mid-move holds it as a feed hold does, and like one it is ended after
+    max_pause_s (1 s in this machine file), saying why; before, it held for ever."""
+    text = (Path(__file__).parents[2] / "hw/machines/unimate2000b.toml").read_text()
+    machine = tmp_path / "short_pause.toml"
+    machine.write_text(text + "\n[supervisor]\nmax_pause_s = 1\n")
+    with ControlClient(machine, lockstep=True, data_dir=tmp_path,
+                       heartbeat_timeout_s=3.0) as client:
+        path = ramp_on_rotate(client)
+        handle = client.move(path, kind="ramp")
+        wait_until(lambda: client.status().move_done > 100, "the ramp under way")
+        set_at = client.status().time_s
+        client.feed_override(0.0)
+        wait_until(lambda: client.status().feed_rate == 0.0, "the move held")
+        held_at = client.status().move_done
+        result = client.wait(handle, timeout=60)
+        assert not result.complete
+        assert result.status == ("fault: feed override 0 %: the move was held longer than "
+                                 "1 s; ended, holding"), result.status
+        status = client.status()
+        assert status.mode == Mode.HOLD and not status.estop
+        assert status.time_s - set_at > 1.0  # the controller's time: not before max_pause_s
+        assert result.run.samples == held_at < len(path)  # held still until it was ended
+
+
+def test_twenty_thousand_feed_changes_keep_a_bounded_timeline(lockstep: ControlClient) -> None:
+    """A slider dragged hard: 20,000 override changes during one move. The run's JSON keeps
+    at most MAX_ENTRIES of them, at least 50 ms of the move apart, in order, and ending on
+    the override as last set; before, it kept every one."""
+    start = np.array(lockstep.status().position)
+    end = start.copy()
+    end[ROTATE] += 60.0
+    path = moves.ramp(start, end, ramp_time=10.0, machine=UNIMATE)
+    handle = lockstep.move(path, kind="ramp")
+    wait_until(lambda: lockstep.status().move_done > 100, "the ramp under way")
+    # each one new; so slow that the ramp lasts hours of the controller's time meanwhile
+    values = [0.001 + 0.001 * k / 20_000 for k in range(20_000)]
+    for k, value in enumerate(values):
+        lockstep.feed_override(value)
+        if k % BATCH == BATCH - 1:  # the client queues a few dozen commands, no more
+            wait_until(lambda v=value: lockstep.status().feed_override == v, "the override")
+    lockstep.feed_override(1.0)
+    result = lockstep.wait(handle, timeout=120)
+    assert result.complete, result.status  # every change arrived during the move
+    feed = load_run(result.files.json).meta["feed"]
+    assert 2 <= len(feed) < MAX_ENTRIES, len(feed)
+    times = np.array([t for t, _ in feed])
+    assert np.all(np.diff(times) >= SPACING_S - 1e-9)
+    assert {v for _, v in feed[:-1]} <= set(values) and feed[-1][1] == 1.0
 
 
 def test_pause_without_a_move_is_refused(lockstep: ControlClient) -> None:
