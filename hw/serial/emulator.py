@@ -66,6 +66,15 @@ class Faults:
     was (a stalled multiplexer, a cut cable reading a constant).
     ``stuck_bit``: (joint, bit, value): that bit of that joint's word always reads value.
     ``flood``: each REPORT is followed by this many more, valid, of the same words.
+
+    Once every ``fault_every_s`` (the first that long after the first CONFIG):
+    ``flip_word``: (joint, bit): one REPORT has that bit of that joint's word flipped (a
+    wrong encoder word, once).
+    ``hold_ms``: after that REPORT the board holds back its replies this long (it goes on
+    applying DUTYs) and then sends them all at once: a host reading through the hold
+    re-reads the words it had, so a flipped word just before is read again tick after tick.
+    ``flip_first``: (joint, bit): the first REPORT after every CONFIG has that bit of that
+    joint's word flipped, where the host has no reading before it to judge it by.
     """
 
     corrupt_rate: float = 0.0
@@ -75,6 +84,15 @@ class Faults:
     frozen_after_s: float | None = None
     stuck_bit: tuple[int, int, int] | None = None
     flood: int = 0
+    flip_word: tuple[int, int] | None = None
+    hold_ms: float = 0.0
+    fault_every_s: float = 1.0
+    flip_first: tuple[int, int] | None = None
+
+    @property
+    def beats(self) -> bool:
+        """Whether a flipped word or a hold comes every ``fault_every_s``."""
+        return self.flip_word is not None or self.hold_ms > 0.0
 
 
 class EmulatedBoard:
@@ -104,6 +122,8 @@ class EmulatedBoard:
         self.estop_button = False
         self.applied = 0
         self.naks = 0
+        self.flipped = 0  # words flipped on purpose (Faults.flip_word)
+        self.holds = 0  # replies held back on purpose (Faults.hold_ms)
         self._rng = random.Random(seed)
         self._estop_reported = False
         self._duty_pct = [0.0] * self.channels
@@ -115,6 +135,10 @@ class EmulatedBoard:
         self._silent_at_ns: int | None = None
         self._frozen_at_ns: int | None = None
         self._frozen: tuple[int, ...] | None = None
+        self._beat_at_ns: int | None = None  # when the next flipped word or hold is due
+        self._flip_first = False  # the next REPORT is the first since a CONFIG
+        self._hold_next = False  # hold back what follows the output now waiting
+        self._held_until_ns = 0
         self._out = bytearray()
 
     # -- inputs -----------------------------------------------------------------
@@ -155,7 +179,7 @@ class EmulatedBoard:
             data = self._corrupt_frames(data, self.faults.corrupt_rx_rate)
         for seq, message in self.reader.feed(data):
             self._handle(seq, message, now_ns)
-        return self._take_output()
+        return self._take_output(now_ns)
 
     def poll(self, now_ns: int) -> bytes:
         """Timed duties: E-stop edges, the valve watchdog, heartbeats; return bytes to send."""
@@ -169,7 +193,7 @@ class EmulatedBoard:
                 and now_ns - self._last_tx_ns >= self.config.heartbeat_ms * 1_000_000):
             self._emit(self._report(self._last_host_seq, now_ns, unsolicited=True), now_ns)
         self.plant.read(self._raw)  # the board scans its encoders continuously
-        return self._take_output()
+        return self._take_output(now_ns)
 
     def next_event_ns(self, now_ns: int) -> int:
         """When ``poll`` next has something to do (at most ``MAX_WAIT_NS`` ahead)."""
@@ -178,6 +202,8 @@ class EmulatedBoard:
             deadline = min(deadline, self._last_tx_ns + self.config.heartbeat_ms * 1_000_000)
             if not self.held:
                 deadline = min(deadline, self._last_duty_ns + self.config.watchdog_ms * 1_000_000)
+        if now_ns < self._held_until_ns:
+            deadline = min(deadline, self._held_until_ns)
         return deadline
 
     # -- host frames ----------------------------------------------------------------------
@@ -210,6 +236,9 @@ class EmulatedBoard:
             self._silent_at_ns = now_ns + round(self.faults.silent_after_s * 1e9)
         if self._frozen_at_ns is None and self.faults.frozen_after_s is not None:
             self._frozen_at_ns = now_ns + round(self.faults.frozen_after_s * 1e9)
+        if self._beat_at_ns is None and self.faults.beats:
+            self._beat_at_ns = now_ns + round(self.faults.fault_every_s * 1e9)
+        self._flip_first = self.faults.flip_first is not None
         self._emit(ConfigAck(seq, FIRMWARE, self.channels, config), now_ns)
 
     def _duty(self, seq: int, message: Duty, now_ns: int) -> None:
@@ -281,6 +310,11 @@ class EmulatedBoard:
         flags = self.flags | (Flag.UNSOLICITED if unsolicited else 0)
         mask = (1 << self.config.encoder_bits) - 1  # a quadrature count wraps, two's complement
         words = self._lie(tuple(w & mask for w in self._raw[: self.config.n_joints]), now_ns)
+        if self._beat_at_ns is not None and now_ns >= self._beat_at_ns:
+            words = self._beat(words, now_ns)
+        if self._flip_first and self.faults.flip_first is not None:
+            self._flip_first = False
+            words = self._flip(words, self.faults.flip_first)
         latched = self.plant.sample_ns if self.plant_time else now_ns
         return Report(echo_seq, self._t_us(latched), flags, self.rx_errors, words)
 
@@ -297,6 +331,25 @@ class EmulatedBoard:
             return tuple(stuck)
         return words
 
+    def _beat(self, words: tuple[int, ...], now_ns: int) -> tuple[int, ...]:
+        """This REPORT's share of ``Faults.flip_word`` and ``hold_ms``: its word flipped, and
+        the replies after it held back; the next beat ``fault_every_s`` on."""
+        faults = self.faults
+        assert self._beat_at_ns is not None
+        every_ns = round(faults.fault_every_s * 1e9)
+        self._beat_at_ns += every_ns * ((now_ns - self._beat_at_ns) // every_ns + 1)
+        if faults.hold_ms > 0.0:
+            self._hold_next = True
+        return words if faults.flip_word is None else self._flip(words, faults.flip_word)
+
+    def _flip(self, words: tuple[int, ...], where: tuple[int, int]) -> tuple[int, ...]:
+        """``words`` with bit ``where[1]`` of joint ``where[0]``'s word flipped, counted."""
+        joint, bit = where
+        self.flipped += 1
+        flipped = list(words)
+        flipped[joint] ^= 1 << bit
+        return tuple(flipped)
+
     def _t_us(self, now_ns: int) -> int:
         return ((now_ns - (self._t0_ns or now_ns)) // 1000) & 0xFFFFFFFF
 
@@ -310,9 +363,17 @@ class EmulatedBoard:
             frame = self._corrupt_frames(frame, 1.0)
         self._out += frame
 
-    def _take_output(self) -> bytes:
+    def _take_output(self, now_ns: int) -> bytes:
+        """What to send now: nothing while replies are held back (``Faults.hold_ms``), then
+        all that was held at once."""
+        if now_ns < self._held_until_ns:
+            return b""
         out = bytes(self._out)
         self._out.clear()
+        if self._hold_next:
+            self._hold_next = False
+            self.holds += 1
+            self._held_until_ns = now_ns + round(self.faults.hold_ms * 1e6)
         return out
 
     def _corrupt_frames(self, data: bytes, rate: float) -> bytes:
@@ -487,6 +548,7 @@ class Emulator:
         board = self.board
         return {"url": self.url, "applied": board.applied, "naks": board.naks,
                 "rx_errors": board.rx_errors, "held": board.held, "watchdog": board.watchdog,
+                "flipped_words": board.flipped, "held_back": board.holds,
                 "dropped_bytes": self.port.dropped_bytes, **board.counters.as_dict()}
 
     def _wait(self, timeout_s: float) -> list[int]:
