@@ -22,7 +22,7 @@ from hw.backend import LinkCounters
 from hw.gray import gray_to_binary
 from hw.machine import Machine, load_machine
 from hw.serial.backend import BoardClock, BoardError, SerialBackend
-from hw.serial.emulator import FIRMWARE, EmulatedBoard
+from hw.serial.emulator import FIRMWARE, EmulatedBoard, Faults
 from hw.serial.frame import FrameWriter
 from hw.serial.messages import (
     BOARD_TO_HOST,
@@ -38,6 +38,7 @@ from hw.serial.messages import (
     MsgType,
     Nak,
     NakReason,
+    Report,
     Status,
 )
 from hw.sim.backend import SimBackend
@@ -221,6 +222,90 @@ def test_watchdog_closes_the_valves_when_commands_stop(emulator, connect) -> Non
     assert not backend.board_flags & (Flag.HELD | Flag.WATCHDOG)
 
 
+# -- late answers: the same sample, and a new one asked for ------------------------------------
+
+
+def test_a_read_with_nothing_sent_since_the_last_asks_the_board_for_a_new_sample(
+        emulator, connect) -> None:
+    """A resync reads the joints several times before the loop writes anything: each read
+    with nothing sent since the one before asks for a new sample (a HEARTBEAT), so that it
+    does not re-read the words it has; a read with a command's answer pending asks nothing."""
+    board = emulator("--glitch-scale", "0")
+    backend = connect(board.url)
+    raw = [0] * 6
+    backend.read(raw)  # open's own HEARTBEAT was the last frame: its answer is in hand
+    first, sent = backend.sample_ns, backend.counters.frames_tx
+    backend.read(raw)
+    assert backend.counters.frames_tx == sent + 1, "a read with nothing sent asks for a sample"
+    assert backend.wait_reply(PATIENT_S)
+    backend.read(raw)
+    assert backend.sample_ns != first
+    backend.write([0.0] * 6)
+    sent = backend.counters.frames_tx
+    backend.read(raw)
+    assert backend.counters.frames_tx == sent, "the command's answer is the new sample"
+
+
+def test_answers_held_back_leave_the_words_and_their_sample_time_as_they_were(
+        emulator, connect) -> None:
+    """The board holds its answers back 20 ms every 50 ms (``--hold-replies``): every read
+    that finds no new answer returns the words and ``sample_ns`` of the read before (the
+    same sample, which the encoder input then does not judge again), and the answers held
+    back arrive at once after."""
+    board = emulator("--glitch-scale", "0", "--hold-replies", "20", "--fault-every", "0.05")
+    backend = connect(board.url, watchdog_s=PATIENT_S)
+    raw = [0] * 6
+    backend.read(raw)
+    same = new = 0
+    end = time.monotonic() + 0.5
+    while time.monotonic() < end:
+        before, late = (backend.sample_ns, list(raw)), backend.late_replies
+        backend.read(raw)
+        if backend.sample_ns == before[0]:
+            assert raw == before[1]
+            same += 1
+        else:
+            new += 1
+        assert backend.late_replies == late or backend.sample_ns == before[0]
+        backend.write([0.0] * 6)
+        time.sleep(0.001)
+    assert backend.fault == ""
+    assert same > 20 and new > 20, (same, new)
+
+
+def test_the_board_flips_a_word_then_holds_its_answers_back_and_sends_them_at_once() -> None:
+    """``Faults.flip_word`` and ``hold_ms``, in process: 10 ms after the CONFIG one REPORT has
+    bit 11 of Rotate's word flipped; the answers after it come only when the 5 ms hold is
+    over, all at once; the next beat is 10 ms on."""
+    bench = BoardBench(Faults(flip_word=(1, 11), hold_ms=5.0, fault_every_s=0.01))
+    bench.send(Config(bench.config))
+    (clean,) = bench.send(Duty((0,) * 6, clear=True), 0.001)
+    (flipped,) = bench.send(Duty((0,) * 6), 0.0105)
+    assert (flipped.words[1] ^ clean.words[1]) & (1 << 11)
+    assert flipped.words[:1] + flipped.words[2:] == clean.words[:1] + clean.words[2:]
+    assert bench.send(Duty((0,) * 6), 0.012) == []
+    assert bench.send(Duty((0,) * 6), 0.015) == []
+    assert bench.board.next_event_ns(round(0.015e9)) == round(0.0155e9)  # wake to send them
+    held = bench.poll(0.0156)
+    assert [type(m) for m in held] == [Report, Report]
+    assert [m.echo_seq for m in held] == [3, 4]
+    (after,) = bench.send(Duty((0,) * 6), 0.016)
+    assert after.words[1] == clean.words[1]
+    assert (bench.board.flipped, bench.board.holds) == (1, 1)
+
+
+def test_the_first_answer_after_every_configuration_can_be_made_wrong() -> None:
+    """``Faults.flip_first``: the first REPORT after each CONFIG has the bit flipped, and only
+    that one (a resync's first reading, with none before it to judge it by)."""
+    bench = BoardBench(Faults(flip_first=(3, 11)))
+    for at_s in (0.0, 0.1):
+        bench.send(Config(bench.config), at_s)
+        (first,) = bench.send(Heartbeat(), at_s + 0.001)
+        (second,) = bench.send(Heartbeat(), at_s + 0.002)
+        assert (first.words[3] ^ second.words[3]) == 1 << 11
+    assert bench.board.flipped == 2
+
+
 # -- corruption, silence, a vanished board ---------------------------------------------------
 
 
@@ -319,8 +404,8 @@ def test_estop_closes_the_valves_and_rearms_only_on_a_zero_command(emulator, con
 class BoardBench:
     """An ``EmulatedBoard`` on the real simulator, fed frames directly."""
 
-    def __init__(self) -> None:
-        self.board = EmulatedBoard(SimBackend(UNIMATE, glitch_scale=0.0))
+    def __init__(self, faults: Faults | None = None) -> None:
+        self.board = EmulatedBoard(SimBackend(UNIMATE, glitch_scale=0.0), faults=faults)
         self.host = MessageWriter()
         self.answers = MessageReader(LinkCounters(), BOARD_TO_HOST)
         self.config = BoardConfig.from_machine(UNIMATE, 0.05, 0.02)
