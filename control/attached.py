@@ -3,14 +3,15 @@ its socket (``ControlClient.attach``).
 
 It attaches the service's control segment by name (status, scope, latency, the
 coefficient sets), makes its moves' segments itself and saves their runs as the embedded
-client does. It observes until ``take_command``: only the commander's commands are relayed
-(and only its heartbeat thread writes the heartbeat word); any client's E-stop is (its
-E-stop count in shared memory too). ``close`` detaches: command is released (the controller
-holds), the controller runs on.
+client does. It observes until ``take_command``: only the commander's commands are relayed,
+and only its heartbeats (sent to the service every 50 ms, like every client's) reach the
+controller; any client's E-stop is (its E-stop count in shared memory too). ``close``
+detaches: command is released (the controller holds), the controller runs on.
 """
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import os
 import queue
@@ -25,6 +26,7 @@ from control.commands import Command, EmergencyStop
 from control.events import Commander, Refused
 from control.seqlock import SeqlockReader
 from control.timing import Timing
+from control.wire import Broken, Message
 from hw.machine import Coefficients, load_machine
 
 ANSWER_S = 2.0  # how long take_command and release_command wait for the service's answer
@@ -45,36 +47,39 @@ class AttachedClient(ControlClient):
     def __init__(self, path: str | Path | None = None, *, name: str = "",
                  on_event: Callable[[Event], None] | None = None,
                  timeout_s: float = 5.0) -> None:
-        conn = rendezvous.connect(path)
+        deadline = time.monotonic() + timeout_s
         try:
-            conn.send(rendezvous.Join(name or Path(sys.argv[0]).name or "python", os.getpid()))
-            if not conn.poll(timeout_s):
-                raise ControllerError(f"the controller service did not answer within "
-                                      f"{timeout_s:g} s")
-            hello = conn.recv()
+            wire = rendezvous.connect(path, timeout_s)
+        except (TimeoutError, Broken, PermissionError) as exc:
+            raise ControllerError(f"the controller service did not let this client in within "
+                                  f"{timeout_s:g} s ({exc})") from None
+        try:
+            label = (name or Path(sys.argv[0]).name or "python")[:rendezvous.NAME_TEXT]
+            wire.send(rendezvous.Join(label, os.getpid()))
+            hello = rendezvous.receive(wire, rendezvous.Hello, deadline, "hello")
+        except (TimeoutError, Broken) as exc:
+            wire.close()
+            raise ControllerError(f"the controller service did not answer within "
+                                  f"{timeout_s:g} s ({exc})") from None
         except BaseException:
-            conn.close()
+            wire.close()
             raise
-        if not isinstance(hello, rendezvous.Hello):
-            conn.close()
-            raise ControllerError(f"the controller service answered {hello!r}, not a hello")
         timing = Timing(hello.timing, hello.interrupt_ms, tuple(hello.slips))
         self._configure(load_machine(hello.machine), hello.backend, hello.data_dir, timing,
                         hello.dt, on_event)
         self.port = hello.port
         self.name = hello.client
         self.holder = hello.holder
-        self.heartbeat_on = False
         self.notice, self.realtime = hello.notice, hello.realtime
         self._controller_pid = hello.controller_pid
         self.service_pid = hello.service_pid
         self._ids = itertools.count(hello.id_base)
         self._answers: queue.Queue[Commander | Refused] = queue.Queue()
-        self._conn = conn
+        self._wire = wire
         try:
             self._open_segment(shm.attach(hello.control_segment))
         except OSError:
-            conn.close()
+            wire.close()
             raise
         self.coefficients = {which: self._coefficients_in_use(which) for which in self.coefficients}
         self._start_threads(())
@@ -122,7 +127,7 @@ class AttachedClient(ControlClient):
         answers = self._answers
         while not answers.empty():  # answers to earlier requests
             answers.get_nowait()
-        self._outgoing.put(request)  # type: ignore[arg-type]
+        self._outgoing.put(Message(request))
         deadline = time.monotonic() + timeout_s
         while not granted():
             try:
@@ -133,6 +138,13 @@ class AttachedClient(ControlClient):
             if isinstance(answer, Refused) and answer.command == what:
                 raise NotCommanding(f"{what} refused: {answer.reason}")
 
+    def beat(self) -> None:
+        """A heartbeat to the service (which relays the commander's to the controller): along
+        the commands' path, so a frozen service stops it too. Dropped while the outgoing queue
+        is full: the commands in it will say the client is alive."""
+        with contextlib.suppress(queue.Full):
+            self._outgoing.put_nowait(Message(rendezvous.Heartbeat()))
+
     def _may_send(self, command: Command) -> None:
         if not self.commanding and not isinstance(command, EmergencyStop):
             raise NotCommanding(f"{self.role}; take it first")
@@ -141,7 +153,6 @@ class AttachedClient(ControlClient):
         record = event.record
         if isinstance(record, Commander):
             self.holder = record.holder
-            self.heartbeat_on = self.commanding
             self._answers.put(record)
         elif isinstance(record, Refused) and record.command in (TAKE, RELEASE):
             self._answers.put(record)
@@ -164,7 +175,7 @@ class AttachedClient(ControlClient):
         """Detach: release command (the controller holds, which ends this client's moves),
         and save the runs that end within ``CLOSE_WAIT_S``; the service saves any later."""
         if self.commanding:
-            self._outgoing.put(rendezvous.ReleaseCommand())  # type: ignore[arg-type]
+            self._outgoing.put(Message(rendezvous.ReleaseCommand()))
         deadline = time.monotonic() + CLOSE_WAIT_S
         for handle in list(self._moves.values()):
             handle.done.wait(max(deadline - time.monotonic(), 0.0))

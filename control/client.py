@@ -25,7 +25,6 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
-from multiprocessing.connection import Connection
 from multiprocessing.shared_memory import SharedMemory
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -33,7 +32,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 import control
-from control import process, shm
+from control import process, sealed, shm
+from control.channel import client_end
 from control.commands import (
     Command,
     EmergencyStop,
@@ -82,6 +82,7 @@ from control.recovery import recover_runs
 from control.runs import encode_meta, run_from_segment, segment_meta
 from control.seqlock import SeqlockReader, SeqlockWriter
 from control.timing import Timing
+from control.wire import Broken, Message, Unreadable
 from hw.machine import Coefficients, Machine, load_machine
 
 if TYPE_CHECKING:
@@ -205,7 +206,7 @@ class ControlClient:
             orphan_timeout_s=orphan_timeout_s, sim_options=sim_options, slots=slots,
             slips=self.timing.slips)
         ours, theirs = socket.socketpair()
-        self._conn = Connection(ours.detach())
+        self._wire = client_end(ours)
         self._stderr = tempfile.TemporaryFile()  # noqa: SIM115  # lives as long as the client
         try:
             self._process = subprocess.Popen(
@@ -253,7 +254,7 @@ class ControlClient:
         self._moves: dict[int, MoveHandle] = {}
         self._kept: dict[str, str] = {}  # run id: segment of a run not saved, for the next start
         self._ids = itertools.count(1)
-        self._outgoing: queue.Queue[Command] = queue.Queue(OUTGOING)
+        self._outgoing: queue.Queue[Message] = queue.Queue(OUTGOING)
         self._closing = threading.Event()
         self._stopping = False
         self._manual = [0.0] * self.machine.n_joints  # the duties jog_joint keeps for the others
@@ -351,10 +352,12 @@ class ControlClient:
     def _await_ready(self, timeout_s: float) -> None:
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
-            if self._conn.poll(0.01):
+            if self._wire.poll(0.01):
                 try:
-                    record = self._conn.recv()
-                except EOFError:
+                    record = self._wire.recv().record
+                except Unreadable:
+                    continue
+                except Broken:
                     break
                 if isinstance(record, Ready):
                     # the controller watches the heartbeat from now: beat before the threads
@@ -397,41 +400,51 @@ class ControlClient:
         self._words.release()
         self._status.release()
         shm.release(self._segment, unlink=self.OWNS_CONTROLLER)
-        with contextlib.suppress(OSError):
-            self._conn.close()
+        self._wire.close()
+        while not self._outgoing.empty():  # descriptors of moves never sent
+            self._outgoing.get_nowait().close_fds()
         if self.OWNS_CONTROLLER:
             self._stderr.close()
 
     # -- the monitor thread: heartbeats out, events in, death noticed -------------------
 
     def _beat(self) -> None:
-        """Heartbeats on their own thread, written into shared memory (no channel to fill), so
-        saving a run, a busy UI or a frozen controller never silences or blocks them."""
+        """Heartbeats on their own thread, so saving a run or a busy UI never silences them."""
         while not (self.dead or self._stopping):
             if self.heartbeat_on:  # the first at once: see Ready
-                self._words[HEARTBEAT_WORD] = time.monotonic_ns()
+                self.beat()
             if self._closing.wait(HEARTBEAT_S):
                 return
+
+    def beat(self) -> None:
+        """One heartbeat: the word in shared memory the controller watches (no channel to fill,
+        so a frozen controller never blocks it). A controller service calls it for the client
+        that commands, each time that client's heartbeat reaches it."""
+        self._words[HEARTBEAT_WORD] = time.monotonic_ns()
 
     def _deliver(self) -> None:
         """Send queued commands in order; only this thread ever waits on the channel."""
         while not self._closing.is_set():
             try:
-                command = self._outgoing.get(timeout=0.05)
+                message = self._outgoing.get(timeout=0.05)
             except queue.Empty:
                 continue
             try:
-                self._conn.send(command)
-            except (OSError, ValueError):
+                self._wire.send(message.record, message.fds)
+            except Broken:
                 return  # the channel is gone: the monitor thread reports the death
+            finally:
+                message.close_fds()
 
     def _watch(self) -> None:
         """Dispatch the controller's events and report its death."""
         while not self._closing.is_set():
             try:
-                if self._conn.poll(0.01):
-                    self._dispatch(Event(self._conn.recv()))
-            except (EOFError, OSError):
+                if self._wire.poll(0.01):
+                    self._dispatch(Event(self._wire.recv().record))
+            except Unreadable:
+                pass  # a message of a newer servodesk, say: nothing to act on
+            except Broken:
                 self._died(self.CHANNEL_CLOSED)
             # poll on every pass, after the death too: it reaps an exited controller at once
             # rather than leaving a zombie until close()
@@ -442,9 +455,9 @@ class ControlClient:
                 self._closing.wait(0.05)
 
     def _drain(self) -> None:
-        with contextlib.suppress(EOFError, OSError):
-            while self._conn.poll():
-                self._dispatch(Event(self._conn.recv()))
+        with contextlib.suppress(Broken, Unreadable):
+            while self._wire.poll():
+                self._dispatch(Event(self._wire.recv().record))
 
     def _died(self, why: str) -> None:
         if self.dead or self._stopping:
@@ -515,14 +528,15 @@ class ControlClient:
 
     # -- commands ------------------------------------------------------------------------
 
-    def _send(self, command: Command) -> None:
-        """Queue ``command`` for the channel; never waits. ControllerError if the controller is
-        dead or has not taken the last ``OUTGOING`` commands (frozen or flooded)."""
+    def _send(self, command: Command, fds: tuple[int, ...] = ()) -> None:
+        """Queue ``command`` (and descriptors to send with it, closed once sent) for the
+        channel; never waits. ControllerError if the controller is dead or has not taken the
+        last ``OUTGOING`` commands (frozen or flooded)."""
         if self.dead:
             raise ControllerError(self.dead)
         self._may_send(command)
         try:
-            self._outgoing.put_nowait(command)
+            self._outgoing.put_nowait(Message(command, fds))
         except queue.Full:
             raise ControllerError(f"the controller has not taken the last {OUTGOING} commands "
                                   "(frozen or overloaded): E-stop still works") from None
@@ -532,14 +546,16 @@ class ControlClient:
         starts from zero duty on every other joint, never from duties set before."""
         self._manual = [0.0] * self.machine.n_joints
 
-    def send(self, command: Command) -> None:
-        """Queue a typed command (``control.commands``) as it is: the controller checks it
-        (a controller service relays its clients' commands this way)."""
-        self._send(command)
+    def send(self, command: Command, fds: tuple[int, ...] = ()) -> None:
+        """Queue a typed command (``control.commands``) as it is, with the descriptors that
+        came with it (a move's sealed path), which are closed once sent: the controller checks
+        it (a controller service relays its clients' commands this way)."""
+        self._send(command, fds)
 
-    def hold(self) -> None:
-        """Abort any move and hold every joint where it is (the thesis's default mode)."""
-        self._send(Hold())
+    def hold(self, reason: str = "") -> None:
+        """Abort any move and hold every joint where it is (the thesis's default mode);
+        ``reason``: how a running move ends, if not "aborted by operator"."""
+        self._send(Hold(reason))
         self._forget_manual()
 
     def estop(self) -> None:
@@ -730,8 +746,9 @@ class ControlClient:
         return self.run(MovePlan(kind, kind, profile=duty, meta=dict(meta or {}), moving=moving))
 
     def _start(self, plan: MovePlan) -> MoveHandle:
-        """Send an accepted plan: its path or profile, and all its run needs to be saved by
-        whoever outlives the move, into a new move segment; then StartMove."""
+        """Send an accepted plan: its path or profile sealed (``control/sealed.py``) with the
+        StartMove, and all its run needs to be saved by whoever outlives the move in a new
+        move segment, where the controller records it."""
         kind, path, profile = plan.kind, plan.path, plan.profile
         samples = len(path if path is not None else profile)
         meta = segment_meta(self.machine, kind, self.dt, self.data_dir, self.pid, {
@@ -751,15 +768,15 @@ class ControlClient:
                              f"a {kind} move of {samples * self.dt:.1f} s")
         layout.write_header(segment.buf)
         layout.write_meta(segment.buf, encoded)
-        if path is not None:
-            layout.desired(segment.buf)[:] = path
-        else:
-            layout.profile(segment.buf)[:] = profile
         handle = MoveHandle(move_id, kind, samples, meta, plan, segment, layout)
         self._moves[move_id] = handle
+        path_fd = -1
         try:
-            self._send(StartMove(move_id, segment.name, kind, path is None))
+            path_fd = sealed.seal(path if path is not None else profile)
+            self._send(StartMove(move_id, segment.name, kind, path is None, samples), (path_fd,))
         except BaseException:
+            if path_fd >= 0:
+                os.close(path_fd)
             self._moves.pop(move_id, None)
             shm.release(segment, unlink=True)
             raise

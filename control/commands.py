@@ -28,6 +28,7 @@ SMOOTH_KINDS = frozenset({"path", "ramp", "sine", "cartesian", "via_points", "en
 STEP_KINDS = frozenset({"step", "multi_step"})
 DUTY_KINDS = frozenset({"tracking_actuate", "set_pulse"})
 MOVE_KINDS = SMOOTH_KINDS | STEP_KINDS | DUTY_KINDS
+REASON_TEXT = 200
 INJECTABLE = ("press_estop", "jam_valve", "freeze_encoder", "stick_bit")  # simulator faults
 
 
@@ -74,7 +75,8 @@ class Command:
     def check(self, n_joints: int) -> None:
         """Raise CommandError unless this record, as it arrived, fits ``n_joints`` joints.
 
-        Unpickling bypasses ``__init__``, so the controller re-runs every check here.
+        A decoded message is built through its constructor (``control/wire.py``); the
+        controller still re-runs every check here, for a record made any other way.
         """
         self.__post_init__()
         self.fits(n_joints)
@@ -92,9 +94,15 @@ class Shutdown(Command):
 
 @dataclass(frozen=True)
 class Hold(Command):
-    """Abort any move and hold every joint where it is (the thesis's default mode)."""
+    """Abort any move and hold every joint where it is (the thesis's default mode); ``reason``
+    is how the move ended when it is not the operator's hold (the commander gone, say)."""
 
     NAME: ClassVar[str] = "hold"
+    reason: str = ""
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.reason, str) or len(self.reason) > REASON_TEXT:
+            raise CommandError(f"a hold's reason is a text of at most {REASON_TEXT} characters")
 
 
 @dataclass(frozen=True)
@@ -202,18 +210,23 @@ class SetCoefficients(Command):
 
 @dataclass(frozen=True)
 class StartMove(Command):
-    """follow_track (a desired path) or tracking_actuate (a duty profile) from a move segment
-    (which also holds the run's metadata, ``control/runs.py``)."""
+    """follow_track (a desired path) or tracking_actuate (a duty profile): the path sealed in
+    the memory file sent with this command, the run recorded into the move segment named
+    ``segment`` (which also holds the run's metadata, ``control/runs.py``)."""
 
     NAME: ClassVar[str] = "move"
     move_id: int
     segment: str
     kind: str
     tracking: bool
+    samples: int  # rows of the sealed path sent with it (control/sealed.py)
 
     def __post_init__(self) -> None:
-        if isinstance(self.move_id, bool) or not isinstance(self.move_id, int) or self.move_id < 1:
-            raise CommandError(f"move id must be a positive integer, got {self.move_id!r}")
+        for name in ("move_id", "samples"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise CommandError(f"move {name.replace('_', ' ')} must be a positive integer, "
+                                   f"got {value!r}")
         if self.kind not in MOVE_KINDS:
             raise CommandError(f"unknown move kind {self.kind!r} (kinds: "
                                f"{', '.join(sorted(MOVE_KINDS))})")
@@ -262,3 +275,7 @@ def check_coefficients(coefficients: Coefficients, n_joints: int) -> None:
     for name, values in numbers.items():
         for value in values:
             finite(f"coefficient set {c.name!r}: {name}", value)
+
+
+COMMANDS = (Shutdown, Hold, EmergencyStop, Reset, FeedOverride, Pause, Resume, Initialise, Manual,
+            JogPosition, SetCoefficients, StartMove, Inject)  # what a channel carries

@@ -173,3 +173,7 @@ class Commander(ControllerEvent):
     @property
     def message(self) -> str:
         return self.reason
+
+
+EVENTS = (Ready, Notice, Refused, MoveDone, Initialised, Fault, EStop, Crash, MoveStarted,
+          CoefficientsApplied, Died, Commander)  # what a channel carries back

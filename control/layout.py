@@ -27,7 +27,7 @@ from hw.machine import MAX_TAPS, Coefficients
 if TYPE_CHECKING:
     from control.latency import LatencyStats
 
-LAYOUT_VERSION = 3
+LAYOUT_VERSION = 4
 CONTROL_MAGIC = b"SDSK"
 MOVE_MAGIC = b"SDMV"
 HIST_BIN_NS = 5_000  # 5 µs bins, Table 2.1
@@ -258,15 +258,15 @@ class ControlLayout:
 
 
 class MoveLayout:
-    """A move segment: desired path and duty profile in, recorded run out, and all a run
-    needs to be saved by whoever outlives the move (``control/recovery.py``).
+    """A move segment: the recorded run, and all it needs to be saved by whoever outlives
+    the move (``control/recovery.py``). The path the move follows is not here: it is sealed
+    in a memory file of its own (``control/sealed.py``), so no one can change it once sent.
 
     header (64 B): magic, version, samples N, joints J; at offset 24 the number of rows
     recorded so far (one aligned 8-byte store per tick); at 32 the metadata's length.
     Then the status text the controller writes when the move ends (``STATUS_TEXT``
     bytes, empty while it runs), the run's metadata as JSON (written by the client),
-    and ``desired (N, J)``, ``profile (N, J)`` and ``record (N, 1 + 3J)`` rows of
-    ``t, desired..., actual..., duty...`` as float64.
+    and ``record (N, 1 + 3J)`` rows of ``t, desired..., actual..., duty...`` as float64.
     """
 
     HEADER = struct.Struct("<4sIQI")
@@ -284,9 +284,7 @@ class MoveLayout:
         self.row = struct.Struct(f"<{1 + 3 * n}d")
         self.target = struct.Struct(f"<{n}d")
         self.meta_offset = self.STATUS_OFFSET + self.STATUS_TEXT
-        self.desired_offset = _align(self.meta_offset + meta_size)
-        self.profile_offset = self.desired_offset + 8 * samples * n
-        self.record_offset = self.profile_offset + 8 * samples * n
+        self.record_offset = _align(self.meta_offset + meta_size)
         self.size = self.record_offset + self.row.size * samples
 
     @classmethod
@@ -301,12 +299,6 @@ class MoveLayout:
     def write_header(self, buf: memoryview) -> None:
         self.HEADER.pack_into(buf, 0, MOVE_MAGIC, LAYOUT_VERSION, self.samples, self.n)
         struct.pack_into("<Q", buf, self.META_SIZE_OFFSET, self.meta_size)
-
-    def desired(self, buf: memoryview) -> np.ndarray:
-        return np.ndarray((self.samples, self.n), np.float64, buf, self.desired_offset)
-
-    def profile(self, buf: memoryview) -> np.ndarray:
-        return np.ndarray((self.samples, self.n), np.float64, buf, self.profile_offset)
 
     def record(self, buf: memoryview) -> np.ndarray:
         return np.ndarray((self.samples, 1 + 3 * self.n), np.float64, buf, self.record_offset)

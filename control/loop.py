@@ -15,7 +15,6 @@ events wait in the ``Outbox``. Each stage's state lives in its component:
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from multiprocessing.connection import Connection
 
 from control import commands as cmd
 from control.channel import CommandChannel
@@ -29,8 +28,10 @@ from control.modes import ActiveMove, InitialiseConfig, ModeMachine
 from control.outbox import Outbox
 from control.publisher import Publisher
 from control.saver import RunSaver, release
+from control.sealed import open_sealed
 from control.seqlock import SeqlockReader
 from control.supervisor import Supervisor
+from control.wire import Wire
 from hw.backend import Backend
 from hw.machine import Machine
 from hw.transmission import Transmission
@@ -53,13 +54,13 @@ class LoopConfig:
 
 
 class Controller:
-    """Owns the backend while it runs; talks to the client through ``conn`` and shared memory."""
+    """Owns the backend while it runs; talks to the client through ``wire`` and shared memory."""
 
-    def __init__(self, machine: Machine, backend: Backend, conn: Connection,
+    def __init__(self, machine: Machine, backend: Backend, wire: Wire,
                  control_buf: memoryview, config: LoopConfig) -> None:
         self.machine = machine
         self.backend = backend
-        self.conn = conn
+        self.wire = wire
         self.config = config
         self.clock = backend.clock
         n = self.n = machine.n_joints
@@ -71,7 +72,7 @@ class Controller:
         hist = control_buf[self.layout.hist_offset:
                            self.layout.hist_offset + 8 * (HIST_BINS + 5)].cast("q")
         self.transmission = Transmission(machine)
-        self.outbox = Outbox(conn)
+        self.outbox = Outbox(wire)
         self.latency = LatencyStats(hist, config.period_ns, machine.supervision.overrun_fraction)
         self.encoders = EncoderInput(machine, self.transmission, config.glitch_margin)
         self.guards = Guards(machine, self.outbox)
@@ -88,7 +89,7 @@ class Controller:
         self.tick_count = 0
         self.publisher = Publisher(control_buf, self.layout, self.clock.now_ns())
         self.deadline = 0
-        self.channel = CommandChannel(conn, self.outbox, self.client, n, {
+        self.channel = CommandChannel(wire, self.outbox, self.client, n, {
             cmd.Shutdown: self.on_shutdown,
             cmd.Hold: self.on_hold, cmd.EmergencyStop: self.on_estop, cmd.Reset: self.on_reset,
             cmd.Initialise: self.on_initialise, cmd.Manual: self.on_manual,
@@ -178,8 +179,8 @@ class Controller:
         self.end_move("stopped: controller shut down")
         self.running = False
 
-    def on_hold(self, _: cmd.Hold) -> None:
-        self.end_move("aborted by operator")
+    def on_hold(self, command: cmd.Hold) -> None:
+        self.end_move(command.reason or "aborted by operator")
         self.hold_here()
 
     def on_estop(self, _: cmd.EmergencyStop) -> None:
@@ -238,11 +239,15 @@ class Controller:
         self.end_move("aborted: initialise")
         self.modes.start_initialise(self.clock.now_ns())
 
-    def on_move(self, command: cmd.StartMove) -> None:
+    def on_move(self, command: cmd.StartMove, path_fd: int) -> None:
+        """Follow the path sealed in ``path_fd`` (``control/sealed.py``), recording into the
+        move segment: a path that is not sealed is refused, so nobody can change it once sent."""
         if self.refused(command, closed_loop=not command.tracking):
             return
+        move = ActiveMove.attach(command, open_sealed(path_fd, 8 * command.samples * self.n),
+                                 self.clock.now_ns())
         self.end_move("superseded by a new move")
-        self.modes.start_move(ActiveMove.attach(command, self.clock.now_ns()))
+        self.modes.start_move(move)
         self.rearm()
 
     def on_feed(self, command: cmd.FeedOverride | cmd.Pause | cmd.Resume) -> None:

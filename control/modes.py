@@ -1,12 +1,13 @@
 """The mode machine (section 5.1.1): hold, follow_track, manual_actuate, tracking_actuate, and
 the rig's initialise (section 3.4.1), each turning positions into controller output.
 
-Inputs: the encoder input's believed positions, the active move's segment, the
+Inputs: the encoder input's believed positions, the active move's sealed path, the
 operator's manual duty and hold target. Outputs: ``desired`` (nan when open
 loop) and ``duty`` per joint, each tick's row in the move's record, and
-``fault`` when a row of the segment cannot be trusted.
+``fault`` when a row of the path cannot be trusted.
 
-Nothing read from a move segment is trusted: a desired row must be finite,
+Nothing read from a move's path is trusted (sealed, it is what the commanding client sent,
+and that client may be wrong): a desired row must be finite,
 inside the limits and, for a smooth kind, no farther from the previous one
 than the joint can move in a tick (step kinds jump, as the thesis's did); a
 duty row must be finite and within ±100 %. Until the rig's encoder is zeroed
@@ -16,6 +17,7 @@ open-loop duty is limited to the initialise duty (section 3.5).
 from __future__ import annotations
 
 import math
+import mmap
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -34,17 +36,19 @@ from hw.transmission import Transmission
 
 MS = 1_000_000
 SUPPLY_EVERY_S = 0.1  # the run lists the supply pressure this often (meta "supply")
+TIMELINE_ENTRIES = 2_000  # a move's stalls or supply readings kept at most: MoveDone's bound
 
 
 @dataclass
 class ActiveMove:
-    """The move in progress and its segment views."""
+    """The move in progress: its sealed path, and its segment's views."""
 
     move_id: int
     kind: str
     segment: object
     layout: MoveLayout
-    cells: memoryview  # float64 view of the whole segment
+    path_map: mmap.mmap  # the sealed path, read-only (control/sealed.py)
+    path: memoryview  # float64 view of it: samples rows of n joints
     recorded: memoryview  # uint64 progress counter
     tracking: bool
     smooth: bool  # its rows may not jump (commands.STEP_KINDS may)
@@ -56,14 +60,25 @@ class ActiveMove:
     feed: list[tuple[float, float]] = field(default_factory=list)  # (t s, override) as set
     pauses: list[tuple[float, float]] = field(default_factory=list)  # (t s, length s) holds
     supply: list[tuple[float, float]] = field(default_factory=list)  # (t s, MPa) every 0.1 s
+    supply_every: float = SUPPLY_EVERY_S  # doubled, the list thinned, when it is full
 
     @classmethod
-    def attach(cls, command: StartMove, now: int) -> ActiveMove:
-        """Open the move segment the client filled (``docs/shared_memory.md``)."""
+    def attach(cls, command: StartMove, path_map: mmap.mmap, now: int) -> ActiveMove:
+        """Open the move segment the client made for the run (``docs/shared_memory.md``), to
+        follow ``path_map``; ValueError if the segment is not the move's."""
         seg = shm.attach(command.segment)
+        try:
+            layout = MoveLayout.read_header(seg.buf)
+            if layout.samples != command.samples or 8 * layout.samples * layout.n != len(path_map):
+                raise ValueError(f"move segment {command.segment} is for {layout.samples} rows "
+                                 f"of {layout.n} joints, the move {command.samples} rows")
+        except BaseException:
+            shm.release(seg, unlink=False)
+            path_map.close()
+            raise
         recorded = seg.buf[MoveLayout.RECORDED_OFFSET:MoveLayout.RECORDED_OFFSET + 8].cast("Q")
-        return cls(move_id=command.move_id, kind=command.kind,
-                   segment=seg, layout=MoveLayout.read_header(seg.buf), cells=seg.buf.cast("d"),
+        return cls(move_id=command.move_id, kind=command.kind, segment=seg, layout=layout,
+                   path_map=path_map, path=memoryview(path_map).cast("d"),
                    recorded=recorded, tracking=command.tracking,
                    smooth=command.kind not in STEP_KINDS, start_ns=now, last_tick_ns=now)
 
@@ -252,8 +267,8 @@ class ModeMachine:
         if not (self.feed.steady and move.phase == move.index):
             self.follow_scaled(move)
             return
-        n, k, last, cells = self.n, move.index, move.layout.samples - 1, move.cells
-        row = move.layout.desired_offset // 8 + k * n  # a row a tick, as the thesis's
+        n, k, last, cells = self.n, move.index, move.layout.samples - 1, move.path
+        row = k * n  # a row a tick, as the thesis's
         if not self.row_trusted(move, cells, row):
             return
         before = row - n if k > 0 else row  # central difference, one-sided at the ends
@@ -269,10 +284,10 @@ class ModeMachine:
     def follow_scaled(self, move: ActiveMove) -> None:
         """The path at the feed's rate: the desired position interpolated at the move's
         phase, the desired velocity the path's times the rate (control/feed.py)."""
-        n, last, cells = self.n, move.layout.samples - 1, move.cells
+        n, last, cells = self.n, move.layout.samples - 1, move.path
         k = min(int(move.phase), last)
         frac = move.phase - k if k < last else 0.0
-        row = move.layout.desired_offset // 8 + k * n
+        row = k * n
         ahead = row + n if k < last else row
         if not (self.row_trusted(move, cells, row)
                 and self.row_trusted(move, cells, ahead, cells[row:row + n])):
@@ -320,8 +335,8 @@ class ModeMachine:
 
     def tracking_actuate(self) -> None:
         move = self.move
-        row = move.layout.profile_offset // 8 + move.index * self.n
-        desired, duty, cells = self.desired, self.duty, move.cells
+        row = move.index * self.n
+        desired, duty, cells = self.desired, self.duty, move.path
         limit = 100.0 if self.encoders.homed else self.initialise_config.duty
         for j in self.serviced:
             u = cells[row + j]
@@ -355,20 +370,29 @@ class ModeMachine:
         advance the phase by the feed's rate; True after its last row. A gap longer than
         ``stall_s`` between two ticks of the move is a controller stall, listed in ``gaps``.
         Every ``SUPPLY_EVERY_S`` the supply pressure (when the backend knows it) goes into
-        ``supply``."""
+        ``supply``. Both lists are bounded (``TIMELINE_ENTRIES``), as a slow feed can make a
+        move long: past it the supply's interval doubles and every other reading goes, and
+        later stalls are added to the last one listed."""
         move = self.move
         layout = move.layout
         rate = 1.0 if move.tracking else self.feed.rate
         t = (now - move.start_ns) / 1e9
         if now - move.last_tick_ns > self.stall_ns and move.index:
             gap = (now - move.last_tick_ns) / 1e9
-            move.gaps.append((round(t - gap, 4), round(gap, 4)))
+            if len(move.gaps) < TIMELINE_ENTRIES:
+                move.gaps.append((round(t - gap, 4), round(gap, 4)))
+            else:
+                start, length = move.gaps[-1]
+                move.gaps[-1] = (start, round(length + gap, 4))
             self.outbox.put(Notice(f"controller stalled {gap:.3f} s during move "
                                    f"{move.move_id} at t = {t - gap:.2f} s: the run lists the "
                                    "gap"))
         move.last_tick_ns = now
-        if supply_mpa == supply_mpa and t >= SUPPLY_EVERY_S * len(move.supply):
+        if supply_mpa == supply_mpa and t >= move.supply_every * len(move.supply):
             move.supply.append((round(t, 4), round(supply_mpa, 4)))
+            if len(move.supply) >= TIMELINE_ENTRIES:
+                move.supply_every *= 2
+                del move.supply[1::2]
         if move.phase >= move.index:
             layout.row.pack_into(move.segment.buf,
                                  layout.record_offset + move.index * layout.row.size,

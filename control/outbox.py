@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import select
-from multiprocessing.connection import Connection
 
 from control.events import ControllerEvent
+from control.wire import Broken, Wire
 
 OUTBOX_LIMIT = 256
 
@@ -14,12 +14,12 @@ class Outbox:
     """A frozen client stops reading and the loop must go on: events wait while the channel is
     full, and the oldest are dropped past ``OUTBOX_LIMIT``."""
 
-    def __init__(self, conn: Connection) -> None:
-        self.conn = conn
+    def __init__(self, wire: Wire) -> None:
+        self.wire = wire
         self.open = True
         self.queue: list[ControllerEvent] = []
         self.writable = select.poll()  # a unix socket polls writable with 3/4 of its buffer free
-        self.writable.register(conn.fileno(), select.POLLOUT)
+        self.writable.register(wire.fileno(), select.POLLOUT)
 
     def put(self, event: ControllerEvent) -> None:
         self.queue.append(event)
@@ -32,8 +32,8 @@ class Outbox:
             return
         while queue and self.writable.poll(0):
             try:
-                self.conn.send(queue.pop(0))
-            except OSError:
+                self.wire.send(queue.pop(0))
+            except Broken:
                 self.open = False
                 queue.clear()
                 return

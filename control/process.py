@@ -2,7 +2,7 @@
 
 ``ControlClient`` starts it as ``python -m control.process CONFIG_JSON FD``: a
 fresh interpreter that shares nothing with the UI process but one end of a
-socketpair (the command channel) and the shared memory.
+socketpair (the command channel, ``control/wire.py`` frames) and the shared memory.
 """
 
 from __future__ import annotations
@@ -10,16 +10,18 @@ from __future__ import annotations
 import contextlib
 import json
 import signal
+import socket
 import sys
 import traceback
 from dataclasses import asdict, dataclass
-from multiprocessing.connection import Connection
 
 from control import shm
+from control.channel import controller_end
 from control.events import Crash, Ready
 from control.layout import ControlLayout
 from control.loop import Controller, LoopConfig
 from control.realtime import enter_realtime
+from control.wire import Broken, Wire
 from hw.backend import RealClock
 from hw.factory import make_backend
 from hw.machine import load_machine
@@ -52,7 +54,7 @@ class ProcessConfig:
         return cls(**json.loads(text))
 
 
-def main(config: ProcessConfig, conn: Connection) -> None:
+def main(config: ProcessConfig, wire: Wire) -> None:
     """Run the controller until told to stop, orphaned, or killed by SIGTERM."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl+C belongs to the operator's UI
     segment = shm.attach(config.control_segment)
@@ -73,7 +75,7 @@ def main(config: ProcessConfig, conn: Connection) -> None:
         )
         if isinstance(backend.clock, RealClock):
             backend.clock.spin_ns = round(config.spin_us * 1e3)
-        controller = Controller(machine, backend, conn, segment.buf, loop_config)
+        controller = Controller(machine, backend, wire, segment.buf, loop_config)
         signal.signal(signal.SIGTERM, lambda *_: setattr(controller, "running", False))
         backend.open()
         try:
@@ -89,8 +91,8 @@ def main(config: ProcessConfig, conn: Connection) -> None:
                 controller.zero_valves()
             backend.close()
     except Exception as exc:
-        with contextlib.suppress(Exception):
-            conn.send(Crash(f"{type(exc).__name__}: {exc}", traceback.format_exc()))
+        with contextlib.suppress(Broken):
+            wire.send(Crash(f"{type(exc).__name__}: {exc}", traceback.format_exc()))
         raise
     finally:
         orphaned = controller is None or controller.orphaned
@@ -100,4 +102,5 @@ def main(config: ProcessConfig, conn: Connection) -> None:
 
 
 if __name__ == "__main__":
-    main(ProcessConfig.from_json(sys.argv[1]), Connection(int(sys.argv[2])))
+    main(ProcessConfig.from_json(sys.argv[1]),
+         controller_end(socket.socket(fileno=int(sys.argv[2]))))

@@ -2,24 +2,40 @@
 first: the records a client and ``servodesk controller`` exchange besides commands and events.
 
 The socket lives in the user's runtime directory (``$XDG_RUNTIME_DIR/servodesk``, else
-``/tmp/servodesk-<uid>``), a directory only its owner may enter (0700), the socket and the
-key beside it readable by the owner alone (0600). A connection must also answer a challenge
-with that key (``multiprocessing.connection``'s HMAC handshake), so a process that can reach
-the socket but cannot read the key is refused.
+``/tmp/servodesk-<uid>``), a directory only its owner may enter (0700, when servodesk makes
+it; a directory given with ``--socket`` keeps its own mode), the socket and the key beside it
+(``<socket>.key``, one per socket) readable by the owner alone (0600). Each side of a
+connection must also answer the other's challenge with that key (HMAC-SHA256), within
+``HANDSHAKE_S``, so a process that can reach the socket but cannot read the key is refused,
+and one that never answers is dropped. Every message is a typed record in a bounded frame
+(``control/wire.py``), never pickle.
 """
 
 from __future__ import annotations
 
+import contextlib
+import hashlib
+import hmac
 import os
 import secrets
+import socket
 import stat
+import time
 from dataclasses import dataclass
-from multiprocessing.connection import Client, Connection
 from pathlib import Path
+from typing import TypeVar
+
+from control.commands import COMMANDS
+from control.events import EVENTS
+from control.wire import Broken, Codec, Unreadable, Wire
 
 SOCKET_NAME = "controller.sock"
-KEY_NAME = "controller.key"
 ID_SPAN = 1_000_000  # move ids per client: client k numbers its moves from k * ID_SPAN
+HANDSHAKE_S = 5.0  # both challenges answered, and the client's join sent, within this
+REQUEST_LIMIT = 64 * 1024  # bytes of one message to the service: a command, a join
+EVENT_LIMIT = 1 << 20  # bytes of one message from it: an event with a 600 s move's timeline
+NAME_TEXT = 80  # characters of a client's name
+R = TypeVar("R")
 
 
 def runtime_dir() -> Path:
@@ -35,18 +51,24 @@ def default_socket() -> Path:
 
 
 def key_path(socket_path: Path) -> Path:
-    return socket_path.with_name(KEY_NAME)
+    """The key of the service on ``socket_path``: one per socket, so two services in one
+    directory never share (or remove) each other's."""
+    return socket_path.with_name(socket_path.name + ".key")
 
 
-def private_dir(path: Path) -> None:
-    """Create ``path`` (0700) or check that an existing one is this user's and private."""
-    path.mkdir(mode=0o700, parents=True, exist_ok=True)
+def socket_dir(path: Path) -> None:
+    """Make the socket's directory owner-only (0700) if it does not exist. One that exists keeps
+    its mode (``--socket`` may name a shared directory such as /tmp), but must be a directory in
+    which other users cannot replace this user's files: this user's own, or sticky."""
+    with contextlib.suppress(FileExistsError):
+        path.mkdir(mode=0o700, parents=True)
     info = path.lstat()
-    if not stat.S_ISDIR(info.st_mode) or info.st_uid != os.getuid():
-        raise PermissionError(f"{path} is not a directory of this user: remove it or set "
-                              "XDG_RUNTIME_DIR to a private directory")
-    if stat.S_IMODE(info.st_mode) != 0o700:
-        path.chmod(0o700)
+    if not stat.S_ISDIR(info.st_mode):
+        raise PermissionError(f"{path} is not a directory: give the socket another place")
+    if (info.st_uid != os.getuid() and not info.st_mode & stat.S_ISVTX
+            and info.st_mode & (stat.S_IWGRP | stat.S_IWOTH)):
+        raise PermissionError(f"{path} is another user's directory that others may write in: "
+                              "give the socket a private directory")
 
 
 def new_key(socket_path: Path) -> bytes:
@@ -54,22 +76,77 @@ def new_key(socket_path: Path) -> bytes:
     key = secrets.token_bytes(32)
     path = key_path(socket_path)
     path.unlink(missing_ok=True)
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o600)
     with os.fdopen(fd, "wb") as file:
         file.write(key)
     return key
 
 
-def connect(socket_path: str | Path | None = None) -> Connection:
-    """A connection to the controller service at ``socket_path``, authenticated; a clear
-    error if none runs there."""
+def connect(socket_path: str | Path | None = None, timeout_s: float = HANDSHAKE_S) -> Wire:
+    """A connection to the controller service at ``socket_path``, both sides authenticated,
+    within ``timeout_s``: ``ConnectionError`` if none runs there, ``TimeoutError`` if it does
+    not answer in time."""
     path = Path(socket_path) if socket_path is not None else default_socket()
+    deadline = time.monotonic() + timeout_s
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
     try:
         key = key_path(path).read_bytes()
-        return Client(str(path), family="AF_UNIX", authkey=key)
+        sock.settimeout(timeout_s)
+        sock.connect(str(path))
+        sock.settimeout(None)  # sends wait for a slow service; reads are bounded by the wire
     except (FileNotFoundError, ConnectionRefusedError) as exc:
+        sock.close()
         raise ConnectionError(f"no controller service at {path} ({exc.strerror or exc}): start "
                               "one with `servodesk controller`, or give its socket") from None
+    except BaseException:
+        sock.close()
+        raise
+    wire = Wire(sock, CODEC, EVENT_LIMIT, frame_s=timeout_s)
+    try:
+        authenticate(wire, key, deadline, serving=False)
+    except BaseException:
+        wire.close()
+        raise
+    return wire
+
+
+def authenticate(wire: Wire, key: bytes, deadline: float, *, serving: bool) -> None:
+    """Each side proves it holds ``key`` by answering the other's random challenge, the service
+    first: ``PermissionError`` for a wrong answer, ``TimeoutError`` past ``deadline``."""
+    mine = secrets.token_hex(32)
+    if serving:
+        wire.send(Challenge(mine))
+        _check(receive(wire, Answer, deadline, "answer"), key, mine, "client")
+        theirs = receive(wire, Challenge, deadline, "challenge")
+        wire.send(Answer(_digest(key, theirs.nonce, "service")))
+    else:
+        theirs = receive(wire, Challenge, deadline, "challenge")
+        wire.send(Answer(_digest(key, theirs.nonce, "client")))
+        wire.send(Challenge(mine))
+        _check(receive(wire, Answer, deadline, "answer"), key, mine, "service")
+
+
+def _digest(key: bytes, nonce: str, role: str) -> str:
+    return hmac.new(key, f"{role}:{nonce}".encode(), hashlib.sha256).hexdigest()
+
+
+def _check(answer: Answer, key: bytes, nonce: str, role: str) -> None:
+    if not hmac.compare_digest(answer.digest.encode(), _digest(key, nonce, role).encode()):
+        raise PermissionError(f"the {role} does not hold this socket's key")
+
+
+def receive(wire: Wire, kind: type[R], deadline: float, what: str) -> R:
+    """The next record, which must be a ``kind``, by ``deadline`` (``TimeoutError``)."""
+    if not wire.poll(deadline - time.monotonic()):
+        raise TimeoutError(f"no {what} from the other side in time")
+    try:
+        message = wire.recv()
+    except Unreadable as exc:
+        raise Broken(f"a {what} expected: {exc}") from None
+    message.close_fds()
+    if not isinstance(message.record, kind):
+        raise Broken(f"a {what} expected, got {type(message.record).__name__}")
+    return message.record
 
 
 @dataclass(frozen=True)
@@ -78,6 +155,13 @@ class Join:
 
     name: str
     pid: int
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not 0 < len(self.name) <= NAME_TEXT \
+                or not self.name.isprintable():
+            raise ValueError(f"a client's name is 1…{NAME_TEXT} printable characters")
+        if isinstance(self.pid, bool) or not isinstance(self.pid, int) or self.pid < 0:
+            raise ValueError(f"a client's pid is a whole number, got {self.pid!r}")
 
 
 @dataclass(frozen=True)
@@ -110,3 +194,27 @@ class TakeCommand:
 @dataclass(frozen=True)
 class ReleaseCommand:
     """Give command back: the controller holds every joint, and another client may take it."""
+
+
+@dataclass(frozen=True)
+class Heartbeat:
+    """A client is alive (every 50 ms): the service relays the commander's to the controller,
+    and drops a client it has not heard from in a while."""
+
+
+@dataclass(frozen=True)
+class Challenge:
+    nonce: str  # hex
+
+
+@dataclass(frozen=True)
+class Answer:
+    digest: str  # hex HMAC-SHA256 of the challenge under the socket's key
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.digest, str):
+            raise ValueError("an answer is a hex digest")
+
+
+CODEC = Codec(COMMANDS + EVENTS + (Join, Hello, TakeCommand, ReleaseCommand, Heartbeat,
+                                   Challenge, Answer))

@@ -65,7 +65,8 @@ class RunSaver:
 
 
 def release(move: ActiveMove, unlink: bool) -> None:
-    """Drop every view of the move's segment, then close (and maybe unlink) it."""
-    move.cells.release()
+    """Drop every view of the move's path and segment, then close (and maybe unlink) it."""
+    move.path.release()
+    move.path_map.close()
     move.recorded.release()
     shm.release(move.segment, unlink=unlink)

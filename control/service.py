@@ -6,13 +6,22 @@ relays between it and the clients that attach (``control/attached.py``):
 - **commands** from the commanding client to the controller, and from nobody else: the
   others are refused with the reason ("observing: command is held by …; take it first"),
   except the E-stop, which anyone may press (and whose count in shared memory reaches
-  the controller whatever this process does);
+  the controller whatever this process does); a move's sealed path comes with its command
+  and goes on to the controller as it came (``control/sealed.py``);
 - **events** from the controller to every client, and ``Commander`` when command changes
   hands (``TakeCommand``/``ReleaseCommand``, explicitly);
-- the **heartbeat**: the commander's heartbeat thread writes it; while nobody holds
-  command the service writes it. A commander that goes (its socket closes) or falls
-  silent for ``release_after_s`` loses command: the controller holds (a silent one trips
-  its usual 250 ms watch first) and runs on for the others, and anyone may take command.
+- the **heartbeat**, along the commands' path: every client sends one every 50 ms, and
+  the service beats the controller's heartbeat word for the commander's alone (while
+  nobody commands, its own thread beats it). So a commander that falls silent, or a
+  service that freezes, stops the controller's heartbeat as surely as a local client's
+  would: it holds within its timeout. A commander that goes (its socket closes) or falls
+  silent for ``release_after_s`` loses command; the controller runs on for the others.
+
+Every connection must authenticate and join within ``rendezvous.HANDSHAKE_S``; one silent
+for ``SILENT_S`` (or three times ``release_after_s``, if longer) or not reading its events for ``SEND_S`` is dropped; at most
+``MAX_CLIENTS`` connections are served at once (more are closed at once), and running out
+of file descriptors is logged and waited out, never the end of the service. Messages are
+typed records in bounded frames (``control/wire.py``), never pickle.
 
 A client's moves are its own (it makes their segments, numbered from its ``id_base``,
 and saves their runs); a move whose client has gone by its end is saved here.
@@ -21,6 +30,7 @@ and saves their runs); a move whose client has gone by its end is saved here.
 from __future__ import annotations
 
 import contextlib
+import errno
 import itertools
 import logging
 import os
@@ -29,7 +39,6 @@ import socket
 import threading
 import time
 from dataclasses import dataclass, field
-from multiprocessing.connection import Connection, answer_challenge, deliver_challenge
 from pathlib import Path
 
 from control import rendezvous, shm
@@ -40,23 +49,28 @@ from control.events import Commander, Died, MoveDone, Refused
 from control.layout import MoveLayout
 from control.recorder import save_run
 from control.runs import decode_meta, run_from_segment
+from control.wire import Broken, Unreadable, Wire
 
 log = logging.getLogger("servodesk.controller")
 
-JOIN_S = 5.0  # a connection must authenticate and say who it is within this
 EVENTS_QUEUED = 512  # events waiting for a client; more and it is not reading: dropped
+SEND_S = 2.0  # an event the client does not take within this: it is not reading, dropped
+SILENT_S = 10.0  # a client not heard from this long (it beats every 50 ms) is dropped
+MAX_CLIENTS = 64  # connections served at once, joined or joining
+BACKOFF_S = 0.2  # after accept fails (no descriptor left), wait this long before trying again
 POLL_S = 0.1
 
 
 @dataclass(eq=False)
 class Peer:
-    """An attached client: its connection, and the events waiting for it."""
+    """An attached client: its connection, the events waiting for it, when it was last heard."""
 
     number: int
     name: str
-    conn: Connection
+    wire: Wire
     outgoing: queue.Queue[object] = field(default_factory=lambda: queue.Queue(EVENTS_QUEUED))
     connected: bool = True
+    heard: float = field(default_factory=time.monotonic)
 
     def put(self, record: object) -> bool:
         """Queue ``record`` for the client; False if it is not reading (and is dropped)."""
@@ -74,8 +88,9 @@ class Peer:
             except queue.Empty:
                 continue
             try:
-                self.conn.send(record)
-            except (OSError, ValueError):
+                self.wire.send(record)
+            except Broken:
+                self.connected = False
                 return
 
 
@@ -88,28 +103,29 @@ class ControllerService:
         self.socket_path = Path(socket_path) if socket_path is not None else \
             rendezvous.default_socket()
         self.release_after_s = release_after_s
+        self.drop_after_s = max(SILENT_S, 3 * release_after_s)  # a commander is released first
         self.stopped = threading.Event()
         self.why_stopped = ""
         self._lock = threading.RLock()
         self._peers: dict[int, Peer] = {}
         self._holder: Peer | None = None
-        self._commander_beat = (0, 0.0)  # the heartbeat word as last seen changing, and when
         self._numbers = itertools.count(1)
+        self._slots = threading.BoundedSemaphore(MAX_CLIENTS)
         self._moves: dict[int, tuple[Peer, str]] = {}  # move id: its client, its segment
         self._claim()
         self._key = rendezvous.new_key(self.socket_path)  # first: who sees the socket can log in
         self._socket = self._listen()
         client.on_event = self._from_controller
         self._threads = [threading.Thread(target=self._accept, name="service-accept", daemon=True),
-                         threading.Thread(target=self._watch_commander, name="service-watch",
+                         threading.Thread(target=self._watch_clients, name="service-watch",
                                           daemon=True)]
         for thread in self._threads:
             thread.start()
 
     def _claim(self) -> None:
-        """The socket's directory, private; refused if a service listens there already (a
-        socket file no one listens on is a dead service's: removed)."""
-        rendezvous.private_dir(self.socket_path.parent)
+        """The socket's directory; refused if a service listens there already (a socket file
+        no one listens on is a dead service's: removed)."""
+        rendezvous.socket_dir(self.socket_path.parent)
         if self.socket_path.exists():
             with contextlib.suppress(ConnectionError, OSError), \
                     socket.socket(socket.AF_UNIX) as probe:
@@ -119,75 +135,95 @@ class ControllerService:
             self.socket_path.unlink()
 
     def _listen(self) -> socket.socket:
-        """Bind the socket owner-only (created 0600 in the 0700 directory)."""
+        """Bind the socket owner-only (created 0600)."""
         sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         old = os.umask(0o177)
         try:
             sock.bind(str(self.socket_path))
         finally:
             os.umask(old)
-        sock.listen(8)
+        sock.listen(16)
         sock.settimeout(POLL_S)  # accept wakes to see ``stopped``
         return sock
 
     # -- connections -------------------------------------------------------------------------
 
     def _accept(self) -> None:
+        starved = False
         while not self.stopped.is_set():
             try:
                 sock, _ = self._socket.accept()
             except TimeoutError:
                 continue
-            except OSError:
-                return
-            sock.settimeout(None)
-            conn = Connection(sock.detach())
-            threading.Thread(target=self._serve, args=(conn,), name="service-client",
+            except OSError as exc:
+                if self.stopped.is_set():
+                    return
+                if not starved:
+                    log.error("cannot accept a client (%s)%s; trying again every %g s",
+                              exc.strerror or exc, ": out of file descriptors" if exc.errno in
+                              (errno.EMFILE, errno.ENFILE) else "", BACKOFF_S)
+                starved = True
+                self.stopped.wait(BACKOFF_S)
+                continue
+            if starved:
+                log.warning("accepting clients again")
+                starved = False
+            if not self._slots.acquire(blocking=False):
+                log.warning("refused a connection: %d at once already", MAX_CLIENTS)
+                sock.close()
+                continue
+            threading.Thread(target=self._serve, args=(sock,), name="service-client",
                              daemon=True).start()
 
-    def _serve(self, conn: Connection) -> None:
-        peer = self._join(conn)
-        if peer is None:
-            conn.close()
-            return
+    def _serve(self, sock: socket.socket) -> None:
+        sock.settimeout(SEND_S)  # sends: a client that does not read is not waited for long
+        wire = Wire(sock, rendezvous.CODEC, rendezvous.REQUEST_LIMIT)
+        peer = None
+        try:
+            peer = self._join(wire)
+            if peer is not None:
+                self._listen_to(peer)
+        finally:
+            if peer is not None:
+                self._leave(peer, f"{peer.name} left")
+            wire.close()
+            self._slots.release()
+
+    def _listen_to(self, peer: Peer) -> None:
         sender = threading.Thread(target=peer.deliver, name="service-events", daemon=True)
         sender.start()
-        try:
-            while not self.stopped.is_set() and peer.connected:
-                if not conn.poll(POLL_S):
-                    continue
-                try:
-                    record = conn.recv()
-                except (EOFError, OSError):
-                    break
-                except Exception as exc:  # a message that does not unpickle is no command
-                    peer.put(Refused("message", f"unreadable: {type(exc).__name__}: {exc}"))
-                    continue
-                self._request(peer, record)
-        except OSError:
-            pass
-        finally:
-            self._leave(peer, f"{peer.name} left")
-            sender.join(timeout=1.0)
-            conn.close()
+        while not self.stopped.is_set() and peer.connected:
+            if not peer.wire.poll(POLL_S):
+                continue
+            try:
+                message = peer.wire.recv()
+            except Unreadable as exc:
+                peer.put(Refused("message", f"unreadable: {exc}"))
+                continue
+            except Broken:
+                break
+            peer.heard = time.monotonic()
+            try:
+                self._request(peer, message.record, message.fds)
+            finally:
+                message.close_fds()
+        peer.connected = False
+        sender.join(timeout=1.0)
 
-    def _join(self, conn: Connection) -> Peer | None:
-        """Authenticate (both ways, the key beside the socket) and greet a new client."""
+    def _join(self, wire: Wire) -> Peer | None:
+        """Authenticate (both ways, the key beside the socket) and greet a new client, all
+        within the handshake's time."""
+        deadline = time.monotonic() + rendezvous.HANDSHAKE_S
         try:
-            deliver_challenge(conn, self._key)
-            answer_challenge(conn, self._key)
-            if not conn.poll(JOIN_S):
-                raise TimeoutError(f"no join within {JOIN_S:g} s")
-            join = conn.recv()
-            if not isinstance(join, rendezvous.Join):
-                raise ValueError(f"a join expected, got {type(join).__name__}")
-        except Exception as exc:  # a wrong key, a stranger, a client gone at once
-            log.warning("refused a connection: %s: %s", type(exc).__name__, exc)
+            rendezvous.authenticate(wire, self._key, deadline, serving=True)
+            join = rendezvous.receive(wire, rendezvous.Join, deadline, "join")
+        except (Broken, PermissionError, TimeoutError) as exc:  # a stranger, or silent
+            log.warning("refused a connection: %s", exc)
             return None
         client = self.client
         with self._lock:
             number = next(self._numbers)
-            peer = Peer(number, f"{join.name} #{number} (pid {join.pid})", conn)
+            peer = Peer(number, f"{join.name} #{number} (pid {join.pid})", wire)
             holder = self._holder.name if self._holder else ""
             hello = rendezvous.Hello(
                 client=peer.name, control_segment=client.segment_name,
@@ -198,8 +234,8 @@ class ControllerService:
                 controller_pid=client.pid, service_pid=os.getpid(), realtime=client.realtime,
                 notice=client.notice, holder=holder)
             try:
-                conn.send(hello)
-            except OSError:
+                wire.send(hello)
+            except Broken:
                 return None
             self._peers[number] = peer
         log.info("%s attached (%d attached)", peer.name, len(self._peers))
@@ -210,22 +246,27 @@ class ControllerService:
             peer.connected = False
             self._peers.pop(peer.number, None)
             if self._holder is peer:
-                self._release(f"{why}: command released, the controller holds")
+                self._release(f"{why}: command released, the controller holds",
+                              f"interrupted: the commanding client ({peer.name}) left")
         log.info("%s (%d attached)", why, len(self._peers))
 
     # -- requests from a client ---------------------------------------------------------------
 
-    def _request(self, peer: Peer, record: object) -> None:
-        if isinstance(record, rendezvous.TakeCommand):
+    def _request(self, peer: Peer, record: object, fds: tuple[int, ...]) -> None:
+        if isinstance(record, rendezvous.Heartbeat):
+            if self._holder is peer:
+                self.client.beat()  # the commander's heartbeat, on to the controller
+        elif isinstance(record, rendezvous.TakeCommand):
             self._take(peer)
         elif isinstance(record, rendezvous.ReleaseCommand):
             with self._lock:
                 if self._holder is peer:
-                    self._release(f"{peer.name} released command; the controller holds")
+                    self._release(f"{peer.name} released command; the controller holds",
+                                  "aborted: command released")
                 else:
                     peer.put(Refused("release command", "this client does not hold command"))
         elif isinstance(record, Command):
-            self._relay(peer, record)
+            self._relay(peer, record, fds)
         else:
             peer.put(Refused(command_name(record), "not a command this service knows"))
 
@@ -237,20 +278,21 @@ class ControllerService:
                                  "it first"))
                 return
             self._holder = peer
-            self.client.heartbeat_on = False  # the commander's heartbeat thread beats now
-            self._commander_beat = (self.client.heartbeat_ns, time.monotonic())
+            self.client.heartbeat_on = False  # the commander's heartbeats beat it now
+            self.client.beat()
             self._broadcast(Commander(peer.name, f"{peer.name} took command"))
 
-    def _release(self, reason: str) -> None:
-        """Nobody holds command: the controller holds, this service keeps its heartbeat."""
+    def _release(self, reason: str, move_ends: str) -> None:
+        """Nobody holds command: the controller holds (a running move ends ``move_ends``), and
+        this service keeps its heartbeat."""
         self._holder = None
         self.client.heartbeat_on = True
         with contextlib.suppress(Exception):
-            self.client.hold()
+            self.client.hold(move_ends)
         self._broadcast(Commander("", reason))
         log.info("%s", reason)
 
-    def _relay(self, peer: Peer, command: Command) -> None:
+    def _relay(self, peer: Peer, command: Command, fds: tuple[int, ...]) -> None:
         with self._lock:
             holder = self._holder
             if isinstance(command, Shutdown):
@@ -264,7 +306,10 @@ class ControllerService:
                 self._moves[command.move_id] = (peer, command.segment)
             if not reason:
                 try:
-                    self.client.send(command)
+                    # the descriptors go on with the command; the embedded client closes them
+                    self.client.send(command, tuple(os.dup(fd) for fd in fds))
+                    if holder is peer:
+                        self.client.beat()
                     return
                 except Exception as exc:  # the controller is gone, or not reading
                     reason = str(exc)
@@ -301,21 +346,24 @@ class ControllerService:
         log.info("move %d of %s ended (%s) after it left: %s", done.move_id, owner.name,
                  done.status, save_departed(segment, done))
 
-    def _watch_commander(self) -> None:
-        """A commander whose heartbeat stops for ``release_after_s`` loses command."""
+    def _watch_clients(self) -> None:
+        """Drop a client silent for ``drop_after_s``; a commander silent for
+        ``release_after_s`` loses command first."""
         while not self.stopped.wait(POLL_S):
             self.client.poll_events()  # broadcast already; the queue must not grow for ever
+            now = time.monotonic()
             with self._lock:
                 holder = self._holder
-                if holder is None:
-                    continue
-                beat, since = self._commander_beat
-                now, seen = time.monotonic(), self.client.heartbeat_ns
-                if seen != beat:
-                    self._commander_beat = (seen, now)
-                elif now - since > self.release_after_s:
+                if holder is not None and now - holder.heard > self.release_after_s:
                     self._release(f"{holder.name} silent for {self.release_after_s:g} s: "
-                                  "command released, the controller holds")
+                                  "command released, the controller holds",
+                                  f"interrupted: the commanding client ({holder.name}) fell "
+                                  "silent")
+                for peer in self._peers.values():
+                    if peer.connected and now - peer.heard > self.drop_after_s:
+                        log.warning("%s silent for %g s: disconnected", peer.name,
+                                    self.drop_after_s)
+                        peer.connected = False
 
     # -- the end ----------------------------------------------------------------------------------
 
@@ -332,8 +380,8 @@ class ControllerService:
         with self._lock:
             peers = list(self._peers.values())
         for peer in peers:
-            with contextlib.suppress(OSError):
-                peer.conn.close()
+            peer.connected = False
+            peer.wire.close()
         self.client.close()
 
 

@@ -58,6 +58,7 @@ SLOW_PATHS = (
     "tests/control/test_client_cartesian_jog.py",  # Cartesian jogs on it
     "tests/control/test_process.py",   # the control subprocess's imports
     "tests/control/test_service.py",   # servodesk controller and clients attached to it
+    "tests/control/test_service_trust.py",  # the same, tried as an attacker would
     "tests/app/test_tui_attach.py",    # TUIs attached to servodesk controller
     "tests/app/test_tui_observer_files.py",  # and what their observers may not change
     "tests/app/test_serve.py",         # servodesk serve in a headless Chromium
@@ -232,11 +233,13 @@ class ServiceProcess:
     """``servodesk controller`` in a private runtime directory (short: a socket's path has at
     most 107 bytes), saving runs in ``data_dir``; ``socket`` appears when it is ready."""
 
-    def __init__(self, tmp_path: Path, *args: str) -> None:
+    def __init__(self, tmp_path: Path, *args: str, socket: Path | None = None) -> None:
         self.runtime = Path(tempfile.mkdtemp(prefix="sd-"))
-        self.socket = self.runtime / "servodesk" / "controller.sock"
+        self.socket = socket or self.runtime / "servodesk" / "controller.sock"
+        if socket is not None:
+            args = (*args, "--socket", str(socket))
         self.data_dir = tmp_path / "runs"
-        self.log = tmp_path / "controller.log"
+        self.log = tmp_path / ("controller.log" if socket is None else f"{socket.name}.log")
         env = {**os.environ, "PYTHONPATH": str(ROOT), "XDG_RUNTIME_DIR": str(self.runtime)}
         with self.log.open("wb") as err:
             self.proc = subprocess.Popen(

@@ -440,7 +440,7 @@ def test_a_position_jog_of_25_degrees_travels_at_jog_speed_and_trips_nothing(
     the joint's jog speed and the joint follows it. In real time, so that the status is
     sampled all along the jog's 4 s however loaded the machine."""
     joint = UNIMATE.joints[2]
-    start = realtime.status().position[2]
+    start = realtime.status().desired[2]  # the jog moves the hold target, not the reading
     realtime.jog_position(2, 25.0)
     goal = min(start + 25.0, joint.upper)
     seen = []  # (controller tick, hold target) while the target travels
@@ -448,6 +448,7 @@ def test_a_position_jog_of_25_degrees_travels_at_jog_speed_and_trips_nothing(
     while abs((status := realtime.status()).desired[2] - goal) > 1e-9:
         seen.append((status.tick, status.desired[2]))
         assert time.monotonic() < deadline, "the hold target never reached the goal"
+        time.sleep(0.001)  # a loop that never sleeps starves the client's heartbeat thread
     tick, target = np.array(seen).T
     moved = np.flatnonzero(np.diff(tick) > 0)
     slope = np.abs(np.diff(target)[moved] / (np.diff(tick)[moved] * UNIMATE.sample_time_s))

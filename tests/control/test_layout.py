@@ -66,7 +66,7 @@ def test_status_decodes_what_was_packed() -> None:
 def test_move_layout_sizes_follow_the_move() -> None:
     small, big = MoveLayout(250, 6), MoveLayout(20_000, 6)
     assert big.size > small.size * 50
-    assert big.record_offset - big.profile_offset == 8 * 20_000 * 6
+    assert big.size - big.record_offset == 8 * (1 + 3 * 6) * 20_000
 
 
 def test_histogram_percentiles_and_rows() -> None:

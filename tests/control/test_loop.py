@@ -14,17 +14,19 @@ import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import replace
-from multiprocessing.connection import Connection
 
+import numpy as np
 import pytest
 
-from control import shm
+from control import sealed, shm
+from control.channel import client_end, controller_end
 from control.commands import JogPosition, Manual, Reset, StartMove
 from control.events import Notice
 from control.law import pi
 from control.layout import ESTOP_WORD, ControlLayout, Mode, MoveLayout
 from control.loop import Controller, LoopConfig
 from control.outbox import OUTBOX_LIMIT
+from control.wire import Wire
 from hw.backend import LinkCounters, StepClock
 from hw.gray import binary_to_gray
 from hw.machine import Machine, load_machine
@@ -75,16 +77,16 @@ class ScriptedBackend:
 
 
 @contextmanager
-def controller_on(machine: Machine) -> Iterator[tuple[Controller, ScriptedBackend, Connection]]:
+def controller_on(machine: Machine) -> Iterator[tuple[Controller, ScriptedBackend, Wire]]:
     backend = ScriptedBackend(machine)
     ours, theirs = socket.socketpair()
     layout = ControlLayout(machine.n_joints)
     segment = shm.create("looptest", layout.size)
     layout.write_header(segment.buf)
-    controller = Controller(machine, backend, Connection(theirs.detach()), segment.buf,
+    controller = Controller(machine, backend, controller_end(theirs), segment.buf,
                             LoopConfig(period_ns=1_000_000, heartbeat_timeout_ns=10**12))
     controller.start()
-    client = Connection(ours.detach())
+    client = client_end(ours)
     try:
         yield controller, backend, client
     finally:
@@ -94,7 +96,7 @@ def controller_on(machine: Machine) -> Iterator[tuple[Controller, ScriptedBacken
 
 
 @pytest.fixture
-def rig() -> Iterator[tuple[Controller, ScriptedBackend, Connection]]:
+def rig() -> Iterator[tuple[Controller, ScriptedBackend, Wire]]:
     with controller_on(UNIMATE) as parts:
         yield parts
 
@@ -117,10 +119,10 @@ def teleport(controller: Controller, backend: ScriptedBackend, j: int, q: float)
     ticks(controller, backend, 2)
 
 
-def events(client: Connection) -> list[tuple[str, dict]]:
+def events(client: Wire) -> list[tuple[str, dict]]:
     out = []
     while client.poll(0.05):
-        event = client.recv()
+        event = client.recv().record
         out.append((event.KIND, event.payload))
     return out
 
@@ -308,8 +310,8 @@ def start_move(controller: Controller, path: list[list[float]], kind: str) -> It
     layout = MoveLayout(len(path), UNIMATE.n_joints)
     segment = shm.create("loopmove", layout.size)
     layout.write_header(segment.buf)
-    layout.desired(segment.buf)[:] = path
-    controller.channel.deliver(StartMove(1, segment.name, kind, False))
+    controller.channel.deliver(StartMove(1, segment.name, kind, False, len(path)),
+                               (sealed.seal(np.array(path)),))
     return segment
 
 

@@ -22,7 +22,6 @@ import re
 import socket
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from multiprocessing.connection import Connection
 from pathlib import Path
 
 from hypothesis import HealthCheck, event, example, given, settings
@@ -30,12 +29,14 @@ from hypothesis import strategies as st
 
 from app.cli_machine import describe, summary
 from control import shm
+from control.channel import client_end, controller_end
 from control.commands import Manual
 from control.events import Refused
 from control.layout import ControlLayout
 from control.loop import Controller, LoopConfig
 from control.motion.robot_model import model_of
 from control.seqlock import SeqlockWriter
+from control.wire import Wire
 from hw.machine import Machine, MachineError, parse_machine
 from hw.sim.backend import SimBackend
 
@@ -101,14 +102,14 @@ def edited(name: str, *edits: tuple[str, str]) -> tuple[str, str]:
 
 
 @contextmanager
-def controller_on(machine: Machine) -> Iterator[tuple[Controller, SimBackend, Connection]]:
+def controller_on(machine: Machine) -> Iterator[tuple[Controller, SimBackend, Wire]]:
     """A Controller on the lockstep simulator with the client's coefficient sets written, as
     ControlClient and control.process would set it up; every segment released after."""
     backend = SimBackend(machine, lockstep=True)
     layout = ControlLayout(machine.n_joints)
     segment = shm.create("fuzz", layout.size)
     ours, theirs = socket.socketpair()
-    client = Connection(ours.detach())
+    client = client_end(ours)
     controller: Controller | None = None
     try:
         layout.write_header(segment.buf)
@@ -118,7 +119,7 @@ def controller_on(machine: Machine) -> Iterator[tuple[Controller, SimBackend, Co
             writer.write(*layout.coefficients.encode(machine.coefficients[which]))
             writer.release()
         never = 10**15  # the test is the client: it never beats and never goes away
-        controller = Controller(machine, backend, Connection(theirs.detach()), segment.buf,
+        controller = Controller(machine, backend, controller_end(theirs), segment.buf,
                                 LoopConfig(period_ns=round(machine.sample_time_s * 1e9),
                                            heartbeat_timeout_ns=never, orphan_timeout_ns=never))
         controller.start()
@@ -139,11 +140,11 @@ def tick(controller: Controller, backend: SimBackend, n: int) -> None:
         controller.tick(controller.deadline)
 
 
-def broken_commands(client: Connection) -> list[str]:
+def broken_commands(client: Wire) -> list[str]:
     """Refusals that are an exception's text (``ZeroDivisionError: …``), not a reason."""
     broken = []
     while client.poll(0):
-        event = client.recv()
+        event = client.recv().record
         if isinstance(event, Refused) and re.match(r"\w+(Error|Exception): ", event.reason):
             broken.append(event.reason)
     return broken
