@@ -122,7 +122,7 @@ class EmulatedBoard:
         self.estop_button = False
         self.applied = 0
         self.naks = 0
-        self.flipped = 0  # words flipped on purpose (Faults.flip_word)
+        self.flipped = 0  # words flipped on purpose (Faults.flip_word, flip_first)
         self.holds = 0  # replies held back on purpose (Faults.hold_ms)
         self._rng = random.Random(seed)
         self._estop_reported = False
