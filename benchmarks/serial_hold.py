@@ -180,6 +180,7 @@ def main(argv: list[str] | None = None) -> None:
             load = os.getloadavg()[0]
             glitches = client.status().glitches
             outcomes = trip_and_reset(client, args.resets, tolerance)
+            reset_load = os.getloadavg()[0]
     finally:
         for burner in burners:
             burner.kill()
@@ -190,7 +191,8 @@ def main(argv: list[str] | None = None) -> None:
           f"; other: {causes['other']}; load average {load:.1f}; glitches rejected per joint "
           f"{list(glitches)}")
     print(f"resets after a watchdog trip that held: {outcomes['held']} of {args.resets}"
-          + "".join(f"; {k}: {v}" for k, v in sorted(outcomes.items()) if k != "held"))
+          + "".join(f"; {k}: {v}" for k, v in sorted(outcomes.items()) if k != "held")
+          + f"; load average {reset_load:.1f}")
 
 
 if __name__ == "__main__":
