@@ -1,4 +1,4 @@
-"""A plot as data: panels of lines, drawn in the terminal (``app.widgets.figure_plot``, the
+"""A plot as data: panels of lines, drawn in the terminal (``app.plotting.strips``, the
 braille raster) and exported as an SVG (``app.plotting.svg``) from the same record, so an
 export shows exactly the data the screen plots.
 

@@ -1,6 +1,6 @@
 """Figures of runs and paths: the thesis's ``plotsix.m`` and ``plotdata.m``, and the preview
 of a desired path, as ``Figure`` records (``app.plotting.figure``) that the terminal draws
-(``app.widgets.figure_plot``) and ``export`` writes as an SVG drawn from the same data
+(``app.plotting.strips``) and ``export`` writes as an SVG drawn from the same data
 (``app.plotting.svg``).
 """
 
@@ -22,8 +22,8 @@ from app.plotting.figure import (
     Line,
     Panel,
 )
+from app.plotting.strips import figure_text
 from app.plotting.svg import figure_svg
-from app.widgets.figure_plot import figure_text
 from control.recorder import Run
 
 SMOOTH_S = 0.02  # velocity estimate: moving average over 20 ms before differencing

@@ -25,9 +25,10 @@ from textual.widgets import Button, DataTable, Input, Static
 from app.desk import Desk
 from app.plotting.figure import Figure
 from app.plotting.run_plot import export, steady_velocity, view_figure, view_slug, views
+from app.plotting.strips import panel_size
 from app.run_text import local_time, run_lines
 from app.tabs.tab import TabPage
-from app.widgets.figure_plot import FigurePlot, panel_size
+from app.widgets.figure_plot import FigurePlot
 from control.recorder import RecorderError, Run, RunInfo, list_runs, load_run, save_run
 from control.run_mcap import write_mcap
 

@@ -1,29 +1,18 @@
 """A live plot widget drawn with the braille raster: a title row, y labels, the traces and
-a time axis. ``plot`` replaces what is shown; nothing is computed while the widget is hidden.
-``plot_strips`` is that drawing on its own (the figure plot draws its panels with it)."""
+a time axis (``app.plotting.strips.plot_strips``). ``plot`` replaces what is shown; nothing
+is computed while the widget is hidden."""
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 
-from rich.console import Console
-from rich.segment import Segment
-from rich.style import Style
 from rich.text import Text
 from textual.geometry import Size
 from textual.strip import Strip
 from textual.widget import Widget
 
-from app.plotting.braille import Trace, render
-
-LABEL_WIDTH = 8
-AXIS_STYLE = Style(dim=True)
-
-
-def tick_label(value: float, span: float) -> str:
-    """A y label short enough for the margin, with as many decimals as the span needs."""
-    digits = 0 if span >= 50 else 1 if span >= 5 else 2 if span >= 0.5 else 3
-    return f"{value:.{digits}f}"
+from app.plotting.braille import Trace
+from app.plotting.strips import plot_strips
 
 
 class ScopePlot(Widget):
@@ -69,45 +58,3 @@ class ScopePlot(Widget):
             return self._lines[y]
         return Strip.blank(self.size.width)
 
-
-def plot_strips(traces: Sequence[Trace], x_range: tuple[float, float],
-                y_range: tuple[float, float], title: Text, width: int, height: int,
-                console: Console, *, zero_line: bool = False,
-                x_labels: tuple[str, str, str] = ("", "", "")) -> list[Strip]:
-    """``height`` strips of ``width`` cells: a title row, y labels and the traces, the time
-    axis (blank strips when there is no room for a plot)."""
-    if width <= LABEL_WIDTH + 2 or height < 3:
-        return [Strip.blank(width) for _ in range(height)]
-    cols, rows = width - LABEL_WIDTH - 1, height - 2
-    body = render(traces, x_range, y_range, cols, rows, guide=AXIS_STYLE,
-                  guide_y=0.0 if zero_line else None)
-    labels = _y_labels(y_range, rows)
-    lines = [Strip(list(title.render(console))).crop(0, width).adjust_cell_length(width)]
-    for r, strip in enumerate(body):
-        margin = Segment(labels[r].rjust(LABEL_WIDTH)[:LABEL_WIDTH] + "┤", AXIS_STYLE)
-        lines.append(Strip([margin, *strip], width))
-    lines.append(_axis(x_labels, width, cols))
-    return lines
-
-
-def _y_labels(y_range: tuple[float, float], rows: int) -> list[str]:
-    y0, y1 = y_range
-    labels = [""] * rows
-    span = y1 - y0
-    labels[0] = tick_label(y1, span)
-    labels[-1] = tick_label(y0, span)
-    if rows >= 5:
-        labels[rows // 2] = tick_label((y0 + y1) / 2, span)
-    return labels
-
-
-def _axis(x_labels: tuple[str, str, str], width: int, cols: int) -> Strip:
-    left, middle, right = x_labels
-    axis = [" "] * cols
-    for start, label in ((0, left), (max(0, cols // 2 - len(middle) // 2), middle),
-                         (max(0, cols - len(right)), right)):
-        for i, ch in enumerate(label):
-            if start + i < cols:
-                axis[start + i] = ch
-    text = " " * LABEL_WIDTH + "└" + "".join(axis)
-    return Strip([Segment(text[:width], AXIS_STYLE)], width).adjust_cell_length(width)

@@ -14,10 +14,11 @@ from textual.geometry import Region
 from textual.widget import Widget
 from textual.widgets import OptionList
 
+from app.plotting.strips import MIN_ROWS
 from app.tabs.runs import RunsTab
 from app.tui import TABS, ServodeskApp
 from app.widgets.fields import NumberField
-from app.widgets.figure_plot import MIN_ROWS, FigurePlot
+from app.widgets.figure_plot import FigurePlot
 from app.widgets.live_text import LiveText
 from control.recorder import Run, save_run
 from hw.machine import load_machine

@@ -1,0 +1,141 @@
+"""Plots drawn as terminal text: a panel (``plot_strips``: a title row, y labels, the braille
+traces, a time axis) and a figure's panels in a grid (``figure_strips``), as many columns as
+the panels need to keep at least ``MIN_ROWS`` rows of plot each; ``figure_text`` is that
+grid as plain text (``servodesk runs export --format txt``). The widgets show these strips
+(``app.widgets.scope``, ``app.widgets.figure_plot``); nothing here is a widget."""
+
+from __future__ import annotations
+
+import io
+import math
+from collections.abc import Sequence
+
+from rich.console import Console
+from rich.segment import Segment
+from rich.style import Style
+from rich.text import Text
+from textual.geometry import Size
+from textual.strip import Strip
+
+from app.plotting.braille import Trace, render
+from app.plotting.figure import Figure, Panel
+
+LABEL_WIDTH = 8
+AXIS_STYLE = Style(dim=True)
+MIN_ROWS = 3  # rows of plot a panel needs, besides its title and time axis
+MIN_PLOT_COLS = 16  # columns of plot a panel needs, besides its y labels
+GAP = 2  # columns between panels side by side
+
+
+def tick_label(value: float, span: float) -> str:
+    """A y label short enough for the margin, with as many decimals as the span needs."""
+    digits = 0 if span >= 50 else 1 if span >= 5 else 2 if span >= 0.5 else 3
+    return f"{value:.{digits}f}"
+
+
+def plot_strips(traces: Sequence[Trace], x_range: tuple[float, float],
+                y_range: tuple[float, float], title: Text, width: int, height: int,
+                console: Console, *, zero_line: bool = False,
+                x_labels: tuple[str, str, str] = ("", "", "")) -> list[Strip]:
+    """``height`` strips of ``width`` cells: a title row, y labels and the traces, the time
+    axis (blank strips when there is no room for a plot)."""
+    if width <= LABEL_WIDTH + 2 or height < 3:
+        return [Strip.blank(width) for _ in range(height)]
+    cols, rows = width - LABEL_WIDTH - 1, height - 2
+    body = render(traces, x_range, y_range, cols, rows, guide=AXIS_STYLE,
+                  guide_y=0.0 if zero_line else None)
+    labels = _y_labels(y_range, rows)
+    lines = [Strip(list(title.render(console))).crop(0, width).adjust_cell_length(width)]
+    for r, strip in enumerate(body):
+        margin = Segment(labels[r].rjust(LABEL_WIDTH)[:LABEL_WIDTH] + "┤", AXIS_STYLE)
+        lines.append(Strip([margin, *strip], width))
+    lines.append(_axis(x_labels, width, cols))
+    return lines
+
+
+def _y_labels(y_range: tuple[float, float], rows: int) -> list[str]:
+    y0, y1 = y_range
+    labels = [""] * rows
+    span = y1 - y0
+    labels[0] = tick_label(y1, span)
+    labels[-1] = tick_label(y0, span)
+    if rows >= 5:
+        labels[rows // 2] = tick_label((y0 + y1) / 2, span)
+    return labels
+
+
+def _axis(x_labels: tuple[str, str, str], width: int, cols: int) -> Strip:
+    left, middle, right = x_labels
+    axis = [" "] * cols
+    for start, label in ((0, left), (max(0, cols // 2 - len(middle) // 2), middle),
+                         (max(0, cols - len(right)), right)):
+        for i, ch in enumerate(label):
+            if start + i < cols:
+                axis[start + i] = ch
+    text = " " * LABEL_WIDTH + "└" + "".join(axis)
+    return Strip([Segment(text[:width], AXIS_STYLE)], width).adjust_cell_length(width)
+
+
+def panel_size() -> Size:
+    """The least room one panel takes."""
+    return Size(LABEL_WIDTH + 1 + MIN_PLOT_COLS, MIN_ROWS + 2)
+
+
+def grid(count: int, columns: int, size: Size) -> tuple[int, int] | None:
+    """``(columns, rows)`` of a grid of ``count`` panels that fits ``size`` with every panel
+    at least ``panel_size``: the given ``columns``, or (0) the fewest that fit; None if
+    none does."""
+    least = panel_size()
+    choices = [columns] if columns else range(1, count + 1)
+    for c in choices:
+        rows = math.ceil(count / c)
+        if (size.width - GAP * (c - 1)) // c >= least.width and size.height // rows >= least.height:
+            return c, rows
+    return None
+
+
+def cells(count: int, columns: int, rows: int, size: Size) -> list[tuple[int, int, int, int]]:
+    """``(x, y, width, height)`` of each of ``count`` panels in a ``columns × rows`` grid."""
+    width = (size.width - GAP * (columns - 1)) // columns
+    height = size.height // rows
+    return [((k % columns) * (width + GAP), (k // columns) * height, width, height)
+            for k in range(count)]
+
+
+def figure_strips(figure: Figure, size: Size, console: Console) -> list[Strip]:
+    """The figure's panels in their grid filling ``size``, one strip per row; blank if they
+    do not fit (``grid``)."""
+    lines = [Strip.blank(size.width) for _ in range(size.height)]
+    layout = grid(len(figure.panels), figure.columns, size)
+    if layout is None:
+        return lines
+    for panel, (x, y, w, h) in zip(figure.panels, cells(len(figure.panels), *layout, size),
+                                   strict=True):
+        for row, strip in enumerate(_panel_strips(panel, w, h, console)):
+            line = lines[y + row]
+            lines[y + row] = Strip.join([line.crop(0, x), strip, line.crop(x + w, size.width)])
+    return lines
+
+
+def figure_text(figure: Figure, width: int = 160, height: int = 48) -> str:
+    """The figure as plain text, its title above the panels drawn as on the screen (braille
+    dots) at ``width × height``. ValueError if its panels do not fit."""
+    size = Size(width, height - 1)
+    if grid(len(figure.panels), figure.columns, size) is None:
+        raise ValueError(f"{len(figure.panels)} panel(s) do not fit {width}×{height}")
+    console = Console(width=width, file=io.StringIO(), color_system=None)
+    rows = [strip.text.rstrip() for strip in figure_strips(figure, size, console)]
+    return "\n".join([figure.title, *rows]).rstrip() + "\n"
+
+
+def _panel_strips(panel: Panel, width: int, height: int, console: Console) -> list[Strip]:
+    x0, x1 = panel.x_range()
+    title = Text(panel.title + (f" ({panel.unit})" if panel.unit else ""), "bold")
+    for line in panel.lines:
+        if line.label:
+            title.append("  ━ ", line.color)
+            title.append(line.label)
+    traces = [Trace(line.x, line.y, Style(color=line.color)) for line in panel.lines]
+    return plot_strips(traces, (x0, x1), panel.y_range(), title, width, height,
+                       console, zero_line=panel.zero_line,
+                       x_labels=(f"{x0:.2f}", "", f"{x1:.2f} s"))
