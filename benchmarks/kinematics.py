@@ -26,6 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np
 
+from control.motion.robot_model import builtin_unimate
 from kinematics import Unreachable, unimate
 
 
@@ -63,7 +64,7 @@ def main(argv: list[str] | None = None) -> int:
 def measure(n: int = 100_000, single: int = 2000, rtb_poses: int = 200, seed: int = 0) -> dict:
     """The figures ``main`` prints, as a dict (µs, poses/s, %); ``rtb`` is a dict of the
     Robotics Toolbox's ``ik_LM`` figures, or the reason it was not timed."""
-    model = unimate.MODEL
+    model = builtin_unimate()  # the built-in machine file's Table 4.1 and limits
     q = np.random.default_rng(seed).uniform(model.lower, model.upper, (n, 6))
     pose = model.pose(q)
     fk_s = best_of(lambda: model.forward(q))

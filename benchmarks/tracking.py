@@ -37,9 +37,9 @@ from control import ControlClient
 from control.identify import excitation, sysid, tuning
 from control.motion import trajectory
 from control.motion.cartesian import CartesianPath, cartesian_path
+from control.motion.robot_model import builtin_unimate
 from control.recorder import Run
 from hw.machine import Coefficients, Machine, load_machine
-from kinematics import unimate
 
 START = (1400.0, -20.0, 5.0, -10.0, 30.0, 20.0)  # mm, deg: Yaw off 0, so β is not ±90°
 VIA_OFFSETS = ((150.0, 300.0, -80.0), (-100.0, 500.0, 100.0))  # mm from the start's tool point
@@ -130,7 +130,7 @@ def identify(robot: ControlClient, machine: Machine) -> tuple[sysid.Identificati
 
 
 def standard_path(machine: Machine, speed: float = SPEED_FRACTION) -> CartesianPath:
-    tool = unimate.pose(np.array(START))[:3]
+    tool = builtin_unimate().pose(np.array(START))[:3]
     return cartesian_path(START, tool + np.array(VIA_OFFSETS), machine, speed_fraction=speed)
 
 

@@ -53,28 +53,18 @@ limit with |θ5| below ~0.005° can therefore come back just outside the limit
 (beyond LIMIT_TOL) and be reported unreachable.
 
 The numbers. Table 4.1's lengths and the joint limits are machine data and live
-in the machine file only; a ``Unimate2000B`` has no defaults.
-``control.motion.robot_model`` builds one from any ``hw.Machine`` (that is how
-the app, the control process and ``servodesk fk/ik`` get theirs). ``MODEL`` and
-the module-level ``forward``, ``pose``, ``inverse``, ``inverse_batch`` use the
-built-in machine, ``hw/machines/unimate2000b.toml``, read on first use. This
-package imports nothing of the project, so that read is a data read: the file is
-found beside the ``hw`` package (``importlib.util.find_spec``, which locates a
-top-level package without running it) and its ``[kinematics] dh`` rows and
-joint limits are taken with ``tomllib``. ``hw.machine`` remains the file's one
-validating loader; the tests hold the model read here equal to
-``robot_model.unimate_model(load_machine("unimate2000b"))``.
+in the machine file only; a ``Unimate2000B`` has no defaults, and this package
+reads no file: the caller passes them in (``Unimate2000B.from_table``).
+``control.motion.robot_model`` builds one from any ``hw.Machine``
+(``unimate_model``), and the built-in machine's once (``builtin_unimate``): that
+is how the app, ``servodesk fk/ik``, the benchmarks and the tests get theirs.
 """
 
 from __future__ import annotations
 
-import functools
-import importlib.util
 import math
-import tomllib
 from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -85,8 +75,6 @@ from kinematics.dh import forward as dh_forward
 
 JOINTS = ("In/Out", "Rotate", "Up/Down", "Bend", "Yaw", "Swivel")
 UNITS = ("mm", "°", "°", "°", "°", "°")
-# The built-in machine's file, in the hw package's folder: the numbers of MODEL.
-MACHINE_FILE = Path("machines", "unimate2000b.toml")
 # Distance metric for ranking solutions, a choice of this solver rather than a property of
 # the machine: 10 mm of In/Out count as much as 1° of a revolute joint.
 MM_PER_DEGREE = 10.0
@@ -587,73 +575,3 @@ def _vector(v: ArrayLike, what: str) -> list[float]:
         raise ValueError(f"{what} must be finite numbers, got {values}")
     return values
 
-
-# --- the built-in machine ------------------------------------------------------------------
-
-MODEL: Unimate2000B  # the built-in machine's model, read on first use (module __getattr__)
-
-
-def __getattr__(name: str) -> Unimate2000B:
-    """``MODEL``, built from the built-in machine file on first use (PEP 562)."""
-    if name == "MODEL":
-        return default_model()
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-@functools.cache
-def default_model() -> Unimate2000B:
-    """The model of the built-in machine file (module docstring), read once."""
-    path = _machine_file()
-    return _model_of_file(path.read_text(encoding="utf-8"), path.name)
-
-
-def forward(q: ArrayLike) -> np.ndarray:
-    """``MODEL.forward``: ``T_6^0`` (eq. 4.11) of ``q: (..., 6)`` (mm, deg) → ``(..., 4, 4)``."""
-    return default_model().forward(q)
-
-
-def pose(q: ArrayLike) -> np.ndarray:
-    """``MODEL.pose``: x, y, z (mm), γ, β, α (deg) of ``q: (..., 6)`` → ``(..., 6)``."""
-    return default_model().pose(q)
-
-
-def inverse(p: ArrayLike, near: ArrayLike | None = None) -> np.ndarray:
-    """``MODEL.inverse``: every in-limit solution of pose ``p: (6,)``, nearest ``near`` first."""
-    return default_model().inverse(p, near)
-
-
-def inverse_batch(p: ArrayLike, near: ArrayLike | None = None) -> InverseBatch:
-    """``MODEL.inverse_batch``: all 8 branches of poses ``p: (..., 6)``."""
-    return default_model().inverse_batch(p, near)
-
-
-def _machine_file() -> Path:
-    """The built-in machine file, located beside the ``hw`` package without importing it."""
-    spec = importlib.util.find_spec("hw")
-    if spec is None or not spec.submodule_search_locations:
-        raise ModuleNotFoundError(
-            "the built-in Unimate 2000B model reads hw/machines/unimate2000b.toml, but the hw "
-            "package is not installed (pip install servodesk); or build a Unimate2000B from a "
-            "machine file with control.motion.robot_model.unimate_model")
-    return Path(next(iter(spec.submodule_search_locations))) / MACHINE_FILE
-
-
-def _model_of_file(text: str, name: str) -> Unimate2000B:
-    """The model of a machine file's text: its ``[kinematics] dh`` rows (each naming the
-    joint it drives) and its ``[[joints]]`` kinds and limits. ``name`` names the file."""
-    try:
-        doc = tomllib.loads(text)
-        joints = doc["joints"]
-        keys = [joint["key"] for joint in joints]
-        rows = doc["kinematics"]["dh"]
-        drives = [keys.index(row["joint"]) for row in rows]
-        links = [DHLink(float(row["alpha"]), float(row["a"]), float(row["d"]),
-                        float(row["theta"]), joints[j]["kind"] == "prismatic")
-                 for row, j in zip(rows, drives, strict=True)]
-        lower = [float(joint["limits"][0]) for joint in joints]
-        upper = [float(joint["limits"][1]) for joint in joints]
-        return Unimate2000B.from_table(links, drives, lower, upper,
-                                       [joint["name"] for joint in joints])
-    except (KeyError, TypeError, ValueError, tomllib.TOMLDecodeError) as exc:
-        raise ValueError(f"{name}: no Unimate 2000B model ({type(exc).__name__}: {exc}); "
-                         f"hw.machine.load_machine names the key at fault") from None

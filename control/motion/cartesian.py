@@ -220,7 +220,7 @@ def path_from_poses(points: PosePoints, start: ArrayLike, machine: Machine, *,
         raise PoseFileError(f"{points.source}: {exc}") from None
 
 
-def arm_frame(q0: np.ndarray, model: Unimate2000B = unimate.MODEL) -> _ArmFrame:
+def arm_frame(q0: np.ndarray, model: Unimate2000B) -> _ArmFrame:
     """The 1:1 rule's constants of the start joints ``q0 (6,)`` (module docstring)."""
     p = model.pose(q0)
     theta1 = math.radians(float(q0[1]))

@@ -6,13 +6,15 @@ actuator order; each row names the joint whose variable it carries). A file with
 lengths and joint limits, so a re-measured or modified Unimate is a TOML file away;
 ``hw`` stays free of kinematics, and every user of a pose (the Status tab, the
 end-point and Cartesian moves, ``servodesk fk/ik``) goes through here.
-``kinematics.unimate.MODEL`` is the built-in file's model, equal to
-``unimate_model(load_machine("unimate2000b"))``.
+``builtin_unimate()`` is the built-in file's model, loaded once: the kinematics package
+reads no file, so this is where the benchmarks and the tests get the thesis's Unimate.
 """
 
 from __future__ import annotations
 
-from hw.machine import Machine, MachineError
+import functools
+
+from hw.machine import Machine, MachineError, load_machine
 from kinematics.dh import DHLink
 from kinematics.unimate import Unimate2000B
 
@@ -47,3 +49,9 @@ def unimate_model(machine: Machine) -> Unimate2000B:
                                        [j.name for j in machine.joints])
     except ValueError as exc:
         raise MachineError(f"{machine.path.name}: kinematics.dh: {exc}") from None
+
+
+@functools.cache
+def builtin_unimate() -> Unimate2000B:
+    """The built-in Unimate 2000B's model (``hw/machines/unimate2000b.toml``), loaded once."""
+    return unimate_model(load_machine(UNIMATE))

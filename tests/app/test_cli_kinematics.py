@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from app import cli, cli_kinematics
-from kinematics import unimate
+from control.motion.robot_model import builtin_unimate
 
 BUILTIN = Path(__file__).resolve().parents[2] / "hw" / "machines"
 
@@ -56,7 +56,7 @@ def test_fk_json(capsys: pytest.CaptureFixture[str]) -> None:
     assert code == 0
     doc = json.loads(out)
     assert list(doc["q"].values()) == Q
-    np.testing.assert_allclose(list(doc["pose"].values()), unimate.pose(Q), atol=1e-9)
+    np.testing.assert_allclose(list(doc["pose"].values()), builtin_unimate().pose(Q), atol=1e-9)
     assert list(doc["pose"]) == ["x", "y", "z", "gamma", "beta", "alpha"]
     assert doc["outside_limits"] == []
 
@@ -95,11 +95,11 @@ def test_fk_bad_numbers_exit_2_with_one_line(
 def test_ik_lists_every_solution_nearest_first_and_marks_the_chosen_one(
     capsys: pytest.CaptureFixture[str],
 ) -> None:
-    pose = unimate.pose(Q)
+    pose = builtin_unimate().pose(Q)
     code, out, err = run(["ik", *map(repr, pose.tolist()), "--near", *map(str, Q)], capsys)
     assert code == 0 and err == ""
     rows = [line for line in out.splitlines() if is_row(line)]
-    solutions = unimate.inverse(pose, near=Q)
+    solutions = builtin_unimate().inverse(pose, near=Q)
     assert len(rows) == len(solutions) > 1
     assert [r[0] for r in rows] == ["*"] + [" "] * (len(rows) - 1)
     printed = np.array([[float(v) for v in r[1:].split()] for r in rows])
@@ -182,7 +182,7 @@ def test_fk_and_ik_solve_the_machine_files_model(tmp_path: Path,
     code, out, _ = run(["--machine", str(longer), "fk", "--json", *map(str, Q)], capsys)
     assert code == 0
     pose = np.array(list(json.loads(out)["pose"].values()))
-    built_in = unimate.pose(Q)
+    built_in = builtin_unimate().pose(Q)
     np.testing.assert_allclose(np.linalg.norm(pose[:3] - built_in[:3]), 100.0, atol=1e-9)
     np.testing.assert_allclose(pose[3:], built_in[3:], atol=1e-9)
     code, out, _ = run(["ik", "--json", *map(str, pose), "--near", *map(str, Q),
@@ -194,7 +194,7 @@ def test_fk_and_ik_solve_the_machine_files_model(tmp_path: Path,
 def test_ik_respects_the_machine_files_limits(tmp_path: Path,
                                               capsys: pytest.CaptureFixture[str]) -> None:
     narrow = machine_file(tmp_path, "limits = [976.0, 2041.0]", "limits = [976.0, 1700.0]")
-    pose = unimate.pose(Q)  # In/Out 1857.5 or 1777.5 mm: both above 1700
+    pose = builtin_unimate().pose(Q)  # In/Out 1857.5 or 1777.5 mm: both above 1700
     code, _, err = run(["--machine", str(narrow), "ik", *map(str, pose)], capsys)
     assert code == 2 and "In/Out" in err and "1700" in err, err
 

@@ -20,10 +20,11 @@ from app.tabs.runs import RunsTab
 from app.widgets.fields import NumberField
 from app.widgets.live_text import LiveText
 from control.layout import Mode
+from control.motion.robot_model import builtin_unimate
 from control.run_mcap import read_mcap
-from kinematics import unimate
 
 SIZE = (160, 48)
+MODEL = builtin_unimate()  # the built-in Unimate's kinematics
 
 
 async def choose(app, pilot, label: str) -> None:
@@ -188,7 +189,7 @@ def test_end_point_lists_every_solution_and_runs_the_one_picked(tui) -> None:
             form.solve(np.array(status.position))  # the current pose, filled in
             nearest = np.array([float(v) for v in table.get_row_at(0)[1:]])
             assert np.allclose(nearest, status.position, atol=0.5)  # 3 decimals, Yaw near 0
-            for (_, _, key), value in zip(POSE_FIELDS, unimate.pose(two_ways), strict=True):
+            for (_, _, key), value in zip(POSE_FIELDS, MODEL.pose(two_ways), strict=True):
                 app.query_one(f"#form-end_point #pose-{key}", NumberField).text = f"{value:.4f}"
             form.solve(np.array(status.position))
             assert table.row_count == 2
@@ -292,7 +293,7 @@ def test_via_points_preview_and_run_in_joint_space_and_cartesian(tui) -> None:
             final = np.array(app.client.status().position)
             assert abs(final[1] - (q[1] + 10.0)) < 1.0, final
             app.query_one("#via-cartesian", Switch).value = True
-            start = unimate.pose(final)[:3]
+            start = MODEL.pose(final)[:3]
             area.text = (f"{start[0] + 40:.2f} {start[1]:.2f} {start[2]:.2f}\n"
                          f"{start[0] + 40:.2f} {start[1] + 60:.2f} {start[2] + 20:.2f}")
             await pilot.pause(0.5)
@@ -301,7 +302,7 @@ def test_via_points_preview_and_run_in_joint_space_and_cartesian(tui) -> None:
             tab = await run_and_wait(tui, app, pilot)
             assert tab.last_result.complete and tab.last_result.run.kind == "cartesian"
             desired = tab.last_result.run.desired
-            assert np.allclose(unimate.pose(desired[-1])[:3], start + np.array([40, 60, 20]),
+            assert np.allclose(MODEL.pose(desired[-1])[:3], start + np.array([40, 60, 20]),
                                atol=0.01)
             assert np.ptp(desired[:, 4:], axis=0).max() < 1e-6  # γ β held: Yaw, Swivel still
             assert np.allclose(app.client.status().position, desired[-1], atol=1.0)
@@ -321,7 +322,7 @@ def test_after_a_jog_the_forms_show_the_new_pose_and_run_from_it(tui) -> None:
             await pilot.press("f2")
             await choose(app, pilot, "End point")  # filled with the pose before the jog
             x = app.query_one("#form-end_point #pose-x", NumberField)
-            now = unimate.pose(np.array(client.status().position))
+            now = MODEL.pose(np.array(client.status().position))
             assert float(x.text) == pytest.approx(now[0], abs=1.0)  # the arm still settles
             await pilot.press("f1", "9", "s", "s")  # Rotate at 18 % duty
             await tui.until(lambda: client.status().position[1] > before.position[1] + 5.0,
@@ -330,11 +331,11 @@ def test_after_a_jog_the_forms_show_the_new_pose_and_run_from_it(tui) -> None:
             await tui.until(lambda: client.status().mode == Mode.HOLD, what="holding again")
             await tui.until(lambda: abs(client.status().desired[1] - client.status().position[1])
                             < 0.05, timeout=30, what="Rotate settled where it holds")
-            ahead = unimate.pose(np.array(client.status().position))
+            ahead = MODEL.pose(np.array(client.status().position))
             await pilot.press("f2")
             await pilot.pause()
             jogged = np.array(client.status().position)
-            pose = unimate.pose(jogged)
+            pose = MODEL.pose(jogged)
             assert abs(pose[0] - now[0]) > 10.0  # x moved with Rotate: a stale x would show
             for (_, unit, key), value, moved in zip(POSE_FIELDS, pose, np.abs(pose - ahead),
                                                     strict=True):

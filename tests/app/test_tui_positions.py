@@ -16,8 +16,8 @@ from app.widgets.dialogs import ConfirmScreen, EditValueScreen
 from app.widgets.live_text import LiveText
 from control.layout import Mode
 from control.motion.positions import load_positions, positions_file
+from control.motion.robot_model import builtin_unimate
 from control.recorder import list_runs, load_run
-from kinematics import unimate
 
 SIZE = (160, 48)
 MOVE_S = 60.0  # a go-to of a few seconds on a loaded machine
@@ -53,7 +53,7 @@ def test_teach_list_rename_go_to_and_delete(tui, data_dir: Path) -> None:
             assert taught.name == "station"
             assert np.all(np.abs(np.array(taught.joints) - start) <= tolerance)  # held there
             row = [str(c) for c in table.get_row("station")]
-            x, y, z = unimate.pose(np.array(taught.joints))[:3]
+            x, y, z = builtin_unimate().pose(np.array(taught.joints))[:3]
             assert row[:2] == ["station", "taught"]
             assert row[2:8] == [f"{v:.2f}" for v in taught.joints]
             assert row[8:11] == [f"{x:.1f}", f"{y:.1f}", f"{z:.1f}"]

@@ -19,8 +19,8 @@ from app.tabs.tuning import parse_number, parse_taps
 from app.widgets.dialogs import EditValueScreen
 from app.widgets.live_text import LiveText
 from app.widgets.scope import ScopePlot
+from control.motion.robot_model import builtin_unimate
 from hw.machine import COEFFICIENT, FILTER_DIVISOR, load_machine
-from kinematics import unimate
 
 SIZE = (160, 48)
 BRAILLE = range(0x2801, 0x2900)
@@ -65,7 +65,7 @@ def test_status_shows_joints_pose_loop_and_link(tui) -> None:
             for joint in app.machine.joints:
                 assert joint.name in tui.text(joints)
             pose = tui.text(app.query_one("#status-pose", LiveText))
-            x = unimate.pose(np.array(app.client.status().position))[0]
+            x = builtin_unimate().pose(np.array(app.client.status().position))[0]
             shown = float(re.search(r"^ *x +(-?[\d.]+) mm", pose, re.MULTILINE).group(1))
             assert "end effector" in pose and abs(shown - x) < 1.0  # eq. 4.11 of the reading
             loop = tui.text(app.query_one("#status-loop", LiveText))

@@ -56,11 +56,12 @@ from control.motion.path_files import (
     read_path,
     resample,
 )
+from control.motion.robot_model import builtin_unimate
 from hw.machine import Machine, MachineError, load_machine, parse_machine
 from hw.serial.emulator import EmulatedBoard
 from hw.serial.messages import BoardConfig, Config, Duty, Heartbeat, MessageWriter
 from hw.sim.backend import SimBackend
-from kinematics import Unreachable, unimate, xyz_fixed
+from kinematics import Unreachable, xyz_fixed
 
 UNIMATE = load_machine("unimate2000b")
 MACHINE_TEXT = Path(UNIMATE.path).read_text()
@@ -761,7 +762,7 @@ def poses(draw: st.DrawFn) -> tuple[np.ndarray, np.ndarray | None]:
     """Poses of in-limit configurations, nudged (often out of reach), or any six floats."""
     if draw(st.booleans()):
         q = np.array([draw(st.floats(lo, hi)) for lo, hi in zip(LOWER, UPPER, strict=True)])
-        p = unimate.pose(q)
+        p = builtin_unimate().pose(q)
         nudge = np.array(draw(st.lists(st.sampled_from([0.0, 0.0, 1.0, -50.0, 500.0, 90.0]),
                                        min_size=6, max_size=6)))
         p = p + nudge
@@ -782,13 +783,13 @@ def test_inverse_kinematics_of_any_pose(measured,
     measured.example()
     p, near = case
     try:
-        solutions = unimate.inverse(p, near=near)
+        solutions = builtin_unimate().inverse(p, near=near)
     except (Unreachable, ValueError) as exc:
         assert str(exc) and "\n" not in str(exc)
         return
     assert len(solutions) >= 1
     assert np.all(solutions >= LOWER - 1e-9) and np.all(solutions <= UPPER + 1e-9)
-    t = unimate.forward(solutions)
+    t = builtin_unimate().forward(solutions)
     np.testing.assert_allclose(t[:, :3, 3], np.broadcast_to(p[:3], (len(solutions), 3)),
                                atol=1e-6)
     want = xyz_fixed.rotation(*np.radians(p[3:]))

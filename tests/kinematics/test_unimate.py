@@ -10,9 +10,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from control.motion.robot_model import builtin_unimate
 from kinematics import Unreachable, unimate, xyz_fixed
-from kinematics.unimate import MM_PER_DEGREE, MODEL, Unimate2000B
+from kinematics.unimate import MM_PER_DEGREE, Unimate2000B
 
+MODEL = builtin_unimate()  # Table 4.1 and rtshare.h's limits, from the machine file
 LOWER = np.array(MODEL.lower)
 UPPER = np.array(MODEL.upper)
 WEIGHTS = np.array([1 / MM_PER_DEGREE, 1, 1, 1, 1, 1])
@@ -100,13 +102,13 @@ def test_forward_equals_the_listings_forward_calc() -> None:
     inside = random_joints(5000, seed=10)
     anywhere = np.random.default_rng(11).uniform(-400, 2500, (5000, 6))
     for q in (inside, anywhere):
-        np.testing.assert_allclose(unimate.forward(q), forward_calc(q), atol=1e-9)
+        np.testing.assert_allclose(MODEL.forward(q), forward_calc(q), atol=1e-9)
 
 
 def test_forward_equals_the_thesis_a_matrices_multiplied_eq_4_11() -> None:
     for q in random_joints(200, seed=12):
         want = np.linalg.multi_dot(thesis_a_matrices(q))
-        np.testing.assert_allclose(unimate.forward(q), want, atol=1e-9)
+        np.testing.assert_allclose(MODEL.forward(q), want, atol=1e-9)
 
 
 def test_each_dh_row_is_the_thesis_a_matrix() -> None:
@@ -132,31 +134,31 @@ def test_a21_is_table_4_2s_two_steps_plus_the_a2_offset() -> None:
 def test_pose_at_q_zero_is_the_hand_derived_one() -> None:
     """All joints 0 (section 4.4, Figure 4.5): x6 = z0, y6 = -x0, z6 = -y0, so
     P = (d3 + Lb, -Ly, d1 + a2) and R = Rz(0)·Ry(-90°)·Rx(90°)."""
-    np.testing.assert_allclose(unimate.pose(np.zeros(6)),
+    np.testing.assert_allclose(MODEL.pose(np.zeros(6)),
                                [200.0, -440.0, 1187.45, 90.0, -90.0, 0.0], atol=1e-9)
-    t = unimate.forward(np.zeros(6))
+    t = MODEL.forward(np.zeros(6))
     np.testing.assert_allclose(t[:3, :3], [[0, -1, 0], [0, 0, -1], [1, 0, 0]], atol=1e-15)
-    np.testing.assert_allclose(unimate.pose([1000.0, 0, 0, 0, 0, 0])[:3], [1200.0, -440.0, 1187.45],
+    np.testing.assert_allclose(MODEL.pose([1000.0, 0, 0, 0, 0, 0])[:3], [1200.0, -440.0, 1187.45],
                                atol=1e-9)
 
 
 @pytest.mark.parametrize("batch", [(), (5,), (2, 3), (1, 4, 2)])
 def test_forward_and_pose_are_batch_first(batch: tuple[int, ...]) -> None:
     q = random_joints(int(np.prod(batch)), seed=14).reshape(*batch, 6)
-    assert unimate.forward(q).shape == (*batch, 4, 4)
-    assert unimate.pose(q).shape == (*batch, 6)
-    np.testing.assert_allclose(unimate.pose(q).reshape(-1, 6), unimate.pose(q.reshape(-1, 6)))
+    assert MODEL.forward(q).shape == (*batch, 4, 4)
+    assert MODEL.pose(q).shape == (*batch, 6)
+    np.testing.assert_allclose(MODEL.pose(q).reshape(-1, 6), MODEL.pose(q.reshape(-1, 6)))
 
 
 def test_pose_angles_give_the_forward_rotation() -> None:
     q = random_joints(5000, seed=15)
-    np.testing.assert_allclose(target(unimate.pose(q)), unimate.forward(q), atol=1e-9)
+    np.testing.assert_allclose(target(MODEL.pose(q)), MODEL.forward(q), atol=1e-9)
 
 
 @pytest.mark.parametrize("q", [np.zeros(5), np.zeros((3, 7)), 1.0])
 def test_forward_rejects_the_wrong_shape(q: object) -> None:
     with pytest.raises(ValueError, match=r"\(\.\.\., 6\)"):
-        unimate.forward(q)
+        MODEL.forward(q)
 
 
 # --- inverse: round trips ------------------------------------------------------------------
@@ -164,8 +166,8 @@ def test_forward_rejects_the_wrong_shape(q: object) -> None:
 
 def test_batch_round_trip_finds_every_in_limit_configuration() -> None:
     q = random_joints(20_000, seed=20)
-    p = unimate.pose(q)
-    result = unimate.inverse_batch(p, near=q)
+    p = MODEL.pose(q)
+    result = MODEL.inverse_batch(p, near=q)
     assert result.reachable.all()
     np.testing.assert_allclose(result.best, q, atol=1e-6)
     solutions = result.solutions[result.valid]
@@ -177,8 +179,8 @@ def test_batch_round_trip_finds_every_in_limit_configuration() -> None:
 
 def test_batch_with_the_default_near_reaches_every_pose() -> None:
     q = random_joints(20_000, seed=21)
-    p = unimate.pose(q)
-    result = unimate.inverse_batch(p)
+    p = MODEL.pose(q)
+    result = MODEL.inverse_batch(p)
     assert result.reachable.all()
     assert_in_limits(result.best)
     assert_reaches(result.best, p)
@@ -186,8 +188,8 @@ def test_batch_with_the_default_near_reaches_every_pose() -> None:
 
 def test_single_inverse_returns_q_first_and_every_branch_reaches_the_pose() -> None:
     for q in random_joints(300, seed=22):
-        p = unimate.pose(q)
-        sols = unimate.inverse(p, near=q)
+        p = MODEL.pose(q)
+        sols = MODEL.inverse(p, near=q)
         np.testing.assert_allclose(sols[0], q, atol=1e-6)
         assert_in_limits(sols)
         assert_reaches(sols, p)
@@ -196,10 +198,10 @@ def test_single_inverse_returns_q_first_and_every_branch_reaches_the_pose() -> N
 def test_single_inverse_agrees_with_the_batch() -> None:
     q = random_joints(300, seed=23)
     near = random_joints(300, seed=24)
-    p = unimate.pose(q)
-    result = unimate.inverse_batch(p, near=near)
+    p = MODEL.pose(q)
+    result = MODEL.inverse_batch(p, near=near)
     for i in range(len(q)):
-        sols = unimate.inverse(p[i], near=near[i])
+        sols = MODEL.inverse(p[i], near=near[i])
         batch = result.solutions[i][result.valid[i]]
         assert len(sols) == len(batch)
         np.testing.assert_allclose(sols[0], result.best[i], atol=1e-9)
@@ -212,7 +214,7 @@ def test_solutions_are_distinct_and_sorted_nearest_first() -> None:
     near = random_joints(300, seed=26)
     counts = []
     for qi, ni in zip(q, near, strict=True):
-        sols = unimate.inverse(unimate.pose(qi), near=ni)
+        sols = MODEL.inverse(MODEL.pose(qi), near=ni)
         distance = (np.abs(sols - ni) * WEIGHTS).sum(axis=1)
         assert np.all(np.diff(distance) >= 0)
         gaps = np.abs(sols[:, None] - sols[None]).max(axis=-1) + np.eye(len(sols))
@@ -232,16 +234,16 @@ def test_distance_is_degrees_plus_in_out_over_mm_per_degree() -> None:
 @given(st.tuples(*(st.floats(lo, hi) for lo, hi in zip(MODEL.lower, MODEL.upper, strict=True))))
 def test_any_in_limit_configuration_round_trips(q: tuple[float, ...]) -> None:
     q = np.array(q)
-    p = unimate.pose(q)
+    p = MODEL.pose(q)
     if abs(math.sin(math.radians(q[4]))) > 1e-3:
-        sols = unimate.inverse(p, near=q)
+        sols = MODEL.inverse(p, near=q)
         np.testing.assert_allclose(sols[0], q, atol=1e-6)
         assert_reaches(sols, p)
         return
     # ill-conditioned near the wrist singularity (module docstring): the pose is met,
     # the joints may move along the near-family and so past a limit they sit on
     try:
-        sols = unimate.inverse(p, near=q)
+        sols = MODEL.inverse(p, near=q)
     except Unreachable:
         assert np.minimum(q - LOWER, UPPER - q).min() < 1e-2
         return
@@ -252,9 +254,9 @@ def test_any_in_limit_configuration_round_trips(q: tuple[float, ...]) -> None:
 def test_rotate_at_and_around_90_degrees_round_trips(rotate: float) -> None:
     """The listing divides by cos θ1 and gets d3 wrong at θ1 = ±90° (errata #9)."""
     q = np.array([1500.0, rotate, 12.0, -35.0, 70.0, 150.0])
-    sols = unimate.inverse(unimate.pose(q), near=q)
+    sols = MODEL.inverse(MODEL.pose(q), near=q)
     np.testing.assert_allclose(sols[0], q, atol=1e-6)
-    assert_reaches(sols, unimate.pose(q))
+    assert_reaches(sols, MODEL.pose(q))
 
 
 @pytest.mark.parametrize("q", [
@@ -263,16 +265,16 @@ def test_rotate_at_and_around_90_degrees_round_trips(rotate: float) -> None:
     [2041.0, -110.0, 30.0, -110.0, 174.0, -180.0],
 ])
 def test_configurations_on_the_limits_round_trip_onto_the_limits(q: list[float]) -> None:
-    sols = unimate.inverse(unimate.pose(q), near=q)
+    sols = MODEL.inverse(MODEL.pose(q), near=q)
     np.testing.assert_allclose(sols[0], q, atol=1e-6)
     assert_in_limits(sols)
 
 
 def test_swivel_at_180_takes_the_copy_nearest_near() -> None:
     q = np.array([1500.0, 10.0, 5.0, 20.0, 45.0, 180.0])
-    p = unimate.pose(q)
-    assert unimate.inverse(p, near=[*q[:5], 170.0])[0, 5] == pytest.approx(180.0)
-    assert unimate.inverse(p, near=[*q[:5], -170.0])[0, 5] == pytest.approx(-180.0)
+    p = MODEL.pose(q)
+    assert MODEL.inverse(p, near=[*q[:5], 170.0])[0, 5] == pytest.approx(180.0)
+    assert MODEL.inverse(p, near=[*q[:5], -170.0])[0, 5] == pytest.approx(-180.0)
 
 
 def test_other_geometry_round_trips() -> None:
@@ -288,30 +290,30 @@ def test_other_geometry_round_trips() -> None:
 def test_home_pose_round_trips() -> None:
     """All angles 0 (β = -90°, and θ5 = 0: wrist singular) with In/Out inside its limits."""
     home = np.array([1000.0, 0.0, 0.0, 0.0, 0.0, 0.0])
-    p = unimate.pose(home)
+    p = MODEL.pose(home)
     np.testing.assert_allclose(p, [1200.0, -440.0, 1187.45, 90.0, -90.0, 0.0], atol=1e-9)
     for near in (home, None):
-        sols = unimate.inverse(p, near=near)
+        sols = MODEL.inverse(p, near=near)
         np.testing.assert_allclose(sols[0], home, atol=1e-9)
-    np.testing.assert_allclose(unimate.inverse_batch(p).best, home, atol=1e-9)
+    np.testing.assert_allclose(MODEL.inverse_batch(p).best, home, atol=1e-9)
 
 
 def test_wrist_singularity_holds_swivel_or_bend_at_near() -> None:
     """θ5 = 0: the pose fixes only θ2 + θ4 + θ6 and the wrist point; the solutions are
     the family members with near's Swivel and with near's Bend (module docstring)."""
     q = np.array([1400.0, 30.0, 10.0, 40.0, 0.0, 20.0])
-    p = unimate.pose(q)
-    sols = unimate.inverse(p, near=q)
+    p = MODEL.pose(q)
+    sols = MODEL.inverse(p, near=q)
     assert len(sols) == 1  # both holds give q itself, kept once
     np.testing.assert_allclose(sols[0], q, atol=1e-9)
     for bend, swivel in [(40.0, -20.0), (40.0, 35.0), (0.0, 0.0), (-60.0, 120.0)]:
         near = np.array([1500.0, 0.0, 0.0, bend, 0.0, swivel])
-        sols = unimate.inverse(p, near=near)
+        sols = MODEL.inverse(p, near=near)
         assert_reaches(sols, p)
         assert_in_limits(sols)
         held = np.isclose(sols[:, 5], swivel, atol=1e-9) | np.isclose(sols[:, 3], bend, atol=1e-9)
         assert held.all()
-        result = unimate.inverse_batch(p, near=near)
+        result = MODEL.inverse_batch(p, near=near)
         np.testing.assert_allclose(result.best, sols[0], atol=1e-9)
         assert result.valid.sum() == len(sols)
 
@@ -319,27 +321,27 @@ def test_wrist_singularity_holds_swivel_or_bend_at_near() -> None:
 def test_wrist_singularity_falls_back_to_bend_when_swivel_cannot_be_held() -> None:
     q = np.array([1400.0, 30.0, 10.0, 40.0, 0.0, 20.0])
     near = np.array([1400.0, 30.0, 10.0, 40.0, 0.0, -60.0])  # Swivel -60° needs Bend ≈ 121°
-    np.testing.assert_allclose(unimate.inverse(unimate.pose(q), near=near), [q], atol=1e-9)
+    np.testing.assert_allclose(MODEL.inverse(MODEL.pose(q), near=near), [q], atol=1e-9)
 
 
 def test_wrist_singularity_unreachable_with_this_near_says_so() -> None:
-    p = unimate.pose([976.0, 0.0, 30.0, 0.0, 0.0, 0.0])
+    p = MODEL.pose([976.0, 0.0, 30.0, 0.0, 0.0, 0.0])
     with pytest.raises(Unreachable, match=r"^outside the joint limits: Up/Down would be 39\.1°.*"
                                           r"wrist singular: Swivel held at 120° or Bend at -110°"):
-        unimate.inverse(p, near=[976.0, 0.0, 30.0, -110.0, 0.0, 120.0])
-    assert not unimate.inverse_batch(p, near=[976.0, 0.0, 30.0, -110.0, 0.0, 120.0]).reachable
+        MODEL.inverse(p, near=[976.0, 0.0, 30.0, -110.0, 0.0, 120.0])
+    assert not MODEL.inverse_batch(p, near=[976.0, 0.0, 30.0, -110.0, 0.0, 120.0]).reachable
 
 
 def test_exactly_singular_poses_batch_matches_single() -> None:
     q = random_joints(500, seed=28)
     q[:, 4] = 0.0
     near = random_joints(500, seed=29)
-    p = unimate.pose(q)
-    result = unimate.inverse_batch(p, near=near)
+    p = MODEL.pose(q)
+    result = MODEL.inverse_batch(p, near=near)
     assert result.reachable.mean() > 0.8
     for i in range(len(q)):
         try:
-            sols = unimate.inverse(p[i], near=near[i])
+            sols = MODEL.inverse(p[i], near=near[i])
         except Unreachable:
             assert not result.reachable[i]
             continue
@@ -351,8 +353,8 @@ def test_exactly_singular_poses_batch_matches_single() -> None:
 @pytest.mark.parametrize("yaw", [1e-12, -1e-9, 1e-7, 1e-4])
 def test_near_the_wrist_singularity_every_branch_still_reaches_the_pose(yaw: float) -> None:
     q = np.array([1400.0, 30.0, 10.0, 40.0, yaw, 20.0])
-    p = unimate.pose(q)
-    sols = unimate.inverse(p, near=q)
+    p = MODEL.pose(q)
+    sols = MODEL.inverse(p, near=q)
     assert_reaches(sols, p)
     assert_in_limits(sols)
 
@@ -379,28 +381,28 @@ def test_wrist_point_on_the_rotate_axis_holds_rotate_at_near() -> None:
 
 def test_far_pose_is_out_of_reach_beyond_in_out() -> None:
     q = np.array([2041.0, 10.0, 5.0, 0.0, 30.0, 0.0])
-    p = unimate.pose(q)
+    p = MODEL.pose(q)
     p[:3] *= 1.5
     with pytest.raises(Unreachable, match=r"^out of reach: In/Out would be [\d.]+ mm, "
                                           r"[\d.]+ mm beyond 976…2041 mm"):
-        unimate.inverse(p)
-    assert not unimate.inverse_batch(p).reachable
-    assert np.isnan(unimate.inverse_batch(p).best).all()
+        MODEL.inverse(p)
+    assert not MODEL.inverse_batch(p).reachable
+    assert np.isnan(MODEL.inverse_batch(p).best).all()
 
 
 def test_close_pose_is_out_of_reach_short_of_in_out() -> None:
-    p = unimate.pose([976.0, 0.0, 0.0, 0.0, 30.0, 0.0])
+    p = MODEL.pose([976.0, 0.0, 0.0, 0.0, 30.0, 0.0])
     p[0] -= 300.0
     with pytest.raises(Unreachable, match=r"^out of reach: In/Out would be [\d.]+ mm, "
                                           r"[\d.]+ mm short of 976…2041 mm"):
-        unimate.inverse(p)
+        MODEL.inverse(p)
 
 
 def test_pose_outside_a_joint_limit_names_the_joint_and_value() -> None:
     q = np.array([1500.0, 20.0, 35.0, 10.0, 40.0, 30.0])
     with pytest.raises(Unreachable, match=r"^outside the joint limits: Up/Down would be 35\.0°, "
                                           r"outside -27…30°$"):
-        unimate.inverse(unimate.pose(q), near=q)
+        MODEL.inverse(MODEL.pose(q), near=q)
 
 
 def test_arm_point_inside_the_a2_offset_has_no_real_up_down_root() -> None:
@@ -410,8 +412,8 @@ def test_arm_point_inside_the_a2_offset_has_no_real_up_down_root() -> None:
     p = np.array([100.0, -440.0, 1066.8, 90.0, -90.0, 0.0])
     with pytest.raises(Unreachable, match=r"^out of reach: the arm point is 100\.0 mm from the "
                                           r"Up/Down axis, inside the a2 = 120.65 mm offset"):
-        unimate.inverse(p)
-    assert not unimate.inverse_batch(p).reachable
+        MODEL.inverse(p)
+    assert not MODEL.inverse_batch(p).reachable
 
 
 def test_unreachable_is_a_value_error() -> None:
@@ -421,41 +423,41 @@ def test_unreachable_is_a_value_error() -> None:
 @pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
 @pytest.mark.parametrize("where", [0, 4])
 def test_nan_and_inf_raise_value_error(bad: float, where: int) -> None:
-    p = unimate.pose(np.array([1500.0, 0, 0, 0, 30, 0]))
+    p = MODEL.pose(np.array([1500.0, 0, 0, 0, 30, 0]))
     p[where] = bad
     with pytest.raises(ValueError, match="finite") as info:
-        unimate.inverse(p)
+        MODEL.inverse(p)
     assert not isinstance(info.value, Unreachable)
     with pytest.raises(ValueError, match="finite"):
-        unimate.inverse_batch(np.stack([p, p]))
+        MODEL.inverse_batch(np.stack([p, p]))
     with pytest.raises(ValueError, match="finite"):
-        unimate.inverse(unimate.pose(np.array([1500.0, 0, 0, 0, 30, 0])), near=p)
+        MODEL.inverse(MODEL.pose(np.array([1500.0, 0, 0, 0, 30, 0])), near=p)
     with pytest.raises(ValueError, match="finite"):
-        unimate.inverse_batch(np.zeros(6), near=p)
+        MODEL.inverse_batch(np.zeros(6), near=p)
     with pytest.raises(ValueError, match="finite"):
-        unimate.forward(p)
+        MODEL.forward(p)
 
 
 @pytest.mark.parametrize("p", [np.zeros(5), np.zeros((2, 6)), "abc"])
 def test_single_inverse_rejects_anything_but_one_pose(p: object) -> None:
     with pytest.raises(ValueError):
-        unimate.inverse(p)
+        MODEL.inverse(p)
 
 
 def test_inputs_are_not_mutated() -> None:
     """The listing converts its input angles to radians in place (errata #10)."""
     q = random_joints(50, seed=30)
-    p = unimate.pose(q)
+    p = MODEL.pose(q)
     q_before, p_before = q.copy(), p.copy()
-    unimate.forward(q)
-    unimate.pose(q)
-    unimate.inverse(p[0], near=q[0])
-    unimate.inverse_batch(p, near=q)
-    unimate.inverse_batch(p, near=q[0])
+    MODEL.forward(q)
+    MODEL.pose(q)
+    MODEL.inverse(p[0], near=q[0])
+    MODEL.inverse_batch(p, near=q)
+    MODEL.inverse_batch(p, near=q[0])
     np.testing.assert_array_equal(q, q_before)
     np.testing.assert_array_equal(p, p_before)
     as_list = p[0].tolist()
-    unimate.inverse(as_list)
+    MODEL.inverse(as_list)
     assert as_list == p_before[0].tolist()
 
 
@@ -463,9 +465,9 @@ def test_inputs_are_not_mutated() -> None:
 def test_inverse_batch_shapes(batch: tuple[int, ...]) -> None:
     n = int(np.prod(batch))
     q = random_joints(n, seed=31).reshape(*batch, 6)
-    p = unimate.pose(q)
+    p = MODEL.pose(q)
     for near in (None, q[(0,) * len(batch)] if batch else q, q):
-        result = unimate.inverse_batch(p, near=near)
+        result = MODEL.inverse_batch(p, near=near)
         assert result.solutions.shape == (*batch, 8, 6)
         assert result.valid.shape == (*batch, 8)
         assert result.best.shape == (*batch, 6)
@@ -475,7 +477,7 @@ def test_inverse_batch_shapes(batch: tuple[int, ...]) -> None:
 
 def test_inverse_batch_rejects_a_mismatched_near() -> None:
     with pytest.raises(ValueError, match="near"):
-        unimate.inverse_batch(np.zeros((3, 6)), near=np.zeros((2, 6)))
+        MODEL.inverse_batch(np.zeros((3, 6)), near=np.zeros((2, 6)))
 
 
 def test_model_rejects_bad_limits() -> None:

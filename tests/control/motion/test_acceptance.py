@@ -13,8 +13,8 @@ from control.motion import acceptance, moves, trajectory
 from control.motion.acceptance import MoveRefused, accept, check_path, check_profile
 from control.motion.cartesian import cartesian_path
 from control.motion.plan import MovePlan, approach_ramp
+from control.motion.robot_model import builtin_unimate
 from hw.machine import load_machine
-from kinematics import unimate
 
 UNIMATE = load_machine("unimate2000b")
 RIG = load_machine("rig")
@@ -199,7 +199,7 @@ FAR = HOME + np.array([500, 100, 25, 100, 150, 170])
     lambda: trajectory.via_path(np.vstack([HOME, HOME + np.array([400, 60, 20, 90, -60, 150]),
                                            HOME + np.array([100, -30, -20, 0, 40, 0])]), UNIMATE).q,
     lambda: cartesian_path(np.array([1400.0, -20, 5, -10, 30, 20]),
-                           unimate.pose(np.array([1400.0, -20, 5, -10, 30, 20]))[:3]
+                           builtin_unimate().pose(np.array([1400.0, -20, 5, -10, 30, 20]))[:3]
                            + np.array([[150.0, 300, -80], [-100, 500, 100]]), UNIMATE).q,
     lambda: approach_ramp(HOME, FAR, UNIMATE, DT),
 ], ids=["ramp", "sine-accel", "sine-speed", "via_path", "cartesian", "approach"])

@@ -16,16 +16,18 @@ from control.motion.cartesian import (
     path_from_poses,
     read_poses,
 )
+from control.motion.robot_model import builtin_unimate
 from hw.machine import load_machine
 from kinematics import unimate, xyz_fixed
 from kinematics.unimate import Unimate2000B
 
 UNIMATE = load_machine("unimate2000b")
+MODEL = builtin_unimate()
 DT = UNIMATE.sample_time_s
 VMAX = np.array([j.max_speed for j in UNIMATE.joints])
 AMAX = np.array([j.max_accel for j in UNIMATE.joints])
 START = np.array([1400.0, -20.0, 5.0, -10.0, 30.0, 20.0])
-TOOL = unimate.pose(START)[:3]
+TOOL = MODEL.pose(START)[:3]
 OFFSETS = np.array([[150.0, 300.0, -80.0], [-100.0, 500.0, 100.0]])
 
 
@@ -39,16 +41,16 @@ def wrapped(angle: np.ndarray) -> np.ndarray:
 
 
 def test_gamma_and_beta_stay_constant_within_1e6_degrees(path: cartesian.CartesianPath) -> None:
-    start = unimate.pose(START)
-    reached = unimate.pose(path.q)  # the joints' forward kinematics, not the targets
+    start = MODEL.pose(START)
+    reached = MODEL.pose(path.q)  # the joints' forward kinematics, not the targets
     assert abs(start[4]) < 80.0  # away from β = ±90°, where γ and α are not separable
     assert np.max(np.abs(wrapped(reached[:, 3] - start[3]))) < 1e-6
     assert np.max(np.abs(wrapped(reached[:, 4] - start[4]))) < 1e-6
 
 
 def test_alpha_turns_one_to_one_with_rotate(path: cartesian.CartesianPath) -> None:
-    start = unimate.pose(START)
-    reached = unimate.pose(path.q)
+    start = MODEL.pose(START)
+    reached = MODEL.pose(path.q)
     turned = wrapped((reached[:, 5] - start[5]) - (path.q[:, 1] - START[1]))
     assert np.max(np.abs(turned)) < 1e-6
     assert np.ptp(path.q[:, 1]) > 10.0  # Rotate really turns on this path
@@ -59,7 +61,7 @@ def test_the_tool_attitude_relative_to_the_arm_is_constant(path: cartesian.Carte
     np.testing.assert_allclose(path.q[:, 4], START[4], atol=1e-9)
     np.testing.assert_allclose(path.q[:, 5], START[5], atol=1e-9)
     np.testing.assert_allclose(path.q[:, 2] + path.q[:, 3], START[2] + START[3], atol=1e-9)
-    r = xyz_fixed.rotation(*np.radians(unimate.pose(path.q)[:, 3:]).T)
+    r = xyz_fixed.rotation(*np.radians(MODEL.pose(path.q)[:, 3:]).T)
     rz = xyz_fixed.rotation(0.0, 0.0, -np.radians(path.q[:, 1]))
     relative = rz @ r
     np.testing.assert_allclose(relative, np.broadcast_to(relative[0], relative.shape), atol=1e-12)
@@ -67,7 +69,7 @@ def test_the_tool_attitude_relative_to_the_arm_is_constant(path: cartesian.Carte
 
 def test_the_tool_passes_through_the_via_points_on_a_cubic_spline(
         path: cartesian.CartesianPath) -> None:
-    xyz = unimate.pose(path.q)[:, :3]
+    xyz = MODEL.pose(path.q)[:, :3]
     np.testing.assert_allclose(xyz[0], TOOL, atol=1e-9)
     np.testing.assert_allclose(xyz[path.via_index[1:]], TOOL + OFFSETS, atol=1e-6)
     np.testing.assert_allclose(xyz, path.poses[:, :3], atol=1e-6)
@@ -88,18 +90,18 @@ def test_the_joint_path_is_continuous_and_within_every_limit(
 
 
 def test_every_sample_stays_on_the_start_branch(path: cartesian.CartesianPath) -> None:
-    batch = unimate.inverse_batch(path.poses, near=START)
+    batch = MODEL.inverse_batch(path.poses, near=START)
     assert batch.valid[:, path.branch].all()
     np.testing.assert_allclose(batch.solutions[:, path.branch], path.q, atol=1e-9)
     # the branch is the one the start joints are on
-    start_batch = unimate.inverse_batch(unimate.pose(START), near=START)
+    start_batch = MODEL.inverse_batch(MODEL.pose(START), near=START)
     nearest = np.argmin(np.where(start_batch.valid, unimate.distance(start_batch.solutions,
                                                                      START), np.inf))
     assert nearest == path.branch
 
 
 def test_the_thesis_shortcut_alpha_from_phi_alone_is_only_right_in_the_arm_plane() -> None:
-    frame = cartesian.arm_frame(START)
+    frame = cartesian.arm_frame(START, MODEL)
     assert abs(frame.offset) > 100.0  # the tool point is far off the arm plane here
     end = TOOL + OFFSETS[-1]
     exact = math.degrees(frame.rotate_angle(np.vstack([TOOL, end]))[1])
