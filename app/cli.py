@@ -24,9 +24,8 @@ from app import (
     cli_runs,
     cli_serve,
 )
-from control.law import SLIPS
-from control.timing import TIMINGS, Timing
-from hw.factory import BACKENDS
+from app.cli_options import ALL, global_options, machine_for
+from control.timing import Timing
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -34,25 +33,8 @@ def build_parser() -> argparse.ArgumentParser:
         prog="servodesk",
         description="Terminal workstation for real-time control of hydraulic manipulators "
                     "(Unimate 2000B, single-axis test rig).",
+        parents=[global_options(*ALL, defaults=True)],
     )
-    parser.add_argument("--machine", default="unimate2000b",
-                        help="built-in machine (unimate2000b, rig) or a machine TOML path")
-    parser.add_argument("--backend", default="sim", choices=BACKENDS,
-                        help="sim (default) or serial (an I/O board)")
-    parser.add_argument("--port", help="pyserial URL of the I/O board for --backend serial")
-    parser.add_argument("--data-dir", metavar="DIR",
-                        help="where runs are saved (default: the user's data directory, "
-                             "servodesk/runs)")
-    parser.add_argument("--seed", type=int, default=0, help="simulator seed (default 0)")
-    parser.add_argument("--timing", default="servodesk", choices=TIMINGS,
-                        help="servodesk (every joint every tick, default) or thesis (one joint "
-                             "per interrupt, as RT.o: docs/thesis_timing.md)")
-    parser.add_argument("--interrupt-ms", type=float, default=1.0, metavar="MS",
-                        help="thesis timing: the interrupt period, one joint each (1 or 6 as "
-                             "the thesis; default 1)")
-    parser.add_argument("--slip", action="append", choices=sorted(SLIPS), default=[],
-                        help="thesis timing: run the listing's law with this slip (errata); "
-                             "repeat for several")
     parser.add_argument("--attach", nargs="?", const="", metavar="SOCKET",
                         help="open the TUI on the controller `servodesk controller` runs (its "
                              "socket; default the one in the user's runtime directory) instead "
@@ -93,8 +75,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         app = (attached_app(args.attach, observe_only=args.observe_only,
                             take_command=args.take_command) if args.attach is not None else
-               ServodeskApp(args.machine, args.backend, args.port, args.data_dir, seed=args.seed,
-                            client_options={"timing": timing}))
+               ServodeskApp(machine_for(args), args.backend, args.port, args.data_dir,
+                            seed=args.seed, client_options={"timing": timing}))
     except (MachineError, ConnectionError, ControllerError, OSError) as exc:
         print(f"servodesk: {exc}", file=sys.stderr)
         return 2

@@ -15,32 +15,21 @@ import sys
 import time
 from pathlib import Path
 
+from app.cli_options import ALL, global_options, machine_for
 from app.priority import raise_priority
-from control.timing import TIMINGS, Timing
-from hw.factory import BACKENDS
+from control.timing import Timing
 
 log = logging.getLogger("servodesk.controller")
 
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
-        "controller", help="run the controller as a service that TUIs and scripts attach to",
+        "controller", parents=[global_options(*ALL)],
+        help="run the controller as a service that TUIs and scripts attach to",
         description="Run the control process in the foreground (logs on stderr) and serve it on "
                     "a Unix socket (owner only): `servodesk --attach` opens a TUI on it, "
                     "`ControlClient.attach()` a script. One client holds command at a time; "
                     "the others observe; any may press E-stop.")
-    # SUPPRESS: an unset subcommand option must not hide the global one
-    p.add_argument("--machine", default=argparse.SUPPRESS,
-                   help="built-in machine (unimate2000b, rig) or a machine TOML path")
-    p.add_argument("--backend", default=argparse.SUPPRESS, choices=BACKENDS,
-                   help="sim (default) or serial (an I/O board)")
-    p.add_argument("--port", default=argparse.SUPPRESS,
-                   help="pyserial URL of the I/O board for --backend serial")
-    p.add_argument("--data-dir", default=argparse.SUPPRESS, metavar="DIR",
-                   help="where runs are saved")
-    p.add_argument("--seed", type=int, default=argparse.SUPPRESS, help="simulator seed")
-    p.add_argument("--timing", default=argparse.SUPPRESS, choices=TIMINGS,
-                   help="servodesk (default) or thesis (docs/thesis_timing.md)")
     p.add_argument("--socket", type=Path, metavar="PATH",
                    help="where to listen (default: $XDG_RUNTIME_DIR/servodesk/controller.sock, "
                         "else /tmp/servodesk-UID/controller.sock)")
@@ -70,8 +59,8 @@ def run(args: argparse.Namespace) -> int:
     try:
         timing = Timing(args.timing, args.interrupt_ms, tuple(args.slip))
         client = ControlClient(
-            args.machine, args.backend, port=args.port, seed=args.seed, data_dir=args.data_dir,
-            timing=timing, heartbeat_timeout_s=args.heartbeat_timeout,
+            machine_for(args), args.backend, port=args.port, seed=args.seed,
+            data_dir=args.data_dir, timing=timing, heartbeat_timeout_s=args.heartbeat_timeout,
             # the service keeps the heartbeat of a client-less controller; past this the
             # service itself is gone and the controller stops
             orphan_timeout_s=args.release_after + 5.0)

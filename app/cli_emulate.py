@@ -20,27 +20,24 @@ import os
 import signal
 import sys
 
+from app.cli_options import global_options
 from hw.machine import MachineError, load_machine
 from hw.serial.emulator import Emulator, Faults
 
-DEFAULT_MACHINE = "unimate2000b"
 BOARD_PRIORITY = 70  # SCHED_FIFO: above the tests and their burners, below the controller
 
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
-        "emulate", help="run the I/O board emulator (the simulator behind a pty or TCP port)",
+        "emulate", parents=[global_options("machine", "seed")],
+        help="run the I/O board emulator (the simulator behind a pty or TCP port)",
         description="Serve an emulated I/O board (docs/protocol.md) in front of the simulator, "
                     "so `--backend serial --port URL` can be run without hardware. Prints the "
-                    "URL on the first line. SIGUSR1 presses the E-stop, SIGUSR2 releases it.")
-    # SUPPRESS: an unset subcommand option must not hide the global --machine
-    p.add_argument("--machine", default=argparse.SUPPRESS,
-                   help=f"built-in machine or a machine TOML path (default {DEFAULT_MACHINE})")
+                    "URL on the first line. SIGUSR1 presses the E-stop, SIGUSR2 releases it. "
+                    "--seed seeds the simulator and the injected faults.")
     p.add_argument("--tcp", type=_port, metavar="PORT",
                    help="serve one TCP client on 127.0.0.1:PORT (0: any free port) "
                         "instead of a pseudo-terminal")
-    p.add_argument("--seed", type=int, default=argparse.SUPPRESS,
-                   help="simulator and fault-injection seed (default: the global --seed, 0)")
     p.add_argument("--glitch-scale", type=_scale, default=1.0, metavar="X",
                    help="multiplies the simulated encoders' wrong-reading rate (0: none)")
     p.add_argument("--corrupt-rate", type=_rate, default=0.0, metavar="R",
@@ -81,8 +78,8 @@ def run(args: argparse.Namespace) -> int:
     from hw.sim.backend import SimBackend
 
     try:
-        machine = load_machine(getattr(args, "machine", DEFAULT_MACHINE))
-        plant = SimBackend(machine, seed=getattr(args, "seed", 0), lockstep=False,
+        machine = load_machine(args.machine)
+        plant = SimBackend(machine, seed=args.seed, lockstep=False,
                            glitch_scale=args.glitch_scale)
     except (MachineError, ValueError) as exc:
         print(f"servodesk: {exc}", file=sys.stderr)
@@ -99,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
                     flood=args.flood, flip_word=args.flip_word, hold_ms=args.hold_replies,
                     fault_every_s=args.fault_every, flip_first=args.flip_first)
     try:
-        emulator = Emulator(plant, tcp_port=args.tcp, faults=faults, seed=getattr(args, "seed", 0))
+        emulator = Emulator(plant, tcp_port=args.tcp, faults=faults, seed=args.seed)
     except OSError as exc:
         print(f"servodesk: cannot serve the emulator: {exc}", file=sys.stderr)
         return 2
@@ -132,7 +129,8 @@ def _take_realtime() -> None:
 
 def main(argv: list[str] | None = None) -> int:
     """Run ``emulate`` on its own (``python -c 'from app.cli_emulate import main; main()'``)."""
-    parser = argparse.ArgumentParser(prog="servodesk")
+    parser = argparse.ArgumentParser(
+        prog="servodesk", parents=[global_options("machine", "seed", defaults=True)])
     add_parsers(parser.add_subparsers())
     args = parser.parse_args(["emulate", *(sys.argv[1:] if argv is None else argv)])
     return args.func(args)

@@ -23,13 +23,11 @@ from collections.abc import Callable
 
 import numpy as np
 
+from app.cli_options import global_options
 from control.motion.robot_model import unimate_model
 from hw.machine import load_machine
 from kinematics import Unreachable, unimate
 
-DEFAULT_MACHINE = "unimate2000b"
-MACHINE_HELP = ("built-in machine or machine TOML path whose [kinematics] model is solved "
-                "(default unimate2000b)")
 JOINT_ARGS = ("IN_OUT", "ROTATE", "UPDOWN", "BEND", "YAW", "SWIVEL")
 POSE_ARGS = ("X", "Y", "Z", "GAMMA", "BETA", "ALPHA")
 POSE_NAMES = ("x", "y", "z", "gamma", "beta", "alpha")
@@ -46,26 +44,28 @@ RESOLUTION = 1e-3  # mm and degrees: the tables print three decimals
 def add_parsers(sub: argparse._SubParsersAction) -> None:
     """Add the ``fk`` and ``ik`` subcommands; each sets ``func`` to its runner."""
     fk = sub.add_parser(
-        "fk", help="pose of a joint vector (forward kinematics)",
+        "fk", parents=[global_options("machine")],
+        help="pose of a joint vector (forward kinematics)",
         description="Print the end-effector pose of a Unimate 2000B joint vector: x, y, z (mm) "
-                    "and X-Y-Z fixed angles gamma, beta, alpha (deg).")
+                    "and X-Y-Z fixed angles gamma, beta, alpha (deg), on --machine's "
+                    "[kinematics] model.")
     for metavar, name, unit in zip(JOINT_ARGS, unimate.JOINTS, unimate.UNITS, strict=True):
         fk.add_argument(metavar.lower(), metavar=metavar, help=f"{name} ({unit})")
     fk.add_argument("--json", action="store_true", help="machine-readable output")
-    fk.add_argument("--machine", default=argparse.SUPPRESS, help=MACHINE_HELP)
     fk.set_defaults(func=run_fk)
 
     ik = sub.add_parser(
-        "ik", help="joint solutions of a pose (inverse kinematics)",
+        "ik", parents=[global_options("machine")],
+        help="joint solutions of a pose (inverse kinematics)",
         description="Print every joint solution of a pose inside the Unimate 2000B's limits, "
-                    "nearest --near first; the first is the one chosen.")
+                    "nearest --near first; the first is the one chosen. --machine's "
+                    "[kinematics] model and limits are solved.")
     for metavar, text in zip(POSE_ARGS, POSE_HELP, strict=True):
         ik.add_argument(metavar.lower(), metavar=metavar, help=text)
     ik.add_argument("--near", nargs=6, metavar=JOINT_ARGS,
                     help="joint vector to rank by, e.g. the current reading; also the Swivel/Bend "
                          "kept at a wrist singularity (default: the middle of the limits)")
     ik.add_argument("--json", action="store_true", help="machine-readable output")
-    ik.add_argument("--machine", default=argparse.SUPPRESS, help=MACHINE_HELP)
     ik.set_defaults(func=run_ik)
 
     for parser in (fk, ik):
@@ -133,7 +133,7 @@ def run_ik(args: argparse.Namespace) -> int:
 def machine_model(args: argparse.Namespace) -> unimate.Unimate2000B:
     """The model of ``--machine`` (given before or after the subcommand); ValueError (a
     MachineError naming file and key for a bad file) when it has none."""
-    return unimate_model(load_machine(getattr(args, "machine", DEFAULT_MACHINE)))
+    return unimate_model(load_machine(args.machine))
 
 
 def parse_numbers(texts: list[str], names: tuple[str, ...]) -> list[float]:

@@ -1,4 +1,5 @@
-"""``servodesk machine``: show (and so validate) a machine description."""
+"""``servodesk machine``: show (and so validate) a machine description: the file, its
+kinematic model, and the simulator's plant when it describes one."""
 
 from __future__ import annotations
 
@@ -21,10 +22,14 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from hw.sim import check_plant
+
     spec = args.spec or args.machine
     try:
         machine = load_machine(spec)
         model_of(machine)  # a DH table the closed-form model cannot take
+        if machine.describes_plant:
+            check_plant(machine)  # numbers the simulator cannot run, refused as it would
     except MachineError as exc:
         print(f"servodesk: {exc}", file=sys.stderr)
         return 2

@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from app.cli_options import ALL, global_options, machine_for
 from app.run_text import summary_table
 from control.layout import Flag
 from control.motion import form_plans
@@ -52,12 +53,11 @@ from control.motion.fields import (
 )
 from control.motion.plan import MovePlan, result_records
 from control.timing import Timing
-from hw.machine import Machine, MachineError, load_machine
+from hw.machine import Machine, MachineError
 
 if TYPE_CHECKING:
     from control.client import ControlClient, MoveHandle, MoveResult
 
-DEFAULT_MACHINE = "unimate2000b"
 POSE_OPTIONS = (("x", "mm"), ("y", "mm"), ("z", "mm"), ("gamma", "°"), ("beta", "°"),
                 ("alpha", "°"))
 INITIALISE_S = 120.0  # the rig's ram from its top to the bottom stop at 20 % takes ~30 s
@@ -92,20 +92,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
 
 
 def _common_options() -> argparse.ArgumentParser:
-    """Options every kind takes, after the kind too; SUPPRESS keeps the global ones."""
-    common = argparse.ArgumentParser(add_help=False)
-    common.add_argument("--machine", default=argparse.SUPPRESS,
-                        help=f"built-in machine (unimate2000b, rig) or a machine TOML path "
-                             f"(default {DEFAULT_MACHINE})")
-    common.add_argument("--backend", choices=("sim", "serial"), default=argparse.SUPPRESS,
-                        help="sim (default) or serial (an I/O board, with --port)")
-    common.add_argument("--port", default=argparse.SUPPRESS,
-                        help="pyserial URL of the I/O board for --backend serial")
-    common.add_argument("--data-dir", "--data", dest="data_dir", metavar="DIR",
-                        default=argparse.SUPPRESS,
-                        help="where the run is saved (default: the user's data directory)")
-    common.add_argument("--seed", type=int, default=argparse.SUPPRESS,
-                        help="simulator seed (default 0)")
+    """Options every kind takes: the global ones after the kind too, and the move's own."""
+    common = argparse.ArgumentParser(add_help=False, parents=[global_options(*ALL)])
     common.add_argument("--json", action="store_true",
                         help="print one JSON object: status, run files, metrics")
     common.add_argument("--initialise", action="store_true",
@@ -414,7 +402,7 @@ def _run(args: argparse.Namespace) -> int:
 
     kind: Kind = args.kind
     try:
-        machine = load_machine(args.machine)
+        machine = machine_for(args)
     except MachineError as exc:
         raise BadInput(str(exc)) from None
     if args.backend == "serial" and not args.port:

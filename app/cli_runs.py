@@ -14,6 +14,7 @@ import json
 import sys
 from pathlib import Path
 
+from app.cli_options import global_options
 from app.run_text import local_time, run_lines, summary_table
 from control.recorder import (
     RecorderError,
@@ -38,10 +39,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                        description="The runs saved in the data directory (--data-dir): list "
                                    "them, show one's summary and metrics, export one's plot.")
     actions = p.add_subparsers(title="actions", metavar="ACTION", required=True)
-    common = argparse.ArgumentParser(add_help=False)
-    common.add_argument("--data-dir", "--data", dest="data_dir", metavar="DIR",
-                        default=argparse.SUPPRESS,
-                        help="the data directory (default: the user's)")
+    common = argparse.ArgumentParser(add_help=False, parents=[global_options("data_dir")])
     common.add_argument("--json", action="store_true", help="machine-readable output")
     listing = actions.add_parser("list", parents=[common], help="one line per run, newest first")
     listing.set_defaults(func=run, action=_list)

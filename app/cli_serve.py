@@ -21,8 +21,7 @@ import sys
 import time
 from pathlib import Path
 
-from control.timing import TIMINGS
-from hw.factory import BACKENDS
+from app.cli_options import ALL, global_options
 
 TEMPLATES = Path(__file__).with_name("serve_templates")  # textual-serve's page, offline
 CONTROLLER_START_S = 60.0  # a cold start on a loaded machine imports numpy, scipy…
@@ -32,26 +31,14 @@ MAX_SESSIONS = 4  # each a TUI process of about 85 MB beside the controller serv
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
-        "serve", help="the TUI in a web browser, on a controller service",
+        "serve", parents=[global_options(*ALL, scope="for a controller started here")],
+        help="the TUI in a web browser, on a controller service",
         description="Serve the TUI to web browsers (textual-serve): each browser session is a "
                     "TUI attached to the controller service on --socket, started here if none "
                     "runs. Sessions observe only, unless --command: then each takes command "
                     "at start (one at a time holds it). Any session's E-stop latches. Bound to "
                     "127.0.0.1: from elsewhere, forward it (ssh -L 8000:127.0.0.1:8000 host). "
                     "Open the address it prints: the page wants its token (new each start).")
-    # SUPPRESS: an unset subcommand option must not hide the global one
-    p.add_argument("--machine", default=argparse.SUPPRESS,
-                   help="for a controller started here: built-in machine (unimate2000b, rig) or "
-                        "a machine TOML path")
-    p.add_argument("--backend", default=argparse.SUPPRESS, choices=BACKENDS,
-                   help="for a controller started here: sim (default) or serial")
-    p.add_argument("--port", default=argparse.SUPPRESS,
-                   help="for a controller started here: pyserial URL of the I/O board")
-    p.add_argument("--data-dir", default=argparse.SUPPRESS, metavar="DIR",
-                   help="for a controller started here: where runs are saved")
-    p.add_argument("--seed", type=int, default=argparse.SUPPRESS, help="simulator seed")
-    p.add_argument("--timing", default=argparse.SUPPRESS, choices=TIMINGS,
-                   help="for a controller started here: servodesk (default) or thesis")
     p.add_argument("--socket", type=Path, metavar="PATH",
                    help="the controller service's socket (default: the user's, as for "
                         "`servodesk controller`); one is started there if none listens")

@@ -26,7 +26,8 @@ MAX_CATCH_UP_NS = 1_000_000_000  # a plant left alone longer is simulated for th
 
 def check_plant(machine: Machine) -> None:
     """Raise MachineError, naming the file and the key, if the simulator cannot run the
-    machine file's plant (``hw.machine.parse_machine`` asks, so a machine that loads runs)."""
+    machine file's plant: what building a SimBackend refuses, asked before a controller
+    starts (``servodesk machine``, the command line's sim backend)."""
     SimBackend(machine, lockstep=True)
 
 

@@ -10,15 +10,16 @@ import numpy as np
 import pytest
 
 from app import cli, cli_kinematics
+from app.cli_options import global_options
 from control.motion.robot_model import builtin_unimate
 
 BUILTIN = Path(__file__).resolve().parents[2] / "hw" / "machines"
 
 
 def parser() -> argparse.ArgumentParser:
-    """A top-level parser like app.cli's, with an option of its own."""
-    top = argparse.ArgumentParser(prog="servodesk")
-    top.add_argument("--machine", default="unimate2000b")
+    """A top-level parser like app.cli's: the global --machine with its default."""
+    top = argparse.ArgumentParser(prog="servodesk",
+                                  parents=[global_options("machine", defaults=True)])
     cli_kinematics.add_parsers(top.add_subparsers())
     return top
 

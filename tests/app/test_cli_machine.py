@@ -35,3 +35,21 @@ def test_a_machine_is_described_from_its_file(capsys: pytest.CaptureFixture[str]
     assert out.startswith(f"Single-axis hydraulic test rig (rig) from {BUILTIN / 'rig.toml'}\n")
     assert out.endswith("\nhome: Ram 600mm\npark: Ram 10mm\n")  # the named positions
     assert err == ""
+
+
+@pytest.mark.parametrize("form", ["servodesk machine FILE", "servodesk --machine FILE"])
+def test_a_plant_the_simulator_cannot_run_is_refused_naming_the_key(
+        form: str, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The machine description reads the plant's numbers; the simulator judges them
+    (hw.sim.check_plant), asked before anything starts: exit 2, one line naming the key."""
+    path = tmp_path / "heavy.toml"
+    path.write_text((BUILTIN / "unimate2000b.toml").read_text().replace(
+        "gravity_nm = 1500.0", "gravity_nm = 1e6"))
+    monkeypatch.setattr(ServodeskApp, "run", lambda self: pytest.fail(f"the TUI opened {path}"))
+    argv = ["machine", str(path)] if form == "servodesk machine FILE" else ["--machine", str(path)]
+    code = cli.main(argv)
+    out, err = capsys.readouterr()
+    assert (code, out) == (2, ""), err
+    assert re.fullmatch(r"servodesk: heavy\.toml: joints\[2\]\.plant: Up/Down cannot hold its "
+                        r"load: .* \(plant\.supply_mpa\): raise the supply.*\n", err), err

@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 
 from hw import machine as machine_module
 from hw.machine import MachineError, load_machine, parse_machine
-from hw.sim.backend import SimBackend
+from hw.sim import SimBackend, check_plant
 
 MACHINES = Path(__file__).resolve().parents[2] / "hw" / "machines"
 UNIMATE_TEXT = (MACHINES / "unimate2000b.toml").read_text()
@@ -122,8 +122,6 @@ BAD = [
     (("gradient = -0.2617", "gradient = -5e-324"),
      r"joints\[0\]\.encoder\.gradient: -4\.94066e-324 out of range \(its size must be in "
      r"1e-06…10 units a count"),
-    (("mass_kg = 60.0", "mass_kg = 1e-300"),
-     r"joints\[0\]\.plant\.mass_kg: 1e-300 out of range \(must be in 0\.1…100000\)$"),
     (("settle_ms = 6.0", "settle_ms = 1e300"), r"encoder\.settle_ms: 1e\+300 out of range"),
     (("settle_ms = 6.0", "settle_ms = 0"),
      r"encoder\.settle_ms: 0 out of range \(must be in 0\.001…65\)$"),
@@ -149,13 +147,6 @@ BAD = [
      r"coefficients\.hold\.ki\[0\]: 2e\+300 out of range \(must be in -1e\+06…1e\+06\)$"),
     (("filter_divisor = 6.0", "filter_divisor = 1e-300"),
      r"coefficients\.hold\.filter_divisor: 1e-300 out of range"),
-    (("inertia_kgm2 = 0.3", "inertia_kgm2 = 0.001"),
-     r"joints\[5\]\.plant: its oil columns ring too fast to simulate: they need steps of "
-     r"5\.\d+ µs, the simulator's shortest is 10 µs"),
-    (("gravity_nm = 1500.0", "gravity_nm = 1e6"),
-     r"joints\[2\]\.plant: Up/Down cannot hold its load: it needs more than \d+\.\d MPa, the "
-     r"supply is 6\.9 MPa \(plant\.supply_mpa\): raise the supply"),
-    (("lamp_ripple = 0.05", "lamp_ripple = 5e-324"), r"plant\.lamp_ripple: 4\.94066e-324 out of"),
     (('name = "Up/Down"', 'name = "Up\\nDown"'),
      r"joints\[2\]\.name: 'Up\\nDown': character 2 is '\\n', which does not print"),
     (('note = "option.c hold_coeff"', 'note = "option.c \\u202ehold_coeff"'),
@@ -192,6 +183,35 @@ def test_bad_file_names_file_key_and_problem(edit: tuple[str, str], message: str
         parse_machine(text, MACHINES / "unimate2000b.toml")
 
 
+# The simulator's plant: numbers the machine description reads and the simulator judges
+# (hw.sim.check_plant, as a SimBackend is built; `servodesk machine` and the command line's
+# sim backend ask it before a controller starts, tests/app/test_cli_machine.py).
+BAD_PLANT = [
+    (("mass_kg = 60.0", "mass_kg = 1e-300"),
+     r"joints\[0\]\.plant\.mass_kg: 1e-300 out of range \(must be in 0\.1…100000\)$"),
+    (("inertia_kgm2 = 0.3", "inertia_kgm2 = 0.001"),
+     r"joints\[5\]\.plant: its oil columns ring too fast to simulate: they need steps of "
+     r"5\.\d+ µs, the simulator's shortest is 10 µs"),
+    (("gravity_nm = 1500.0", "gravity_nm = 1e6"),
+     r"joints\[2\]\.plant: Up/Down cannot hold its load: it needs more than \d+\.\d MPa, the "
+     r"supply is 6\.9 MPa \(plant\.supply_mpa\): raise the supply"),
+    (("lamp_ripple = 0.05", "lamp_ripple = 5e-324"), r"plant\.lamp_ripple: 4\.94066e-324 out of"),
+]
+
+
+@pytest.mark.parametrize(("edit", "message"), BAD_PLANT, ids=[m for _, m in BAD_PLANT])
+def test_the_simulator_refuses_a_plant_it_cannot_run_naming_the_key(
+        edit: tuple[str, str], message: str) -> None:
+    old, new = edit
+    assert old in UNIMATE_TEXT, f"test edit {old!r} no longer matches the file"
+    machine = parse_machine(UNIMATE_TEXT.replace(old, new, 1), MACHINES / "unimate2000b.toml")
+    assert machine.describes_plant  # the description loads: what the numbers do is the sim's
+    with pytest.raises(MachineError, match=r"^unimate2000b\.toml: .*" + message):
+        check_plant(machine)
+    with pytest.raises(MachineError, match=r"^unimate2000b\.toml: .*" + message):
+        SimBackend(machine, lockstep=True)
+
+
 def test_a_quadrature_count_must_reach_the_whole_range_either_way() -> None:
     """A signed count from wherever the ram powered up: 12000 counts either way need 15 bits."""
     text = RIG_TEXT.replace('kind = "quadrature"', 'kind = "quadrature"\nbits = 14')
@@ -212,13 +232,14 @@ def test_the_standstill_error_limit_is_never_inside_the_settle_band() -> None:
 
 
 def test_a_file_without_a_plant_loads_and_the_simulator_names_what_it_lacks() -> None:
-    """A machine for real hardware only needs no [plant]; a file with one has it checked as it
-    loads, and the simulator refuses a file without naming the first key it needs."""
+    """A machine for real hardware only needs no [plant]; the simulator refuses a file
+    without one, naming the first key it needs."""
     text = re.sub(r"(?m)^\[(joints\.)?plant\]\n(?:^(?!\[).*\n)*", "", RIG_TEXT)
     assert "plant" not in tomllib.loads(text) and "area_a_m2" not in text
     machine = parse_machine(text, Path("hardware.toml"))
+    assert not machine.describes_plant and load_machine("rig").describes_plant
     with pytest.raises(MachineError, match=r"^hardware\.toml: plant\.supply_mpa: missing number$"):
-        SimBackend(machine, lockstep=True)
+        check_plant(machine)
 
 
 def test_a_file_that_is_no_machine_description_is_refused_naming_it(

@@ -1,5 +1,6 @@
 """Machine files changed to the last number (issue 12): whatever numbers a file holds, it either
-loads into a machine the controller runs, or is refused as ``FILE: KEY: what`` (MachineError).
+loads into a machine the controller runs, or is refused as ``FILE: KEY: what`` (MachineError):
+by the machine description, or by the simulator for its plant (``hw.sim.check_plant``).
 
 The property changes one to three numbers of a built-in file, to extremes (0, ±5e-324,
 ±1e300, inf and nan as TOML spells them, integers wider than a float and wider than int's
@@ -38,7 +39,7 @@ from control.motion.robot_model import model_of
 from control.seqlock import SeqlockWriter
 from control.wire import Wire
 from hw.machine import Machine, MachineError, parse_machine
-from hw.sim.backend import SimBackend
+from hw.sim import SimBackend, check_plant
 
 MACHINES = Path(__file__).resolve().parents[2] / "hw" / "machines"
 TEXTS = {name: (MACHINES / f"{name}.toml").read_text(encoding="utf-8")
@@ -165,6 +166,7 @@ def loads_and_runs(name: str, text: str) -> None:
     filename = f"fuzz-{name}.toml"
     try:
         machine = parse_machine(text, Path(filename))
+        check_plant(machine)  # the simulator's numbers, judged as a SimBackend is built
     except MachineError as exc:
         message = str(exc)
         assert REFUSAL.match(message) and "\n" not in message, message

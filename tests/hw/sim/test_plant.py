@@ -7,6 +7,7 @@ from pathlib import Path
 import pytest
 
 from hw.machine import Machine, MachineError, load_machine, parse_machine
+from hw.sim import check_plant
 from hw.sim.plant import Plant, _friction_step
 from hw.sim.valve import quantise_duty
 
@@ -208,11 +209,14 @@ def test_initial_positions_are_checked_against_the_limits() -> None:
 # -- parameters ---------------------------------------------------------------------------
 
 def edited(name: str, old: str, new: str) -> Machine:
-    """The machine of built-in file ``name`` with ``old`` replaced: its plant is checked as it
-    loads, so a bad plant number is refused there, before any simulator is built."""
+    """The machine of built-in file ``name`` with ``old`` replaced, its plant checked as the
+    simulator checks it (``check_plant``, before a controller starts): a bad plant number is
+    refused there."""
     text = (MACHINES / name).read_text()
     assert old in text
-    return parse_machine(text.replace(old, new, 1), MACHINES / name)
+    machine = parse_machine(text.replace(old, new, 1), MACHINES / name)
+    check_plant(machine)
+    return machine
 
 
 def test_missing_key_names_file_and_key() -> None:

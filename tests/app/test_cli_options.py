@@ -1,0 +1,76 @@
+"""The global options, declared once (app/cli_options.py): each command that uses one takes it
+before or after its name, with the same default and help; parsed in-process, nothing runs."""
+
+from __future__ import annotations
+
+import pytest
+
+from app import cli
+from app.cli_options import ALL, GLOBAL_OPTIONS
+
+# Each command that takes global options after its name, with the arguments it needs.
+COMMANDS = {
+    "move": (["move", "step", "--target", "5"], ALL),
+    "controller": (["controller"], ALL),
+    "serve": (["serve"], ALL),
+    "emulate": (["emulate"], ("machine", "seed")),
+    "fk": (["fk", "1000", "0", "0", "0", "0", "0"], ("machine",)),
+    "ik": (["ik", "1200", "-440", "1187", "0", "0", "0"], ("machine",)),
+    "runs": (["runs", "list"], ("data_dir",)),
+}
+# A value other than the default for each option, as typed and as parsed.
+GIVEN = {"machine": (["--machine", "rig"], "rig"),
+         "backend": (["--backend", "serial"], "serial"),
+         "port": (["--port", "/dev/ttyACM0"], "/dev/ttyACM0"),
+         "data_dir": (["--data-dir", "runs"], "runs"),
+         "seed": (["--seed", "7"], 7),
+         "timing": (["--timing", "thesis"], "thesis"),
+         "interrupt_ms": (["--interrupt-ms", "6"], 6.0),
+         "slip": (["--slip", "windup"], ["windup"])}
+CASES = [(command, name) for command, (_, names) in COMMANDS.items() for name in names]
+
+
+def test_every_global_option_has_a_value_to_try() -> None:
+    assert set(GIVEN) == set(GLOBAL_OPTIONS)
+    assert all(GIVEN[name][0][0] in GLOBAL_OPTIONS[name].flags for name in GIVEN)
+
+
+@pytest.mark.parametrize(("command", "name"), CASES)
+def test_a_global_option_works_before_or_after_the_command(command: str, name: str) -> None:
+    argv, _ = COMMANDS[command]
+    typed, value = GIVEN[name]
+    parse = cli.build_parser().parse_args
+    assert getattr(parse(argv), name) == GLOBAL_OPTIONS[name].default  # not given
+    assert getattr(parse([*typed, *argv]), name) == value  # before the command
+    assert getattr(parse([*argv, *typed]), name) == value  # after it
+    # the default before, the option after: the one given counts
+    assert getattr(parse([*typed, *argv, *typed[:1], typed[1]]), name) == value
+
+
+def test_data_is_data_dir_for_every_command() -> None:
+    parse = cli.build_parser().parse_args
+    assert parse(["--data", "a"]).data_dir == "a"
+    assert parse(["runs", "list", "--data", "b"]).data_dir == "b"
+    assert parse(["move", "goto", "--targets", "1", "--data", "c"]).data_dir == "c"
+
+
+def test_a_command_refuses_a_global_option_it_has_no_use_for(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """fk solves a model: it takes --machine, never a backend it would silently ignore."""
+    with pytest.raises(SystemExit) as refused:
+        cli.build_parser().parse_args(["fk", *COMMANDS["fk"][0][1:], "--backend", "serial"])
+    assert refused.value.code == 2
+    assert "unrecognized arguments: --backend serial" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("command", ["", *COMMANDS])
+def test_each_help_shows_the_global_options_it_takes_with_their_help(
+        command: str, capsys: pytest.CaptureFixture[str]) -> None:
+    argv = COMMANDS[command][0][:2 if command in ("move", "runs") else 1] if command else []
+    names = COMMANDS[command][1] if command else ALL
+    with pytest.raises(SystemExit):
+        cli.build_parser().parse_args([*argv, "--help"])
+    shown = " ".join(capsys.readouterr().out.split())  # argparse wraps the help to the width
+    for name in names:
+        option = GLOBAL_OPTIONS[name]
+        assert option.flags[0] in shown and " ".join(option.help.split()) in shown, name
