@@ -1,7 +1,11 @@
 """``servodesk move …`` in real subprocesses: each kind runs on a real controller and leaves
 its run on disk (listed by ``servodesk runs list``); a bad field exits 2 naming it, with
 nothing started or saved; Ctrl+C during the move, or the board's E-stop, exits 1 with the
-run recorded so far saved; the serial backend against ``servodesk emulate`` on a pty."""
+run recorded so far saved; the serial backend against ``servodesk emulate`` on a pty.
+
+The moves run with ``--lockstep`` (the simulator as fast as the controller computes) but
+for the end-to-end ones that are about real time: a step on the simulator, Ctrl+C during a
+move, and the serial backend's two."""
 
 from __future__ import annotations
 
@@ -35,6 +39,11 @@ def servodesk(*args: str, data_dir: Path) -> subprocess.CompletedProcess[str]:
                           cwd=ROOT, env=ENV, capture_output=True, text=True, timeout=MOVE_S)
 
 
+def move(*args: str, data_dir: Path, lockstep: bool = True) -> subprocess.CompletedProcess[str]:
+    """``servodesk move ARGS``, in lockstep unless the test is about real time."""
+    return servodesk("move", *args, *(["--lockstep"] if lockstep else []), data_dir=data_dir)
+
+
 def listed(data_dir: Path) -> list[dict]:
     done = servodesk("runs", "list", "--json", data_dir=data_dir)
     assert done.returncode == 0, done.stderr
@@ -42,8 +51,8 @@ def listed(data_dir: Path) -> list[dict]:
 
 
 def test_a_step_runs_saves_its_run_and_reports_it_as_json(tmp_path: Path) -> None:
-    done = servodesk("move", "step", "--joint", "updown", "--target", "5", "--duration", "1.5",
-                     "--json", data_dir=tmp_path)
+    done = move("step", "--joint", "updown", "--target", "5", "--duration", "1.5", "--json",
+                data_dir=tmp_path, lockstep=False)
     assert done.returncode == 0, done.stderr
     report = json.loads(done.stdout)  # one object, nothing else on stdout
     assert (report["status"], report["kind"], report["backend"]) == ("complete", "step", "sim")
@@ -98,7 +107,7 @@ GOOD: dict[str, tuple[str, Callable[[Path], list[str]], str]] = {
 @pytest.mark.parametrize("kind", sorted(GOOD))
 def test_every_kind_runs_and_leaves_its_run_on_disk(kind: str, tmp_path: Path) -> None:
     first_line, options, run_kind = GOOD[kind]
-    done = servodesk("move", kind, *options(tmp_path), data_dir=tmp_path)
+    done = move(kind, *options(tmp_path), data_dir=tmp_path)
     assert done.returncode == 0, done.stderr
     lines = done.stdout.splitlines()
     assert lines[0].startswith(first_line), done.stdout
@@ -122,8 +131,7 @@ def test_every_kind_runs_and_leaves_its_run_on_disk(kind: str, tmp_path: Path) -
 ])
 def test_the_rig_moves_once_initialised(kind: str, options: list[str], what: str,
                                         tmp_path: Path) -> None:
-    done = servodesk("move", kind, "--machine", "rig", "--initialise", *options,
-                     data_dir=tmp_path)
+    done = move(kind, "--machine", "rig", "--initialise", *options, data_dir=tmp_path)
     assert done.returncode == 0, done.stderr
     assert done.stdout.startswith(what), done.stdout
     assert "initialising" in done.stderr
@@ -131,8 +139,8 @@ def test_the_rig_moves_once_initialised(kind: str, options: list[str], what: str
 
 
 def test_the_rig_pulse_is_open_loop_and_needs_no_initialise(tmp_path: Path) -> None:
-    done = servodesk("move", "pulse", "--machine", "rig", "--duty", "15", "--duration", "0.5",
-                     "--json", data_dir=tmp_path)
+    done = move("pulse", "--machine", "rig", "--duty", "15", "--duration", "0.5", "--json",
+                data_dir=tmp_path)
     assert done.returncode == 0, done.stderr
     report = json.loads(done.stdout)
     assert (report["kind"], report["samples"], report["metrics"]) == ("set_pulse", 501, [])
@@ -163,13 +171,15 @@ BAD = [
      "--step: step 1 dwell: 'later' is not a number"),
     (["step", "--target", "5", "--backend", "serial"], "--port: --backend serial needs"),
     (["step", "--target", "5", "--machine", "nope.toml"], "nope.toml: no such machine file"),
+    (["step", "--target", "5", "--backend", "serial", "--port", "/dev/null"],
+     "--lockstep: an I/O board runs in real time"),
 ]
 
 
 @pytest.mark.parametrize("args, message", BAD, ids=[" ".join(a)[:40] for a, _ in BAD])
 def test_bad_input_exits_2_naming_the_field_and_moves_nothing(
         args: list[str], message: str, tmp_path: Path) -> None:
-    done = servodesk("move", *args, data_dir=tmp_path)
+    done = move(*args, data_dir=tmp_path)
     assert (done.returncode, done.stdout) == (2, ""), done.stderr
     assert done.stderr.startswith("servodesk: ") and message in done.stderr, done.stderr
     assert "Traceback" not in done.stderr
@@ -193,7 +203,7 @@ def test_a_fifo_as_the_path_file_exits_2_at_once_naming_it(tmp_path: Path) -> No
 
 
 def test_bad_usage_is_argparses_exit_2(tmp_path: Path) -> None:
-    done = servodesk("move", "step", data_dir=tmp_path)  # --target is required
+    done = move("step", data_dir=tmp_path)  # --target is required
     assert done.returncode == 2 and "--target" in done.stderr
 
 
@@ -249,8 +259,9 @@ def test_ctrl_c_during_the_move_is_an_estop_the_run_is_saved_and_the_exit_is_1(
 def test_a_step_on_the_serial_backend_through_the_emulator(
         emulator: Callable[..., EmulatorProcess], tmp_path: Path) -> None:
     board = emulator("--glitch-scale", "0")
-    done = servodesk("move", "step", "--backend", "serial", "--port", board.url, "--joint",
-                     "bend", "--target", "5", "--duration", "1.5", "--json", data_dir=tmp_path)
+    done = move("step", "--backend", "serial", "--port", board.url, "--joint", "bend",
+                "--target", "5", "--duration", "1.5", "--json", data_dir=tmp_path,
+                lockstep=False)
     assert done.returncode == 0, done.stderr
     report = json.loads(done.stdout)
     assert (report["status"], report["backend"]) == ("complete", "serial")
