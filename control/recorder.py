@@ -51,15 +51,16 @@ import contextlib
 import csv
 import errno
 import glob
-import gzip
 import io
 import json
 import math
 import os
 import re
 import sys
+import threading
 import uuid
-from collections.abc import Callable, Mapping
+import zlib
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import asdict, dataclass, field, replace
 from datetime import UTC, datetime
 from pathlib import Path
@@ -68,6 +69,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import platformdirs
 
+from control import decimal_text
+from control.decimal_text import Block, Cells, counting, fixed, shortest, slots
 from hw.machine import SAMPLE_TIME_MS, Coefficients, Machine
 from hw.user_files import TEXT_ENCODING, NotRegularFile, open_regular
 
@@ -82,6 +85,8 @@ TIME_DECIMALS = 6  # µs
 BYTES_PER_NUMBER = 26
 MAX_JSON_BYTES = 64 << 20  # a run's metadata; a 600 s move's lists are under 1 MB
 DUTY_DECIMALS = 2  # 0.01 %
+GZIP_LEVEL = 1  # 7 % larger than level 9 for a tenth of the time (benchmarks/run_io.py)
+ROWS_AT_ONCE = 8192  # rows written as one block: ~2 MB of text, made in steps of ~1 ms
 MAX_SUFFIX = 10_000  # stems tried before giving up: far beyond same-second saves
 _NO_HARD_LINKS = {errno.EPERM, errno.EOPNOTSUPP, errno.ENOTSUP, errno.ENOSYS, errno.EINVAL}
 _SUFFIX = re.compile(r"\.(?:json|csv|tsv)(?:\.gz)?$")  # a run's file name less its stem
@@ -263,7 +268,7 @@ def save_run(run: Run, data_dir: Path) -> RunFiles:
     still holds ``run``.
     """
     data_dir = Path(data_dir)
-    tsv, table = (gzip.compress(text.encode(), mtime=0) for text in (_tsv(run), csv_text(run)))
+    tsv, table = _packed(run)
     base = stem_base(run)
     placed: list[Path] = []
     try:
@@ -489,19 +494,85 @@ def _parse_table(lines: list[str], columns: int) -> np.ndarray:
             else np.empty((0, columns)))
 
 
-def _tsv(run: Run) -> str:
-    """option.c SaveData: ``k``, then desired, actual, duty per joint, tab-separated."""
-    columns = _interleaved(run)
-    rows = np.concatenate([np.arange(run.samples, dtype=np.float64)[:, None], columns], axis=1)
-    return _table(rows, "\t", ("d", *_formats(run)))
-
-
 def csv_text(run: Run) -> str:
     """The run's CSV: ``t [s]`` then desired, actual, duty per joint, under a header with
     names and units."""
-    rows = np.concatenate([run.t[:, None], _interleaved(run)], axis=1)
     return (_csv_header(run.joint_names, run.joint_units) + "\n"
-            + _table(rows, ",", (f".{TIME_DECIMALS}f", *_formats(run))))
+            + b"".join(table for _, table in _tables(run, tsv=False)).decode())
+
+
+def _packed(run: Run) -> tuple[bytes, bytes]:
+    """The run's TSV and CSV, gzipped (``GZIP_LEVEL``) as their text is made, a block of
+    rows at a time, each on a thread of its own one block behind (zlib runs without the
+    GIL), so a block is packed while the next is written."""
+    tsv, table = _Gzip(), _Gzip()
+    table.add((_csv_header(run.joint_names, run.joint_units) + "\n").encode())
+    for tsv_text, csv_text_ in _tables(run):
+        tsv.add(tsv_text)
+        table.add(csv_text_)
+    return tsv.done(), table.done()
+
+
+class _Gzip:
+    """A gzip stream (a member with mtime 0) made as its text comes, each piece packed on a
+    thread of its own while the caller makes the next."""
+
+    def __init__(self) -> None:
+        self._packer = zlib.compressobj(GZIP_LEVEL, zlib.DEFLATED, 31)
+        self._out: list[bytes] = []
+        self._thread: threading.Thread | None = None
+
+    def add(self, text: bytes) -> None:
+        self._wait()
+        self._thread = threading.Thread(target=self._pack, args=(text,),
+                                        name="servodesk-gzip", daemon=True)
+        self._thread.start()
+
+    def _pack(self, text: bytes) -> None:
+        self._out.append(self._packer.compress(text))
+
+    def _wait(self) -> None:
+        if self._thread is not None:
+            self._thread.join()
+            self._thread = None
+
+    def done(self) -> bytes:
+        self._wait()
+        self._out.append(self._packer.flush())
+        return b"".join(self._out)
+
+
+def _tables(run: Run, *, tsv: bool = True) -> Iterator[tuple[bytes, bytes]]:
+    """The rows of the TSV (if ``tsv``; else b"") and of the CSV (no header), a block of
+    ``ROWS_AT_ONCE`` at a time: the joints' columns written once for both."""
+    desired, actual, duty = _joint_cells(run)
+    for a in range(0, run.samples, ROWS_AT_ONCE):
+        rows = slice(a, a + ROWS_AT_ONCE)
+        joints = Block.of(*(slots(cells(rows)) for cells in (desired, actual, duty)))
+        time = fixed(run.t[rows], TIME_DECIMALS, _spell(f".{TIME_DECIMALS}f", first=True),
+                     negative_zero=True)
+        count = slots(counting(a, a + len(run.t[rows])))
+        yield (decimal_text.lines([Block.of(count), joints], b"\t") if tsv else b"",
+               decimal_text.lines([Block.of(slots(time)), joints], b","))
+
+
+def _joint_cells(run: Run) -> tuple[Callable[[slice], Cells], ...]:
+    """How the desired, actual and duty columns of a block of rows become text: desired in
+    full (``repr``), actual at each joint's decimals (``Run.decimals``; in full if it has
+    none), duty to ``DUTY_DECIMALS``."""
+    decimals = run.decimals()
+    duty = _spell(f".{DUTY_DECIMALS}f")
+    if None in decimals:
+        def actual(rows: slice) -> Cells:
+            return shortest(run.actual[rows], _spell("r"))
+    else:
+        places = np.array(decimals)
+        by_joint = [_spell(f".{d}f") for d in decimals]
+
+        def actual(rows: slice) -> Cells:
+            return fixed(run.actual[rows], places, lambda v, j: by_joint[j](v, j))
+    return (lambda rows: shortest(run.desired[rows], _spell("r")), actual,
+            lambda rows: fixed(run.duty[rows], DUTY_DECIMALS, duty))
 
 
 def _csv_header(names: tuple[str, ...], units: tuple[str, ...]) -> str:
@@ -514,30 +585,22 @@ def _csv_header(names: tuple[str, ...], units: tuple[str, ...]) -> str:
     return out.getvalue()
 
 
-def _formats(run: Run) -> list[str]:
-    """The %-format of each joint column, in ``_interleaved``'s order: desired in full
-    (``r``), actual at the joint's decimals, duty to ``DUTY_DECIMALS``."""
-    out = []
-    for d in run.decimals():
-        out += ["r", "r" if d is None else f".{d}f", f".{DUTY_DECIMALS}f"]
-    return out
-
-
 # trailing zeros of a fraction, and a fraction of zeros with its point: 1.500 → 1.5, 2.000 → 2
 _TRAILING = re.compile(r"(\.\d*?)0+(?=[,\t\n])")
 _BARE_POINT = re.compile(r"\.(?=[,\t\n])")
 _NEGATIVE_ZERO = re.compile(r"(?<=[,\t])-0(?=[,\t\n])")
 
 
-def _table(rows: np.ndarray, sep: str, formats: tuple[str, ...] | list[str]) -> str:
-    """``rows (N, C)`` as text lines, column ``c`` in ``formats[c]`` (a %-format, or ``r``
-    for the shortest text that reads back to the same float), trailing zeros dropped."""
-    if not len(rows):
-        return ""
-    line = sep.join("%r" if f == "r" else f"%{f}" for f in formats) + "\n"
-    text = "".join(line % tuple(row) for row in rows.tolist())
-    text = _BARE_POINT.sub("", _TRAILING.sub(r"\1", text))
-    return _NEGATIVE_ZERO.sub("0", text)
+def _spell(fmt: str, *, first: bool = False) -> Callable[[float, int], str]:
+    """A number's text in %-format ``fmt`` (``r``: the shortest that reads back), trailing
+    zeros dropped, and ``-0`` as ``0`` unless it starts the line (``first``): for the few
+    numbers ``control/decimal_text.py`` leaves to Python (NaN, ±inf, near a rounding tie,
+    written with an exponent)."""
+    def spell(value: float, _: int) -> str:
+        text = ("," if not first else "") + ("%r" if fmt == "r" else f"%{fmt}") % value + "\n"
+        text = _NEGATIVE_ZERO.sub("0", _BARE_POINT.sub("", _TRAILING.sub(r"\1", text)))
+        return text[0 if first else 1:-1]
+    return spell
 
 
 def _json(run: Run, files: RunFiles) -> bytes:
@@ -567,12 +630,6 @@ def _joints(run: Run) -> list[dict[str, Any]]:
     for joint, r in zip(joints, run.joint_resolution, strict=False):
         joint["resolution"] = r
     return joints
-
-
-def _interleaved(run: Run) -> np.ndarray:
-    """(N, 3J): desired, actual, duty of joint 0, then of joint 1, …"""
-    by_joint = np.stack([run.desired, run.actual, run.duty], axis=2)
-    return by_joint.reshape(run.samples, 3 * len(run.joint_names))
 
 
 def _place_all(contents: tuple[tuple[Path, bytes], ...], placed: list[Path]) -> bool:
