@@ -77,9 +77,10 @@ from control.motion import form_plans
 from control.motion.acceptance import accept, starts_here
 from control.motion.cartesian_jog import plan_jog
 from control.motion.plan import MovePlan, Summary, moving_joints, result_records, summaries
-from control.recorder import Run, RunFiles, coefficients_record, default_data_dir, save_run
+from control.recorder import Run, RunFiles, coefficients_record, default_data_dir
 from control.recovery import recover_runs
-from control.runs import encode_meta, run_from_segment, segment_meta
+from control.run_keeper import FinishedMove, RunKeeper, RunKept
+from control.runs import encode_meta, segment_meta
 from control.seqlock import SeqlockReader, SeqlockWriter
 from control.timing import Timing
 from control.wire import Broken, Message, Unreadable
@@ -93,6 +94,7 @@ if TYPE_CHECKING:
 HEARTBEAT_S = 0.05
 OUTGOING = 64  # commands waiting for the channel; more means the controller is not reading
 CLOSE_WAIT_S = 1.0  # close(): how long the controller may take to stop before it is killed
+KEEP_WAIT_S = 30.0  # close(): how long the runs in hand may take to be saved (600 s: under 5)
 DEATH_S = 0.25
 _SESSIONS = itertools.count(1)  # several clients in one process get their own segments
 _MOVES = itertools.count(1)  # and so do their moves (a move's segment may outlive its client)
@@ -252,6 +254,7 @@ class ControlClient:
         self.dead = ""
         self.heartbeat_on = True  # this client's heartbeat thread writes the heartbeat word
         self._moves: dict[int, MoveHandle] = {}
+        self.keeper = RunKeeper()  # saves finished moves' runs off the monitor thread
         self._kept: dict[str, str] = {}  # run id: segment of a run not saved, for the next start
         self._ids = itertools.count(1)
         self._outgoing: queue.Queue[Message] = queue.Queue(OUTGOING)
@@ -325,7 +328,9 @@ class ControlClient:
 
     def close(self) -> None:
         """Stop the controller (valves closed), save what it finished, unlink every segment.
-        A controller that does not stop within ``CLOSE_WAIT_S`` (frozen, flooded) is killed."""
+        A controller that does not stop within ``CLOSE_WAIT_S`` (frozen, flooded) is killed;
+        the runs in hand get ``KEEP_WAIT_S`` to be saved (one not saved by then stays in its
+        segment for the next start)."""
         if self._closing.is_set():
             return
         if not self.dead:
@@ -339,6 +344,7 @@ class ControlClient:
         self._drain()
         for handle in list(self._moves.values()):
             self._finish(handle, "interrupted: client closed", None)
+        self.keeper.wait(KEEP_WAIT_S)
         self._release()
 
     def _stop_controller(self) -> None:
@@ -485,38 +491,46 @@ class ControlClient:
 
     def _finish(self, handle: MoveHandle, status: str, saved: str | None,
                 timeline: dict[str, tuple[tuple[float, float], ...]] | None = None) -> None:
-        """Turn a finished move's record into a saved run (its stalls and feed changes,
-        ``timeline``, listed in its metadata) and, once it is saved, unlink its segment: a run
-        that cannot be saved now stays whole there for the next start to recover."""
+        """Hand a finished move to the run keeper (``control/run_keeper.py``) and return at
+        once: on its own thread it saves the run (its metrics, and its stalls and feed changes,
+        ``timeline``, in its metadata), unlinks the segment once the run is saved (a run that
+        cannot be saved now stays whole there for the next start to recover) and completes
+        the handle. The monitor thread, which hears E-stops and faults, never waits on a disk."""
         if self._moves.pop(handle.move_id, None) is None:
             return
-        run = run_from_segment(handle.segment.buf, handle.layout, handle.meta, status, timeline)
-        results, problem = self._results(handle.plan, run)
-        files, error = None, ""
-        if saved:  # by the controller, its client gone: without the metrics
-            files = RunFiles.from_json(Path(saved))
-        elif run.samples:
-            run = replace(run, meta={**run.meta, **problem, "results": result_records(results)})
-            try:
-                files = save_run(run, self.data_dir)
-            except OSError as exc:
-                error = (f"run not saved ({exc}); it is kept in memory (save it elsewhere from "
-                         "the Runs tab) and in shared memory, where the next start saves it")
-        handle.result = MoveResult(handle.move_id, status, run, files, error, handle.plan,
-                                   self.machine, tuple(results))
-        kept = files is None and bool(run.samples)
-        if kept:
+        move = FinishedMove(handle.segment, handle.layout, handle.meta, status, timeline,
+                            saved or "")
+        self.keeper.hand(move, lambda kept: self._kept_run(handle, status, kept),
+                         measure=lambda run: self._results(handle.plan, run), save_empty=False)
+
+    def _kept_run(self, handle: MoveHandle, status: str, kept: RunKept) -> None:
+        """On the keeper's thread, the run saved (or kept): the handle's result."""
+        run = kept.run if kept.run is not None else self._unread(handle, status)
+        error = ""
+        if kept.kept:
+            error = (f"run not saved ({kept.problem}); it is kept in memory (save it elsewhere "
+                     "from the Runs tab) and in shared memory, where the next start saves it")
             self._kept[str(handle.meta["run_id"])] = handle.segment.name
-        shm.release(handle.segment, unlink=not kept)
+        handle.result = MoveResult(handle.move_id, status, run, kept.files, error, handle.plan,
+                                   self.machine, tuple(kept.results))
         handle.done.set()
 
+    def _unread(self, handle: MoveHandle, status: str) -> Run:
+        """An empty run in place of one its segment would not give (it stays there)."""
+        empty = np.empty((0, self.machine.n_joints))
+        return Run.from_machine(self.machine, handle.kind, status, {}, np.empty(0), empty,
+                                empty, empty, meta={"run_id": handle.meta.get("run_id")})
+
     def _results(self, plan: MovePlan, run: Run) -> tuple[list[tuple[str, Summary]], dict]:
-        """The move's metrics (``control.motion.plan.summaries``), and what went wrong if they
-        could not be computed: a run is saved whatever its metrics do."""
+        """The move's metrics (``control.motion.plan.summaries``) and what goes into its run's
+        metadata with them, with what went wrong if they could not be computed: a run is
+        saved whatever its metrics do."""
         try:
-            return summaries(plan, run, self.machine), {}
+            results = summaries(plan, run, self.machine)
         except Exception as exc:  # never lose a run over its summary
-            return [], {"results_error": f"{type(exc).__name__}: {exc}"}
+            return [], {"results_error": f"{type(exc).__name__}: {exc}",
+                        "results": result_records([])}
+        return results, {"results": result_records(results)}
 
     def release_kept(self, run: Run) -> None:
         """``run``, which could not be saved, has been saved elsewhere: let go of the copy

@@ -24,18 +24,11 @@ import fcntl
 import os
 import time
 from collections.abc import Iterator
+from dataclasses import replace
 from pathlib import Path
 
 from control import shm
-from control.layout import MoveLayout
-from control.recorder import (
-    RecorderError,
-    find_run,
-    remove_incomplete,
-    remove_stale_temps,
-    save_run,
-)
-from control.runs import decode_meta, run_from_segment
+from control.run_keeper import FinishedMove, keep
 
 UNENDED = "interrupted: the client and the controller died"
 
@@ -94,31 +87,24 @@ def _recover(name: str, fallback: Path) -> str:
         segment = shm.attach(name)
     except OSError:
         return ""  # gone meanwhile: another start recovered it
-    unlink = False
     try:
-        try:
-            layout = MoveLayout.read_header(segment.buf)
-            meta = decode_meta(layout.read_meta(segment.buf))
-        except (ValueError, UnicodeDecodeError) as exc:
-            unlink = True
-            return f"removed {name}: not a move segment this servodesk can read ({exc})"
-        if shm.pid_alive(int(meta.get("controller_pid", 0))):
-            return ""  # its orphaned controller saves it after its loop
-        data_dir = Path(str(meta["data_dir"]))
-        status = f"recovered: {layout.read_status(segment.buf) or UNENDED}"
-        run = run_from_segment(segment.buf, layout, {**meta, "recovered": True}, status)
-        saved = find_run(data_dir, run) or find_run(fallback, run)
-        if saved is None:
-            remove_incomplete(data_dir, run)
-            remove_stale_temps(data_dir, shm.pid_alive)
-            try:
-                saved = save_run(run, data_dir)
-            except RecorderError:
-                saved = save_run(run, fallback)
-        unlink = True
-        return (f"recovered a {run.kind} run ({run.samples} samples) that a process left "
-                f"unsaved when it died: {saved.json}")
-    except (RecorderError, KeyError, TypeError, ValueError) as exc:
+        move = FinishedMove.in_segment(segment)
+    except (ValueError, UnicodeDecodeError) as exc:
+        shm.release(segment, unlink=True)
+        return f"removed {name}: not a move segment this servodesk can read ({exc})"
+    try:
+        controller = int(move.meta.get("controller_pid", 0))
+    except (TypeError, ValueError) as exc:
+        shm.release(segment, unlink=False)
         return f"could not recover the run in {name} yet ({exc}); it is kept for the next start"
-    finally:
-        shm.release(segment, unlink=unlink)
+    if shm.pid_alive(controller):
+        shm.release(segment, unlink=False)
+        return ""  # its orphaned controller saves it after its loop
+    status = f"recovered: {move.status or UNENDED}"
+    kept = keep(replace(move, meta={**move.meta, "recovered": True}, status=status),
+                fallback=fallback, recovering=True)
+    if kept.files is None or kept.run is None:
+        return (f"could not recover the run in {name} yet ({kept.problem}); it is kept for "
+                "the next start")
+    return (f"recovered a {kept.run.kind} run ({kept.run.samples} samples) that a process left "
+            f"unsaved when it died: {kept.files.json}")

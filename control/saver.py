@@ -11,12 +11,10 @@ client start finds them.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 from control import shm
 from control.modes import ActiveMove
-from control.recorder import save_run
-from control.runs import decode_meta, run_from_segment
+from control.run_keeper import FinishedMove, keep
 
 
 @dataclass
@@ -43,25 +41,21 @@ class RunSaver:
 
     def save_kept(self) -> list[str]:
         """After the loop: save every kept run and unlink its segment; the JSON paths."""
-        saved = []
-        for kept in self.kept:
-            path = self.save(kept.move, kept.status)
-            if path:
-                saved.append(path)
-            release(kept.move, unlink=bool(path))
+        saved = [path for kept in self.kept if (path := self.save(kept.move, kept.status))]
         self.kept.clear()
         return saved
 
     def save(self, move: ActiveMove, status: str) -> str:
-        """Save ``move`` as recorded; its JSON path, or "" if it could not be saved (then its
+        """Save ``move`` as recorded (``control/run_keeper.py``, here on the loop's thread, its
+        work done) and let go of it; its JSON path, or "" if it could not be saved (then its
         segment stays for the next client to start: ``control/recovery.py``)."""
-        layout, buf = move.layout, move.segment.buf
         try:
-            meta = decode_meta(layout.read_meta(buf))
-            run = run_from_segment(buf, layout, meta, status, move.timeline())
-            return str(save_run(run, Path(str(meta["data_dir"]))).json)
-        except (OSError, KeyError, TypeError, ValueError):
+            finished = FinishedMove.in_segment(move.segment, status, move.timeline())
+        except (UnicodeDecodeError, ValueError):
+            release(move, unlink=False)
             return ""
+        kept = keep(finished, release=lambda unlink: release(move, unlink))
+        return str(kept.files.json) if kept.files is not None else ""
 
 
 def release(move: ActiveMove, unlink: bool) -> None:

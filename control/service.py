@@ -38,6 +38,7 @@ import queue
 import socket
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -46,9 +47,7 @@ from control.channel import command_name
 from control.client import ControlClient, Event
 from control.commands import Command, EmergencyStop, Shutdown, StartMove
 from control.events import Commander, Died, MoveDone, Refused
-from control.layout import MoveLayout
-from control.recorder import save_run
-from control.runs import decode_meta, run_from_segment
+from control.run_keeper import FinishedMove, RunKeeper, RunKept
 from control.wire import Broken, Unreadable, Wire
 
 log = logging.getLogger("servodesk.controller")
@@ -338,13 +337,15 @@ class ControllerService:
                     peer.connected = False  # its reader thread ends, and it leaves
 
     def _move_done(self, done: MoveDone) -> None:
-        """Save the run of a move whose client has gone (else the client saves it)."""
+        """Save the run of a move whose client has gone (else the client saves it), on the
+        embedded client's run keeper: this is its monitor thread, which must not wait."""
         with self._lock:
             owner, segment = self._moves.pop(done.move_id, (None, ""))
         if owner is None or owner.connected or done.saved:
             return
-        log.info("move %d of %s ended (%s) after it left: %s", done.move_id, owner.name,
-                 done.status, save_departed(segment, done))
+        ended = f"move {done.move_id} of {owner.name} ended ({done.status}) after it left"
+        save_departed(segment, done, self.client.keeper,
+                      lambda outcome: log.info("%s: %s", ended, outcome))
 
     def _watch_clients(self) -> None:
         """Drop a client silent for ``drop_after_s``; a commander silent for
@@ -385,22 +386,25 @@ class ControllerService:
         self.client.close()
 
 
-def save_departed(name: str, done: MoveDone) -> str:
-    """Save the run in move segment ``name`` where its client saved runs, and unlink the
-    segment; what became of it, in words."""
+def save_departed(name: str, done: MoveDone, keeper: RunKeeper,
+                  said: Callable[[str], None]) -> None:
+    """Hand the run in move segment ``name`` to ``keeper``, which saves it where its client
+    saved runs and unlinks the segment; ``said`` is told what became of it, in words."""
     try:
         segment = shm.attach(name)
     except OSError as exc:
-        return f"its segment is gone ({exc})"
-    saved = False
+        said(f"its segment is gone ({exc})")
+        return
     try:
-        layout = MoveLayout.read_header(segment.buf)
-        meta = decode_meta(layout.read_meta(segment.buf))
-        run = run_from_segment(segment.buf, layout, meta, done.status, done.timeline)
-        files = save_run(run, Path(str(meta["data_dir"])))
-        saved = True
-        return f"saved {files.json}"
-    except (OSError, KeyError, TypeError, ValueError) as exc:
-        return f"not saved ({exc}); its segment is kept for the next start to recover"
-    finally:
-        shm.release(segment, unlink=saved)
+        move = FinishedMove.in_segment(segment, done.status, done.timeline)
+    except (UnicodeDecodeError, ValueError) as exc:
+        shm.release(segment, unlink=False)
+        said(f"not saved ({exc}); its segment is kept for the next start to recover")
+        return
+    keeper.hand(move, lambda kept: said(_outcome(kept)))
+
+
+def _outcome(kept: RunKept) -> str:
+    if kept.files is not None:
+        return f"saved {kept.files.json}"
+    return f"not saved ({kept.problem}); its segment is kept for the next start to recover"
