@@ -10,7 +10,9 @@ rounding tie for it to decide, one that Python writes with an exponent (below 10
 10¹⁵ on), a power of two (its neighbours are not equally far) or NaN and ±inf is written
 by Python itself (``Cells.odd``, through ``Cells.spell``): a few in a run. ``slots`` puts
 each text in a slot of bytes, four digits at a time; ``Block`` lays slots side by side and
-``lines`` makes rows of blocks into lines of text.
+``lines`` makes rows of blocks into lines of text. Every step is a numpy operation on a
+block of numbers, which lets go of the GIL while it runs: another thread (a client's
+monitor thread) waits at most a step for it, never a table.
 """
 
 from __future__ import annotations
@@ -289,13 +291,14 @@ class Block:
                    tuple(j * cell + end for j in range(k) for end in ends))
 
 
-def lines(blocks: Sequence[Block], sep: bytes) -> bytes:
-    """The rows of ``blocks`` side by side as lines: ``sep`` between cells, ``\\n`` after
-    each row's last, every NUL of a slot dropped."""
+def lines(blocks: Sequence[Block], sep: bytes) -> np.ndarray:
+    """The rows of ``blocks`` side by side as lines of text (ASCII bytes, ``uint8``): ``sep``
+    between cells, ``\\n`` after each row's last, every NUL of a slot dropped (by numpy,
+    which lets go of the GIL meanwhile, where ``bytes.translate`` would hold it)."""
     text = np.concatenate([b.text for b in blocks], axis=1)
     at = 0
     for b in blocks:
         text[:, [at + end for end in b.ends]] = ord(sep)
         at += b.text.shape[1]
     text[:, -1] = NEWLINE
-    return text.tobytes().translate(None, b"\0")
+    return text[text != 0]

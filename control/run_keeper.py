@@ -150,16 +150,14 @@ class RunKeeper:
             queue.Queue()
         self._lock = threading.Condition()
         self._in_hand = 0
-        self._thread: threading.Thread | None = None
+        # started now: a thread started where a move ends would make that thread wait for it
+        threading.Thread(target=self._work, name=name, daemon=True).start()
 
     def hand(self, move: FinishedMove, done: Callable[[RunKept], None], **how: Any) -> None:
         """Keep ``move``'s run on the worker thread (``how``: ``keep``'s options), then call
         ``done`` with what became of it; returns at once."""
         with self._lock:
             self._in_hand += 1
-            if self._thread is None:
-                self._thread = threading.Thread(target=self._work, name=self.name, daemon=True)
-                self._thread.start()
         self._jobs.put((move, done, how))
 
     @property

@@ -59,6 +59,7 @@ SLOW_PATHS = (
     "tests/control/test_process.py",   # the control subprocess's imports
     "tests/control/test_service.py",   # servodesk controller and clients attached to it
     "tests/control/test_service_trust.py",  # the same, tried as an attacker would
+    "tests/control/test_run_keeper.py",  # a 600 s run saved beside a real controller
     "tests/app/test_tui_attach.py",    # TUIs attached to servodesk controller
     "tests/app/test_tui_observer_files.py",  # and what their observers may not change
     "tests/app/test_serve.py",         # servodesk serve in a headless Chromium
