@@ -10,7 +10,6 @@ from pathlib import Path
 
 from app.event_log import EventLog, entries_of
 from app.history import History
-from control.attached import AttachedClient
 from control.client import ControlClient
 from control.events import Refused
 from hw.machine import Machine
@@ -35,8 +34,7 @@ class Desk:
     @property
     def commanding(self) -> bool:
         """Whether this TUI commands: one that started its own controller always does."""
-        client = self.attached
-        return not isinstance(client, AttachedClient) or client.commanding
+        return self.attached is None or self.attached.commanding
 
     def refusal(self, what: str) -> str:
         """Why ``what`` (a change to taught positions or gains, which the commander's moves
@@ -68,8 +66,7 @@ class Desk:
         return resolved
 
     def _role(self) -> str:
-        client = self.attached
-        return client.role if isinstance(client, AttachedClient) else "commanding"
+        return self.attached.role if self.attached is not None else "commanding"
 
     def _refused(self, what: str, reason: str) -> str:
         """Log the refusal of ``what`` as the controller's refusals are; its sentence."""

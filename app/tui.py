@@ -43,7 +43,6 @@ from app.tabs.tuning import TuningTab
 from app.widgets.dialogs import ConfirmScreen
 from app.widgets.header import FaultBanner, StatusHeader
 from app.widgets.key_bar import KeyBar
-from control.attached import AttachedClient
 from control.client import ControlClient, ControllerError, Event
 from control.events import Commander, Died, EStop, Fault, Initialised, Notice, Refused
 from control.layout import Mode
@@ -628,9 +627,9 @@ class ServodeskApp(App[None]):
         """Give command back: the controller holds; another client may take it."""
         self._command_change(lambda client: client.release_command())
 
-    def _command_change(self, change: Callable[[AttachedClient], None]) -> None:
+    def _command_change(self, change: Callable[[ControlClient], None]) -> None:
         client = self.client
-        if not isinstance(client, AttachedClient):
+        if client is None or not client.role:
             return
         try:
             change(client)
@@ -666,7 +665,7 @@ class ServodeskApp(App[None]):
 
 def _role(client: ControlClient | None) -> str:
     """The header's word on command: "" for a client that started its own controller."""
-    return client.role if isinstance(client, AttachedClient) else ""
+    return client.role if client is not None else ""
 
 
 def attached_app(socket: str | Path | None = None, *, observe_only: bool = False,

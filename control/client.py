@@ -1,9 +1,11 @@
 """``ControlClient``: the only handle the TUI, the CLI, scripts and tests use.
 
-It starts the control subprocess, owns the shared memory (and unlinks it on
-every exit path), sends commands through the channel, sends heartbeats, turns
-the controller's events into saved runs, and notices within 250 ms when the
-controller dies::
+A client is made of a link to its controller (``control/link.py``: the control
+subprocess it starts, ``control/embedded.py``, or a controller service it attaches to,
+``control/attached.py``), the command API here, and a run keeper that saves the runs of
+its moves on its own thread (``control/run_keeper.py``). It sends heartbeats, turns the
+controller's events into saved runs, and notices within 250 ms when the controller
+dies::
 
     with ControlClient("unimate2000b") as robot:
         move = robot.move(moves.step(robot.status().position, joint=2, target=10.0,
@@ -17,23 +19,17 @@ import contextlib
 import itertools
 import os
 import queue
-import socket
-import subprocess
-import sys
-import tempfile
 import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
-from multiprocessing.shared_memory import SharedMemory
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-import control
-from control import process, sealed, shm
-from control.channel import client_end
+from control import sealed, shm
+from control.attached import ANSWER_S, ServiceLink
 from control.commands import (
     Command,
     EmergencyStop,
@@ -47,11 +43,11 @@ from control.commands import (
     Reset,
     Resume,
     SetCoefficients,
-    Shutdown,
     StartMove,
     finite,
     joint_index,
 )
+from control.embedded import EmbeddedLink
 from control.events import (
     CoefficientsApplied,
     ControllerEvent,
@@ -62,47 +58,33 @@ from control.events import (
     MoveDone,
     MoveStarted,
     Notice,
-    Ready,
 )
-from control.layout import (
-    ESTOP_WORD,
-    HEARTBEAT_WORD,
-    ControlLayout,
-    LatencyHistogram,
-    Mode,
-    MoveLayout,
-    Status,
-)
+from control.layout import ESTOP_WORD, HEARTBEAT_WORD, LatencyHistogram, Mode, MoveLayout, Status
+from control.link import OUTGOING, ControllerError, Link, NotCommanding, Setting
 from control.motion import form_plans
 from control.motion.acceptance import accept, starts_here
 from control.motion.cartesian_jog import plan_jog
 from control.motion.plan import MovePlan, Summary, moving_joints, result_records, summaries
 from control.recorder import Run, RunFiles, coefficients_record, default_data_dir
-from control.recovery import recover_runs
 from control.run_keeper import FinishedMove, RunKeeper, RunKept
 from control.runs import encode_meta, segment_meta
-from control.seqlock import SeqlockReader, SeqlockWriter
+from control.seqlock import SeqlockReader
 from control.timing import Timing
 from control.wire import Broken, Message, Unreadable
 from hw.machine import Coefficients, Machine, load_machine
 
 if TYPE_CHECKING:
-    from control.attached import AttachedClient
     from control.identify.gains import GainCheck
     from control.identify.sysid import DeadbandModel
 
+__all__ = ["ControlClient", "ControllerError", "Event", "MoveHandle", "MoveResult",
+           "NotCommanding"]
+
 HEARTBEAT_S = 0.05
-OUTGOING = 64  # commands waiting for the channel; more means the controller is not reading
-CLOSE_WAIT_S = 1.0  # close(): how long the controller may take to stop before it is killed
 KEEP_WAIT_S = 30.0  # close(): how long the runs in hand may take to be saved (600 s: under 5)
 DEATH_S = 0.25
-_SESSIONS = itertools.count(1)  # several clients in one process get their own segments
-_MOVES = itertools.count(1)  # and so do their moves (a move's segment may outlive its client)
+_MOVES = itertools.count(1)  # a move's segment is named apart (it may outlive its client)
 SPIN_US = 150.0  # spin before each deadline: keeps the core and its caches (benchmarks/loop.py)
-
-
-class ControllerError(RuntimeError):
-    """The control subprocess could not start, crashed or died."""
 
 
 @dataclass(frozen=True)
@@ -174,11 +156,11 @@ class ControlClient:
     simulator as fast as it computes (tests). ``on_event`` is called from the
     client's monitor thread for every event (a TUI marshals it to its loop).
     ``ControlClient.attach`` gives a client of a controller run apart, with this API.
-    """
 
-    OWNS_CONTROLLER = True  # started it, unlinks its segment, stops it on close
-    RESTART = "restart servodesk to continue"
-    CHANNEL_CLOSED = "the control process closed its channel"
+    A client is made of parts: its ``link`` to the controller (``control/link.py``: one it
+    started, ``EmbeddedLink``, or a service's, ``ServiceLink``), the command API below, and
+    its run ``keeper`` (``control/run_keeper.py``).
+    """
 
     def __init__(self, machine: str | Path | Machine = "unimate2000b", backend: str = "sim", *,
                  port: str | None = None, seed: int = 0, lockstep: bool = False,
@@ -188,117 +170,165 @@ class ControlClient:
                  start_timeout_s: float = 30.0, sim_options: dict | None = None,
                  on_event: Callable[[Event], None] | None = None,
                  timing: Timing | None = None) -> None:
-        self._configure(machine if isinstance(machine, Machine) else load_machine(machine),
-                        backend, data_dir, timing, period_s, on_event, lockstep=lockstep)
-        self.port = port
-        slots = self.timing.slots(self.machine)
-        sim_options = {**self.timing.sim_options(self.machine), **(sim_options or {})}
-        # runs a dead process left unsaved first, then the clean-up (control/recovery.py)
-        notices = recover_runs(self.data_dir) + shm.cleanup_orphans()[1]
-        self._open_segment(shm.create(f"ctl{next(_SESSIONS)}", self.layout.size,
-                                      "the controller's status"))
-        self.layout.write_header(self._segment.buf)
-        self._words[HEARTBEAT_WORD] = time.monotonic_ns()
-        for which, c in self.coefficients.items():
-            self._write_coefficients(which, self.layout.coefficients.encode(c))
-        config = process.ProcessConfig(
-            machine=str(self.machine.path), backend=backend, port=port, seed=seed,
-            lockstep=lockstep, control_segment=self._segment.name, period_s=self.dt / slots,
-            spin_us=spin_us, realtime=realtime, heartbeat_timeout_s=heartbeat_timeout_s,
-            orphan_timeout_s=orphan_timeout_s, sim_options=sim_options, slots=slots,
-            slips=self.timing.slips)
-        ours, theirs = socket.socketpair()
-        self._wire = client_end(ours)
-        self._stderr = tempfile.TemporaryFile()  # noqa: SIM115  # lives as long as the client
-        try:
-            self._process = subprocess.Popen(
-                [sys.executable, "-m", "control.process", config.to_json(), str(theirs.fileno())],
-                pass_fds=[theirs.fileno()], stdin=subprocess.DEVNULL,
-                stdout=subprocess.DEVNULL, stderr=self._stderr, env=_child_env())
-        finally:
-            theirs.close()
-        try:
-            self._await_ready(start_timeout_s)
-        except BaseException:
-            self._shutdown_process()
-            self._release()
-            raise
-        self._start_threads(notices)
+        machine = machine if isinstance(machine, Machine) else load_machine(machine)
+        timing = timing or Timing()
+        setting = Setting(
+            machine=machine, backend=backend, port=port, timing=timing,
+            dt=period_s or timing.sample_time_s(machine),
+            data_dir=Path(data_dir) if data_dir is not None else default_data_dir(),
+            lockstep=lockstep)
+        early: list[ControllerEvent] = []
+        link, notices = EmbeddedLink.launch(
+            setting, (machine.hold, machine.track), seed=seed, realtime=realtime,
+            spin_us=spin_us, heartbeat_timeout_s=heartbeat_timeout_s,
+            orphan_timeout_s=orphan_timeout_s, start_timeout_s=start_timeout_s,
+            sim_options=sim_options or {}, early=early.append)
+        self._join(link, on_event, [*map(Notice, notices), *early])
 
     @classmethod
     def attach(cls, path: str | Path | None = None, *, name: str = "",
                on_event: Callable[[Event], None] | None = None,
-               timeout_s: float = 5.0) -> AttachedClient:
+               timeout_s: float = 5.0) -> ControlClient:
         """A client of the controller that ``servodesk controller`` runs (``path``: its socket,
-        by default the one in the user's runtime directory), with this class's API. It
-        observes until ``take_command``; ``close`` detaches and leaves the controller running
-        (``control/attached.py``)."""
-        from control.attached import AttachedClient  # here: it imports this module
+        by default the one in the user's runtime directory), with this class's API
+        (``control/attached.py``). It observes until ``take_command``; ``close`` detaches and
+        leaves the controller running."""
+        client = cls.__new__(cls)
+        client._join(ServiceLink.connect(path, name, timeout_s), on_event, [])
+        return client
 
-        return AttachedClient(path, name=name, on_event=on_event, timeout_s=timeout_s)
-
-    def _configure(self, machine: Machine, backend: str, data_dir: str | Path | None,
-                   timing: Timing | None, period_s: float | None,
-                   on_event: Callable[[Event], None] | None, *, lockstep: bool = False) -> None:
-        """The client's own state, whoever runs its controller."""
-        self.machine = machine
-        self.backend = backend
-        self.lockstep = lockstep
-        self.data_dir = Path(data_dir) if data_dir is not None else default_data_dir()
-        self.timing = timing or Timing()
-        self.dt = period_s or self.timing.sample_time_s(self.machine)  # between path rows
+    def _join(self, link: Link, on_event: Callable[[Event], None] | None,
+              early: Sequence[ControllerEvent]) -> None:
+        """Work through ``link``: the client's own state, its views of the control segment,
+        the sets the controller has, and its threads; ``early`` events go out first."""
+        setting = self.setting = link.setting
+        self.link = link
+        self.machine = setting.machine
         self.on_event = on_event
         self.events: queue.Queue[Event] = queue.Queue()
-        self.notice = ""
-        self.realtime = False
         self.dead = ""
-        self.heartbeat_on = True  # this client's heartbeat thread writes the heartbeat word
+        self.heartbeat_on = True  # a controller service turns its own off while another commands
+        self.layout = link.layout
+        self._words = self.layout.client_words(link.segment.buf)
+        self._status = SeqlockReader(link.segment.buf, self.layout.status_offset,
+                                     self.layout.status.struct)
         self._moves: dict[int, MoveHandle] = {}
         self.keeper = RunKeeper()  # saves finished moves' runs off the monitor thread
         self._kept: dict[str, str] = {}  # run id: segment of a run not saved, for the next start
-        self._ids = itertools.count(1)
-        self._outgoing: queue.Queue[Message] = queue.Queue(OUTGOING)
+        self._ids = itertools.count(setting.first_move_id)
         self._closing = threading.Event()
         self._stopping = False
         self._manual = [0.0] * self.machine.n_joints  # the duties jog_joint keeps for the others
         self._latched = False  # an E-stop sent or reported, until the controller releases it
-        self.coefficients = {"hold": self.machine.hold, "track": self.machine.track}
+        self.coefficients = {which: self._coefficients_in_use(which, c) for which, c in
+                             (("hold", self.machine.hold), ("track", self.machine.track))}
         # what the gain check said of each set in use, saved with every run (control.identify.gains)
         self.coefficient_checks: dict[str, dict[str, object]] = {
             which: {"passed": None, "summary": "the machine file's set, applied at start"}
             for which in self.coefficients}
         self._models: tuple[DeadbandModel | None, ...] = (None,) * self.machine.n_joints
-        self.layout = ControlLayout(self.machine.n_joints)
-
-    def _open_segment(self, segment: SharedMemory) -> None:
-        """Views of the control segment: the client's words and the status."""
-        self._segment = segment
-        buf = segment.buf
-        self._words = self.layout.client_words(buf)
-        self._status = SeqlockReader(buf, self.layout.status_offset, self.layout.status.struct)
-
-    def _write_coefficients(self, which: str, values: tuple) -> None:
-        """Write a packed set where the controller reads it on ``SetCoefficients``. The writer
-        takes the seqlock's count as it is now: under a controller service another client may
-        have written the set since this one attached."""
-        writer = SeqlockWriter(self._segment.buf, self.layout.coefficient_offset(which),
-                               self.layout.coefficients.struct)
-        try:
-            writer.write(*values)
-        finally:
-            writer.release()
-
-    def _start_threads(self, notices: Sequence[str]) -> None:
         self._monitor = threading.Thread(target=self._watch, name="servodesk-events",
                                          daemon=True)
         self._heart = threading.Thread(target=self._beat, name="servodesk-heartbeat",
                                        daemon=True)
-        self._sender = threading.Thread(target=self._deliver, name="servodesk-commands",
-                                        daemon=True)
-        for thread in (self._monitor, self._heart, self._sender):
+        link.start()
+        for thread in (self._monitor, self._heart):
             thread.start()
-        for text in notices:
-            self._dispatch(Event(Notice(text)))
+        for record in early:
+            self._dispatch(Event(record))
+
+    def _coefficients_in_use(self, which: str, given: Coefficients) -> Coefficients:
+        """The set the controller has: the machine file's (by its name) or one a client set."""
+        values = self.link.read_coefficients(which)
+        if values == self.layout.coefficients.encode(given):
+            return given
+        return self.layout.coefficients.decode(values, f"{which} (set by a client)")
+
+    # -- what the link says ------------------------------------------------------------
+
+    @property
+    def backend(self) -> str:
+        return self.setting.backend
+
+    @property
+    def port(self) -> str | None:
+        return self.setting.port
+
+    @property
+    def timing(self) -> Timing:
+        return self.setting.timing
+
+    @property
+    def dt(self) -> float:
+        """Between path rows, s."""
+        return self.setting.dt
+
+    @property
+    def data_dir(self) -> Path:
+        return self.setting.data_dir
+
+    @property
+    def lockstep(self) -> bool:
+        return self.setting.lockstep
+
+    @property
+    def notice(self) -> str:
+        """How the controller is scheduled, when it is not as asked."""
+        return self.setting.notice
+
+    @property
+    def realtime(self) -> bool:
+        return self.setting.realtime
+
+    @property
+    def name(self) -> str:
+        """The name a controller service gave this client ("" for one's own controller)."""
+        return self.setting.name
+
+    @property
+    def service_pid(self) -> int:
+        return self.setting.service_pid
+
+    @property
+    def pid(self) -> int:
+        """The control process's id."""
+        return self.link.pid
+
+    @property
+    def alive(self) -> bool:
+        return not self.dead and not self.link.exited()
+
+    @property
+    def commanding(self) -> bool:
+        return self.link.commanding
+
+    @property
+    def role(self) -> str:
+        """In a sentence: whether this client commands, and who does if not ("" when it
+        started its controller)."""
+        return self.link.role
+
+    @property
+    def holder(self) -> str:
+        """Who holds command of a controller service ("" nobody)."""
+        return self.link.holder
+
+    def take_command(self, timeout_s: float = ANSWER_S) -> None:
+        """Become the commanding client of a controller service; ``NotCommanding`` with the
+        reason if another holds command."""
+        self.check()
+        self.link.take_command(timeout_s)
+
+    def release_command(self, timeout_s: float = ANSWER_S) -> None:
+        """Give command of a controller service back: the controller holds every joint;
+        another client may take it."""
+        self.check()
+        self.link.release_command(timeout_s)
+
+    def controller_log(self) -> str:
+        """Everything the control process has written to its stderr so far (when this client
+        started it)."""
+        return self.link.log()
 
     # -- lifecycle -------------------------------------------------------------------
 
@@ -308,153 +338,65 @@ class ControlClient:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-    @property
-    def pid(self) -> int:
-        """The control process's id."""
-        return self._process.pid
-
-    @property
-    def alive(self) -> bool:
-        return self._process.poll() is None
-
-    def _exited(self) -> str:
-        """Why the controller is gone, or "" while it runs (the monitor thread asks)."""
-        code = self._process.poll()
-        return "" if code is None else f"the control process exited (code {code})"
-
-    def _may_send(self, command: Command) -> None:
-        """Raise ``ControllerError`` with the reason if this client may not send ``command``:
-        the client that started its controller may send anything."""
-
     def close(self) -> None:
-        """Stop the controller (valves closed), save what it finished, unlink every segment.
-        A controller that does not stop within ``CLOSE_WAIT_S`` (frozen, flooded) is killed;
+        """Let go of the controller (one this client started is stopped, valves closed; a
+        service's runs on), save what it finished, let go of every segment (unlinking this
+        client's own). A controller that does not stop in time (frozen, flooded) is killed;
         the runs in hand get ``KEEP_WAIT_S`` to be saved (one not saved by then stays in its
         segment for the next start)."""
         if self._closing.is_set():
             return
-        if not self.dead:
-            self._stop_controller()
         self._stopping = True
+        if not self.dead:
+            self.link.stop(self._moves_end)
         self._closing.set()
-        self._shutdown_process()
-        for thread in (self._monitor, self._heart, self._sender):
+        self.link.close()
+        for thread in (self._monitor, self._heart):
             if thread.is_alive():
                 thread.join(timeout=0.2)
         self._drain()
         for handle in list(self._moves.values()):
             self._finish(handle, "interrupted: client closed", None)
         self.keeper.wait(KEEP_WAIT_S)
-        self._release()
-
-    def _stop_controller(self) -> None:
-        """Ask the controller to stop and give it ``CLOSE_WAIT_S`` to do so."""
-        self._stopping = True
-        with contextlib.suppress(ControllerError):
-            self._send(Shutdown())
-        with contextlib.suppress(subprocess.TimeoutExpired):
-            self._process.wait(timeout=CLOSE_WAIT_S)
-
-    def _await_ready(self, timeout_s: float) -> None:
-        deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline:
-            if self._wire.poll(0.01):
-                try:
-                    record = self._wire.recv().record
-                except Unreadable:
-                    continue
-                except Broken:
-                    break
-                if isinstance(record, Ready):
-                    # the controller watches the heartbeat from now: beat before the threads
-                    # start, which a busy UI (building its screen) can delay
-                    self._words[HEARTBEAT_WORD] = time.monotonic_ns()
-                    self.notice = record.notice
-                    self.realtime = record.realtime
-                    return
-                if isinstance(record, Crash):
-                    raise ControllerError(f"control process failed to start: {record.message}")
-                self._dispatch(Event(record))
-            elif not self.alive:
-                break
-        code = self._process.poll()
-        raise ControllerError("control process did not start"
-                              + (f" (exit code {code}): {self._last_words()}" if code is not None
-                                 else f" within {timeout_s:g} s"))
-
-    def _last_words(self) -> str:
-        """The last line the controller wrote to stderr (its traceback's summary)."""
-        lines = self.controller_log().strip().splitlines()
-        return lines[-1] if lines else "no output"
-
-    def controller_log(self) -> str:
-        """Everything the control process has written to its stderr so far."""
-        with contextlib.suppress(OSError, ValueError):
-            self._stderr.seek(0)
-            return self._stderr.read().decode("utf-8", "replace")
-        return ""
-
-    def _shutdown_process(self) -> None:
-        for stop in (self._process.terminate, self._process.kill):
-            if not self.alive:
-                break
-            stop()
-            with contextlib.suppress(subprocess.TimeoutExpired):
-                self._process.wait(timeout=0.3)
-
-    def _release(self) -> None:
         self._words.release()
         self._status.release()
-        shm.release(self._segment, unlink=self.OWNS_CONTROLLER)
-        self._wire.close()
-        while not self._outgoing.empty():  # descriptors of moves never sent
-            self._outgoing.get_nowait().close_fds()
-        if self.OWNS_CONTROLLER:
-            self._stderr.close()
+        self.link.release()
+
+    def _moves_end(self, timeout_s: float) -> None:
+        """Wait at most ``timeout_s`` for this client's moves to end."""
+        deadline = time.monotonic() + timeout_s
+        for handle in list(self._moves.values()):
+            handle.done.wait(max(deadline - time.monotonic(), 0.0))
 
     # -- the monitor thread: heartbeats out, events in, death noticed -------------------
 
     def _beat(self) -> None:
         """Heartbeats on their own thread, so saving a run or a busy UI never silences them."""
         while not (self.dead or self._stopping):
-            if self.heartbeat_on:  # the first at once: see Ready
+            if self.heartbeat_on:
                 self.beat()
             if self._closing.wait(HEARTBEAT_S):
                 return
 
     def beat(self) -> None:
-        """One heartbeat: the word in shared memory the controller watches (no channel to fill,
-        so a frozen controller never blocks it). A controller service calls it for the client
-        that commands, each time that client's heartbeat reaches it."""
-        self._words[HEARTBEAT_WORD] = time.monotonic_ns()
-
-    def _deliver(self) -> None:
-        """Send queued commands in order; only this thread ever waits on the channel."""
-        while not self._closing.is_set():
-            try:
-                message = self._outgoing.get(timeout=0.05)
-            except queue.Empty:
-                continue
-            try:
-                self._wire.send(message.record, message.fds)
-            except Broken:
-                return  # the channel is gone: the monitor thread reports the death
-            finally:
-                message.close_fds()
+        """One heartbeat, the way this client's link carries it (``Link.beat``). A controller
+        service calls it for the client that commands, each time that client's reaches it."""
+        self.link.beat(self._words)
 
     def _watch(self) -> None:
         """Dispatch the controller's events and report its death."""
+        wire = self.link.wire
         while not self._closing.is_set():
             try:
-                if self._wire.poll(0.01):
-                    self._dispatch(Event(self._wire.recv().record))
+                if wire.poll(0.01):
+                    self._dispatch(Event(wire.recv().record))
             except Unreadable:
                 pass  # a message of a newer servodesk, say: nothing to act on
             except Broken:
-                self._died(self.CHANNEL_CLOSED)
-            # poll on every pass, after the death too: it reaps an exited controller at once
+                self._died(self.link.closed)
+            # ask on every pass, after the death too: it reaps an exited controller at once
             # rather than leaving a zombie until close()
-            exited = self._exited()
+            exited = self.link.exited()
             if exited and not self.dead:
                 self._died(exited)
             if self.dead:
@@ -462,20 +404,21 @@ class ControlClient:
 
     def _drain(self) -> None:
         with contextlib.suppress(Broken, Unreadable):
-            while self._wire.poll():
-                self._dispatch(Event(self._wire.recv().record))
+            while self.link.wire.poll():
+                self._dispatch(Event(self.link.wire.recv().record))
 
     def _died(self, why: str) -> None:
         if self.dead or self._stopping:
             return
         self.dead = (f"controller died: {why}. The valves are closed by the I/O board's "
-                     f"watchdog; {self.RESTART}")
+                     f"watchdog; {self.link.restart}")
         for handle in list(self._moves.values()):
             self._finish(handle, "interrupted: controller died", None)
         self._dispatch(Event(Died(self.dead)))
 
     def _dispatch(self, event: Event) -> None:
         record = event.record
+        self.link.observe(record)
         if isinstance(record, EStop):
             self._latched = record.latched
             self._forget_manual()
@@ -548,9 +491,9 @@ class ControlClient:
         last ``OUTGOING`` commands (frozen or flooded)."""
         if self.dead:
             raise ControllerError(self.dead)
-        self._may_send(command)
+        self.link.may_send(command)
         try:
-            self._outgoing.put_nowait(Message(command, fds))
+            self.link.put(Message(command, fds))
         except queue.Full:
             raise ControllerError(f"the controller has not taken the last {OUTGOING} commands "
                                   "(frozen or overloaded): E-stop still works") from None
@@ -656,13 +599,13 @@ class ControlClient:
         from control.identify import gains  # scipy: loaded on first use, never by the controller
 
         command = SetCoefficients(which)
-        self._may_send(command)  # before the set is written where the controller reads it
+        self.link.may_send(command)  # before the set is written where the controller reads it
         if override is not None and (not isinstance(override, str) or not override.strip()):
             raise ValueError(f"override needs the reason as a non-empty string, got {override!r}")
         known = self._known_models(models)
         check = (gains.assess if override is not None else gains.check)(
             coefficients, self.machine, known, self.dt)
-        self._write_coefficients(which, self.layout.coefficients.encode(coefficients))
+        self.link.write_coefficients(which, coefficients)
         self.coefficients[which] = coefficients
         self.coefficient_checks[which] = check.record(override)
         self._models = known
@@ -825,12 +768,12 @@ class ControlClient:
     @property
     def segment_name(self) -> str:
         """The control segment's name in /dev/shm."""
-        return self._segment.name
+        return self.link.segment.name
 
     def histogram(self) -> LatencyHistogram:
         """The loop's wake-up lateness histogram in 5 µs bins, as Table 2.1."""
-        return LatencyHistogram.from_counters(self.layout.histogram(self._segment.buf).copy(),
-                                              self.status().overruns)
+        return LatencyHistogram.from_counters(
+            self.layout.histogram(self.link.segment.buf).copy(), self.status().overruns)
 
     def poll_events(self) -> list[Event]:
         """Every event since the last call, oldest first."""
@@ -857,11 +800,3 @@ class ControlClient:
         """Raise ``ControllerError`` if the controller has died."""
         if self.dead:
             raise ControllerError(self.dead)
-
-
-def _child_env() -> dict[str, str]:
-    """The environment for the control process, with servodesk importable from where it is."""
-    root = str(Path(control.__file__).resolve().parent.parent)
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
-    return env

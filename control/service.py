@@ -18,9 +18,10 @@ relays between it and the clients that attach (``control/attached.py``):
   silent for ``release_after_s`` loses command; the controller runs on for the others.
 
 Every connection must authenticate and join within ``rendezvous.HANDSHAKE_S``; one silent
-for ``SILENT_S`` (or three times ``release_after_s``, if longer) or not reading its events for ``SEND_S`` is dropped; at most
-``MAX_CLIENTS`` connections are served at once (more are closed at once), and running out
-of file descriptors is logged and waited out, never the end of the service. Messages are
+for ``SILENT_S`` (or three times ``release_after_s``, if longer) or not reading its events
+for ``SEND_S`` is dropped; at most ``MAX_CLIENTS`` connections are served at once (more are
+closed at once), and running out of file descriptors is logged and waited out, never the
+end of the service. Messages are
 typed records in bounded frames (``control/wire.py``), never pickle.
 
 A client's moves are its own (it makes their segments, numbered from its ``id_base``,

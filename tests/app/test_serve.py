@@ -33,7 +33,6 @@ from selenium.webdriver.common.keys import Keys
 from app.cli import main
 from app.cli_serve import MAX_SESSIONS
 from app.priority import UI_NICE
-from control.attached import AttachedClient
 from control.client import ControlClient, Event
 from control.layout import Mode
 from tests.app.browser import ROOT, Browser, Served, Session, browser, scripted, wait_until
@@ -58,7 +57,7 @@ def served(tmp_path: Path) -> Iterator[list[Served]]:
         serve.stop()
 
 
-def attach(socket: Path) -> AttachedClient:
+def attach(socket: Path) -> ControlClient:
     return ControlClient.attach(socket, name="test script")
 
 

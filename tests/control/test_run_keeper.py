@@ -60,7 +60,7 @@ class MonitorWatch:
 
     def __init__(self, client: ControlClient) -> None:
         self.passes: list[tuple[float, float]] = []
-        wire = client._wire
+        wire = client.link.wire
         poll = wire.poll
 
         def timed(timeout_s: float = 0.0) -> bool:

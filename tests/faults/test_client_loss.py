@@ -62,7 +62,7 @@ CLIENT_SCRIPT = textwrap.dedent("""
                   flush=True)
         elif command == "close":
             client.close()
-            print(json.dumps({"controller_exit": client._process.returncode}), flush=True)
+            print(json.dumps({"controller_exit": client.link.process.returncode}), flush=True)
             break
 """)
 
