@@ -72,6 +72,7 @@ from control.seqlock import SeqlockReader
 from control.timing import Timing
 from control.wire import Broken, Message, Unreadable
 from hw.machine import Coefficients, Machine, load_machine
+from hw.sim import check_plant
 
 if TYPE_CHECKING:
     from control.identify.gains import GainCheck
@@ -171,6 +172,8 @@ class ControlClient:
                  on_event: Callable[[Event], None] | None = None,
                  timing: Timing | None = None) -> None:
         machine = machine if isinstance(machine, Machine) else load_machine(machine)
+        if backend == "sim":
+            check_plant(machine)  # a MachineError naming the key, before anything starts
         timing = timing or Timing()
         setting = Setting(
             machine=machine, backend=backend, port=port, timing=timing,

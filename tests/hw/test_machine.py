@@ -12,6 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from control.client import ControlClient
 from hw import machine as machine_module
 from hw.machine import MachineError, load_machine, parse_machine
 from hw.sim import SimBackend, check_plant
@@ -210,6 +211,8 @@ def test_the_simulator_refuses_a_plant_it_cannot_run_naming_the_key(
         check_plant(machine)
     with pytest.raises(MachineError, match=r"^unimate2000b\.toml: .*" + message):
         SimBackend(machine, lockstep=True)
+    with pytest.raises(MachineError, match=r"^unimate2000b\.toml: .*" + message):
+        ControlClient(machine, lockstep=True)  # before any process or segment is made
 
 
 def test_a_quadrature_count_must_reach_the_whole_range_either_way() -> None:
