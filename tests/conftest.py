@@ -93,6 +93,9 @@ SLOW_TESTS = (
     "tests/faults/test_bad_input.py::test_tsv_path_files_deeply",
     "tests/faults/test_bad_input.py::test_csv_path_files_deeply",
     "tests/faults/test_bad_input.py::test_pose_files_deeply",
+    # a run's tables against the old writer's, 100 random runs; saved runs played as paths
+    "tests/control/test_recorder.py::test_the_tables_are_the_old_writers_byte_for_byte",
+    "tests/control/test_recorder.py::test_what_is_written_loads_back_and_plays_as_a_path",
     # 1,000 Cartesian jogs planned and checked sample by sample, about 10 s
     "tests/control/motion/test_cartesian_jog.py::"
     "test_random_jogs_keep_the_branch_and_the_line_or_are_refused_with_a_reason",

@@ -7,13 +7,20 @@ import errno
 import gzip
 import json
 import os
+import re
 import subprocess
 import sys
+import tempfile
 import threading
+from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
 
 from control import recorder
 from control.motion import moves
@@ -377,3 +384,125 @@ def test_a_saved_runs_csv_plays_again_as_a_path_even_at_max_accel(tmp_path: Path
                            np.zeros_like(path))
     points = read_path(save_run(run, tmp_path).csv, UNIMATE, tuple(here))
     assert points.q.tolist() == path.tolist()
+
+
+# -- the tables' text, written a block at a time (control/decimal_text.py) ----------------------
+# The writer before it (commit 5c3a3f2), a %-format and regular expressions per row: the
+# reference the new one must match byte for byte.
+_OLD_TRAILING = re.compile(r"(\.\d*?)0+(?=[,\t\n])")
+_OLD_BARE_POINT = re.compile(r"\.(?=[,\t\n])")
+_OLD_NEGATIVE_ZERO = re.compile(r"(?<=[,\t])-0(?=[,\t\n])")
+
+
+def old_table(rows: np.ndarray, sep: str, formats: list[str]) -> str:
+    if not len(rows):
+        return ""
+    line = sep.join("%r" if f == "r" else f"%{f}" for f in formats) + "\n"
+    text = "".join(line % tuple(row) for row in rows.tolist())
+    text = _OLD_BARE_POINT.sub("", _OLD_TRAILING.sub(r"\1", text))
+    return _OLD_NEGATIVE_ZERO.sub("0", text)
+
+
+def old_formats(run: Run) -> list[str]:
+    out = []
+    for d in run.decimals():
+        out += ["r", "r" if d is None else f".{d}f", ".2f"]
+    return out
+
+
+def old_texts(run: Run) -> tuple[str, str]:
+    """The TSV and the CSV's rows as the old writer made them."""
+    by_joint = np.stack([run.desired, run.actual, run.duty], axis=2)
+    joints = by_joint.reshape(run.samples, 3 * len(run.joint_names))
+    count = np.arange(run.samples, dtype=np.float64)[:, None]
+    return (old_table(np.concatenate([count, joints], axis=1), "\t", ["d", *old_formats(run)]),
+            old_table(np.concatenate([run.t[:, None], joints], axis=1), ",",
+                      [".6f", *old_formats(run)]))
+
+
+def new_texts(run: Run) -> tuple[str, str]:
+    pieces = list(recorder._tables(run))
+    return (b"".join(tsv for tsv, _ in pieces).decode(),
+            b"".join(table for _, table in pieces).decode())
+
+
+ANY_FLOAT = st.floats(width=64)  # NaN, ±inf, subnormals, 1e308 and -0.0 among them
+NEAR_A_TIE = st.builds(lambda k, p: k * 10.0 ** -p, st.integers(-10**7, 10**7),
+                       st.integers(0, 9)).map(lambda x: x + 5e-4)  # x.xxx5: %.3f's ties
+IN_COUNTS = st.builds(lambda k, c: k * c, st.integers(-100_000, 100_000),
+                      st.sampled_from([0.2617, 0.0295, 0.01432, 0.1, 0.0348]))
+EXACT_TIE = st.builds(lambda k, j: k / 2.0**j, st.integers(-10**6, 10**6),
+                      st.integers(1, 8))  # 0.125 at 2 decimals, 0.0625 at 3: half to even
+PATH_LIKE = st.floats(-2000.0, 2000.0) | st.floats(-1e-3, 1e-3)
+NUMBERS = st.one_of(ANY_FLOAT, NEAR_A_TIE, EXACT_TIE, IN_COUNTS, PATH_LIKE)
+
+
+@st.composite
+def random_runs(draw: st.DrawFn) -> Run:
+    machine = draw(st.sampled_from([UNIMATE, RIG]))
+    n, j = draw(st.integers(0, 20)), machine.n_joints
+    t = draw(arrays(np.float64, n, elements=st.one_of(NUMBERS, st.floats(0.0, 700.0))))
+    desired, actual, duty = (draw(arrays(np.float64, (n, j), elements=NUMBERS))
+                             for _ in range(3))
+    run = Run.from_machine(machine, "path", "complete", machine.track, t, desired, actual, duty,
+                           start_time="2024-03-01T09:30:15+00:00")
+    if draw(st.booleans()):  # a run that does not know its encoders: actual in full
+        run = replace(run, joint_resolution=())
+    return run
+
+
+def in_blocks_of(rows: int, texts: Callable[[Run], tuple[str, str]], run: Run
+                 ) -> tuple[str, str]:
+    """``texts(run)`` written ``rows`` rows a block (``recorder.ROWS_AT_ONCE``)."""
+    usual = recorder.ROWS_AT_ONCE
+    recorder.ROWS_AT_ONCE = rows
+    try:
+        return texts(run)
+    finally:
+        recorder.ROWS_AT_ONCE = usual
+
+
+@settings(max_examples=100, deadline=None)
+@given(random_runs(), st.integers(4, 25))
+def test_the_tables_are_the_old_writers_byte_for_byte(run: Run, rows: int) -> None:
+    assert in_blocks_of(rows, new_texts, run) == old_texts(run)
+
+
+def test_a_recorded_run_across_blocks_is_the_old_writers_byte_for_byte() -> None:
+    """A run as a controller records one (positions wandering, actual in encoder counts,
+    duty clipped), longer than a block: the numbers the fast path writes, not Python."""
+    n = 10_000
+    rng = np.random.default_rng(11)
+    t = np.arange(n) * UNIMATE.sample_time_s
+    desired = np.cumsum(rng.normal(0.0, 0.01, (n, 6)), axis=0) + rng.uniform(-100, 100, 6)
+    counts = np.array(recorder.resolution(UNIMATE))
+    actual = np.round(desired / counts) * counts
+    duty = np.clip(rng.normal(0.0, 40.0, (n, 6)), -100.0, 100.0)
+    run = Run.from_machine(UNIMATE, "path", "complete", UNIMATE.track, t, desired, actual,
+                           duty, start_time="2024-03-01T09:30:15+00:00")
+    assert in_blocks_of(4_096, new_texts, run) == old_texts(run)
+
+
+@settings(max_examples=10, deadline=None)
+@given(reach=st.lists(st.floats(-1.0, 1.0), min_size=6, max_size=6),
+       seconds=st.floats(0.3, 2.0), seed=st.integers(0, 2**32 - 1))
+def test_what_is_written_loads_back_and_plays_as_a_path(reach: list[float], seconds: float,
+                                                        seed: int) -> None:
+    """A ramp between random points inside the joints' limits, followed with noise: saved, it
+    loads back as written and its CSV plays as a path file with every desired digit."""
+    limits = np.array([[j.lower, j.upper] for j in UNIMATE.joints])
+    middle, half = limits.mean(axis=1), np.diff(limits, axis=1)[:, 0] / 4
+    here = middle + 0.5 * half * np.array(reach[::-1])
+    end = middle + half * np.array(reach)
+    path = moves.ramp(here, end, max(seconds, moves.min_ramp_time(here, end, UNIMATE)),
+                      machine=UNIMATE)
+    counts = np.array(recorder.resolution(UNIMATE))
+    duty = np.clip(np.random.default_rng(seed).normal(0.0, 30.0, path.shape), -100.0, 100.0)
+    run = Run.from_machine(UNIMATE, "ramp", "complete", UNIMATE.track,
+                           np.arange(len(path)) * UNIMATE.sample_time_s, path,
+                           np.round(path / counts) * counts, duty)
+    with tempfile.TemporaryDirectory() as directory:
+        files = save_run(run, Path(directory))
+        back = load_run(files.json)
+        assert back == as_written(run) and back.desired.tolist() == path.tolist()
+        assert read_path(files.csv, UNIMATE, tuple(here)).q.tolist() == path.tolist()
