@@ -1,6 +1,7 @@
 """Runs left in the move segments of processes that died are saved at the next start:
 complete and listed, marked recovered, once only, with a killed save's leftovers cleared;
-a run that cannot be saved yet stays whole for the start after."""
+a run that cannot be saved yet stays whole for the start after. The run keeper that does
+it keeps the same rules for a live client's runs, in the order they were handed over."""
 
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ from control import shm
 from control.layout import MoveLayout
 from control.recorder import list_runs, load_run, save_run, stem_base
 from control.recovery import recover_runs
+from control.run_keeper import FinishedMove, RunKeeper, keep
 from control.runs import encode_meta, run_from_segment, segment_meta
 from hw.machine import load_machine
 
@@ -167,4 +169,48 @@ def test_a_segment_another_start_recovers_is_waited_for_then_left_to_it(left, tm
         os.close(fd)
     (notice,) = recover_runs(tmp_path / "fallback")
     assert "recovered" in notice and segment.gone()
+    assert len(list_runs(tmp_path / "runs")) == 1
+
+
+# -- the run keeper: the same rules for a live client's runs, on a thread of its own ------------
+
+
+def test_a_keeper_saves_its_runs_in_the_order_handed_over_and_unlinks_each(left,
+                                                                          tmp_path) -> None:
+    segments = [left(), left(), left()]
+    for s in segments:  # one start time: the order shows in the stems' -2, -3
+        s.meta["start_time"] = "2024-03-01T09:30:15+00:00"
+    keeper, kept = RunKeeper(), []
+    for s in segments:
+        keeper.hand(FinishedMove(s.segment, s.layout, s.meta, "complete"), kept.append)
+    assert keeper.wait(60.0) and keeper.in_hand == 0
+    stems = [k.files.stem for k in kept]
+    assert stems == [stems[0], f"{stems[0]}-2", f"{stems[0]}-3"]
+    assert [k.run.meta["run_id"] for k in kept] == [s.meta["run_id"] for s in segments]
+    assert all(s.gone() for s in segments) and not any(k.kept for k in kept)
+
+
+def test_a_run_the_disk_refuses_stays_whole_in_its_segment_and_says_why(left, tmp_path) -> None:
+    segment = left()
+    (tmp_path / "runs").write_text("a file where the runs' directory should be")
+    kept = keep(FinishedMove(segment.segment, segment.layout, segment.meta, "complete"))
+    assert kept.kept and kept.files is None and kept.problem.startswith("cannot save the step")
+    assert kept.run is not None and kept.run.samples == ROWS and not segment.gone()
+    (tmp_path / "runs").unlink()
+    assert recover_runs(tmp_path / "fallback") and segment.gone()
+    assert len(list_runs(tmp_path / "runs")) == 1
+
+
+def test_a_keeper_measures_a_run_saves_what_it_measured_and_skips_an_empty_one(
+        left, tmp_path) -> None:
+    done, empty = left(), left(recorded=0)
+    keeper, kept = RunKeeper(), []
+    measure = lambda run: (("metrics", run.samples), {"results": [run.samples]})  # noqa: E731
+    for s in (done, empty):
+        keeper.hand(FinishedMove(s.segment, s.layout, s.meta, "complete"), kept.append,
+                    measure=measure, save_empty=False)
+    assert keeper.wait(60.0)
+    assert kept[0].results == ("metrics", ROWS)
+    assert load_run(kept[0].files.json).meta["results"] == [ROWS]
+    assert kept[1].files is None and not kept[1].kept and empty.gone()
     assert len(list_runs(tmp_path / "runs")) == 1
