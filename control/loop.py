@@ -32,11 +32,12 @@ from control.sealed import open_sealed
 from control.seqlock import SeqlockReader
 from control.supervisor import Supervisor
 from control.wire import Wire
-from hw.backend import Backend
+from hw.backend import Backend, StepClock
 from hw.machine import Machine
 from hw.transmission import Transmission
 
 MS = 1_000_000
+SETTLE_NS = 2_000 * MS  # after motion, a lockstep clock steps this long before pacing (idle)
 NOT_HOMED = ("not initialised: the encoder is not zeroed: run Initialise first (drives the ram "
              "to the bottom and zeroes the encoder)")
 
@@ -81,6 +82,8 @@ class Controller:
                                  self.outbox, config.period_ns * config.slots / 1e9,
                                  config.initialise, slots=config.slots, slips=config.slips)
         self.saver = RunSaver()
+        self.settle_band = [j.tolerance for j in machine.joints]
+        self.moved_ns = 0  # when the robot was last in motion (``idle``)
         self.valve = [0.0] * n
         self.client = ClientWatch(self.layout.client_words(control_buf),
                                   config.heartbeat_timeout_ns, config.orphan_timeout_ns)
@@ -110,8 +113,11 @@ class Controller:
     def run(self) -> None:
         """Run until told to stop or orphaned; the valves are closed on the way out."""
         clock, latency = self.clock, self.latency
+        lockstep = clock if isinstance(clock, StepClock) else None
         self.deadline = clock.now_ns() + self.config.period_ns
         while self.running:
+            if lockstep is not None:
+                lockstep.idle = self.idle(lockstep.now_ns())
             clock.sleep_until(self.deadline)
             woke = clock.now_ns()
             try:
@@ -122,6 +128,29 @@ class Controller:
         self.zero_valves()
         self.publish()
         self.outbox.flush()
+
+    def in_motion(self) -> bool:
+        """Something for the next tick to step: a move, an initialise, a position jog
+        travelling, manual duty, or a joint outside its settle band (``tolerance``) of the
+        hold target; nothing while the E-stop is latched (every valve closed)."""
+        modes = self.modes
+        if modes.move is not None:
+            return True
+        if self.guards.latched:
+            return False
+        if modes.mode == Mode.HOLD:
+            return modes.jog.moving or any(
+                abs(t - q) > band for t, q, band in
+                zip(modes.hold_target, modes.position, self.settle_band, strict=True))
+        return modes.mode != Mode.MANUAL_ACTUATE or any(modes.manual)
+
+    def idle(self, now: int) -> bool:
+        """Nothing stepped for ``SETTLE_NS``: a lockstep clock then paces at real time rather
+        than spinning (``hw.backend.StepClock``); until then the arm settles as fast as the
+        loop computes, as a move does."""
+        if self.in_motion():
+            self.moved_ns = now
+        return now - self.moved_ns > SETTLE_NS
 
     def fail_safe(self, exc: Exception) -> None:
         """A bug in a tick closes the valves and latches the E-stop; a second one stops the loop."""

@@ -4,7 +4,7 @@ Like ros2_control's ``SystemInterface``: a lifecycle (``open``/``close``), a
 ``read`` of the raw encoder words of all joints and a ``write`` of the signed
 valve duty per joint, plus the E-stop input, a fault line and link counters.
 A backend also owns its time base: real time, or a lockstep clock that a
-simulator advances as fast as it can compute.
+simulator advances as fast as it can compute (at real time while the robot only holds).
 
 Only the control subprocess calls a backend while it runs. The loop calls
 ``read`` and ``write`` once per tick with preallocated lists, so an
@@ -72,15 +72,22 @@ class RealClock:
 
 
 class StepClock:
-    """Lockstep time for simulation: sleeping jumps straight to the deadline."""
+    """Lockstep time for simulation: sleeping jumps straight to the deadline, so a move
+    computes as fast as the loop can; while ``idle`` (the control loop says so each tick:
+    nothing to step, the robot holding) a sleep first waits out the same time on the wall
+    clock, so a controller that merely holds paces at real time instead of spinning a core.
+    Simulated time is the deadlines either way: what a tick computes does not depend on it."""
 
     def __init__(self, start_ns: int = 0) -> None:
         self._now = start_ns
+        self.idle = False
 
     def now_ns(self) -> int:
         return self._now
 
     def sleep_until(self, deadline_ns: int) -> None:
+        if self.idle and deadline_ns > self._now:
+            time.sleep((deadline_ns - self._now) / 1e9)
         self._now = max(self._now, deadline_ns)
 
 
