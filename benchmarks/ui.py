@@ -21,9 +21,10 @@ Unimate 2000B. Parts:
    pause per tab (a task that wakes every 5 ms records how late it woke), the client's
    heartbeat's longest age as the controller sees it (read from shared memory by another
    process) and the controller's client-silent events;
-7. soak (``--soak 300``): ``python -m app`` in tmux beside a CPU burner, a tab switch
-   every second for that many seconds; the client-silent events of the session's
-   events.jsonl counted;
+7. soak (``--soak 300``, the five-minute soak; exits 1 if a check fails): ``python -m app``
+   in tmux beside a CPU burner, a tab switch every second for that many seconds, then the
+   app live at the end (the Jog tab, an E-stop, quit; tests/app/soak.py); the client-silent
+   events of the session's events.jsonl counted, and none allowed;
 8. browser (``--browser`` alone; also in the full run when Chromium is installed):
    ``servodesk serve`` started (its own controller), then three times a fresh headless
    Chromium opened on it (tests/app/browser.py): the time from asking for the page to the
@@ -34,7 +35,6 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import json
 import multiprocessing as mp
 import os
 import shlex
@@ -56,7 +56,6 @@ from textual.widgets import OptionList
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # ahead of benchmarks/hw.py
 
-from app.event_log import FILE as EVENT_FILE
 from app.plotting.braille import Trace, render
 from app.plotting.figure import decimate
 from app.tabs.latency import Lateness
@@ -73,7 +72,6 @@ JOINTS = 6
 SIZE = (160, 48)
 PAUSE_TICK_S = 0.005  # the pause clock's wake-ups
 TAB_SETTLE_S = 1.5  # each tab's time to show and settle before the next
-SOAK_KEY_S = 1.0  # the soak's tab switches
 PANEL = (70, 8, 3)  # columns, position rows, duty rows of one joint on a 160 × 48 screen
 
 
@@ -429,53 +427,30 @@ async def tab_pauses(burn: bool) -> None:
         print(f"   {entry.line()}")
 
 
-def soak(seconds: float) -> None:
-    """``python -m app`` in tmux beside a CPU burner, switching every tab (F1…F9, a key every
-    ``SOAK_KEY_S``) for ``seconds``; the controller's client-silent events counted from the
-    session's events.jsonl."""
-    tmux = shutil.which("tmux")
-    if tmux is None:
+def soak(seconds: float) -> bool:
+    """``python -m app`` in tmux beside a CPU burner, switching every tab (F1…F10, a key a
+    second) for ``seconds``, then live at the end (tests/app/soak.py): what it saw, the
+    session's client-silent events and stalls, and whether every check passed."""
+    from tests.app import soak as tmux_soak
+
+    if shutil.which("tmux") is None:
         print("\n7. soak skipped: tmux is not installed")
-        return
-    socket = f"servodesk-soak-{os.getpid()}"
-    run = [tmux, "-L", socket, "-f", os.devnull]
-    burner = start_burner()
-    keys = 0
-    try:
-        with tempfile.TemporaryDirectory() as data_dir:
-            command = (f"cd {shlex.quote(str(ROOT))} && PYTHONPATH={shlex.quote(str(ROOT))} "
-                       f"{shlex.quote(sys.executable)} -m app --data-dir {data_dir}")
-            subprocess.run([*run, "new-session", "-d", "-s", "soak", "-x", str(SIZE[0]), "-y",
-                            str(SIZE[1]), command], check=True)
-            try:
-                deadline = time.monotonic() + 60
-                while " RUN" not in subprocess.run([*run, "capture-pane", "-p", "-t", "soak"],
-                                                   capture_output=True, text=True).stdout:
-                    if time.monotonic() > deadline:
-                        raise RuntimeError("the app did not show a live screen within 60 s")
-                    time.sleep(0.1)
-                end = time.monotonic() + seconds
-                while time.monotonic() < end:
-                    subprocess.run([*run, "send-keys", "-t", "soak", f"F{keys % len(TABS) + 1}"],
-                                   check=True)
-                    keys += 1
-                    time.sleep(SOAK_KEY_S)
-                subprocess.run([*run, "send-keys", "-t", "soak", "C-q"])
-                logged = [json.loads(line) for path in
-                          Path(data_dir).glob(f"sessions/*/{EVENT_FILE}")
-                          for line in path.read_text().splitlines()]
-            finally:
-                subprocess.run([*run, "kill-server"], capture_output=True)
-    finally:
-        burner.kill()
-        burner.wait()
-    silent = [e for e in logged if e["kind"] == "UI lost"]
-    stalls = [e for e in logged if e["kind"] == "stall"]
-    print(f"\n7. soak: {seconds:g} s in tmux {SIZE[0]}×{SIZE[1]} beside a CPU burner, {keys} tab "
-          f"switches ({SOAK_KEY_S:g} s apart, F1…F{len(TABS)}): client-silent events "
-          f"{len(silent)}, loop stalls logged {len(stalls)}, {len(logged)} events in all")
+        return True
+    with tempfile.TemporaryDirectory() as directory:
+        result = tmux_soak.soak(Path(directory), seconds)
+        events = tmux_soak.logged(Path(directory))
+    failed = tmux_soak.failures(result, events)
+    silent = [e for e in events if e["kind"] == "UI lost"]
+    stalls = [e for e in events if e["kind"] == "stall"]
+    print(f"\n7. soak: {seconds:g} s in tmux {SIZE[0]}×{SIZE[1]} beside a CPU burner, "
+          f"{result['switches']} tab switches ({tmux_soak.KEY_S:g} s apart, "
+          f"F1…F{tmux_soak.TABS}): client-silent events {len(silent)}, loop stalls logged "
+          f"{len(stalls)}, {len(events)} events in all, load average {result['load']:.1f}")
     for entry in silent + stalls:
         print(f"   {entry['time']} {entry['kind']}: {entry['what']}")
+    print("   passed: live to the end, a switch a second, the E-stop logged, never silent"
+          if not failed else "   FAILED:\n" + "\n".join(f"   - {f}" for f in failed))
+    return not failed
 
 
 def startup(repeats: int) -> None:
@@ -562,8 +537,7 @@ def main() -> None:
         browser_first_render()
         return
     if args.soak:
-        soak(args.soak)
-        return
+        sys.exit(0 if soak(args.soak) else 1)
     if args.pauses:
         asyncio.run(tab_pauses(not args.no_burner))
         return

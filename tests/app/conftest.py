@@ -19,10 +19,7 @@ from textual.widget import Widget
 
 from app.tui import ServodeskApp
 from control.layout import Status
-from tests.app.soak import BackgroundSoak
-from tests.app.terminal import TMUX
 
-SOAK_TEST = "test_a_five_minute_soak_beside_a_burner_never_lets_the_controller_hold"
 START_S = 30.0  # a loaded machine can take a while to spawn the controller
 SIZE = (160, 48)
 
@@ -103,50 +100,3 @@ def data_dir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
 @pytest.fixture
 def tui(data_dir: Path) -> Tui:
     return Tui(data_dir)
-
-
-# -- the soak: five minutes in tmux, beside the quick tests (tests/app/soak.py) ----------
-
-_soaks: list[BackgroundSoak] = []
-# Slow tests that mostly wait (one controller at real time, a client that sleeps, a saver
-# killed): they run beside the soak too, adding a fraction of a core.
-BESIDE_SOAK = (
-    "tests/faults/test_client_loss.py::test_a_client_killed_30_s_into_a_60_s_move",
-    "tests/faults/test_saving.py::",
-    "tests/faults/test_controller_freeze.py::",
-)
-
-
-@pytest.hookimpl(trylast=True)  # after tests/conftest.py has marked the slow tests
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """The soak runs from collection on; the quick tests (one busy core, no process of their
-    own) and those ``BESIDE_SOAK`` first, beside it, then its test, which waits for it to
-    end, then the other slow tests: their controllers, UIs, browsers and burners would add
-    to the load its five minutes are meant to withstand (one burner) and make it another
-    test (beside the whole suite, its UI missed a heartbeat at load 4-5)."""
-    soaks = [item for item in items if item.name == SOAK_TEST]
-    if not soaks:
-        return
-    rest = [item for item in items if item.name != SOAK_TEST]
-    first = [item for item in rest if item.get_closest_marker("slow") is None
-             or item.nodeid.startswith(BESIDE_SOAK)]
-    items[:] = first + soaks + [item for item in rest if item not in first]
-
-
-def pytest_collection_finish(session: pytest.Session) -> None:
-    if session.config.option.collectonly:
-        return
-    if TMUX is not None and any(item.name == SOAK_TEST for item in session.items):
-        _soaks.append(BackgroundSoak(session.config._tmp_path_factory.mktemp("soak")))
-
-
-def pytest_sessionfinish() -> None:
-    for soak in _soaks:
-        soak.stop()
-
-
-@pytest.fixture(scope="session")
-def soak_in_background() -> BackgroundSoak:
-    """The soak started when its test was collected."""
-    (soak,) = _soaks
-    return soak
