@@ -5,10 +5,12 @@ Writing. A number is written ``±m·10⁻ˢ``: the digits of the integer ``m`` w
 ``s`` digits from their end, no trailing zero after the point (``Cells``). ``fixed`` finds
 ``m`` and ``s`` of a number at so many decimals, as ``'%.2f' % x`` does; ``shortest`` of
 the shortest text that reads back to the same float, as ``repr(x)`` does. Both work in
-float64 with error-free products (Dekker's), so their error is known: a number too near a
-rounding tie for it to decide, one that Python writes with an exponent (below 10⁻⁴ or from
-10¹⁵ on), a power of two (its neighbours are not equally far) or NaN and ±inf is written
-by Python itself (``Cells.odd``, through ``Cells.spell``): a few in a run. ``slots`` puts
+float64 with error-free products (Dekker's) and sums (Knuth's), so they round as Python
+does, exact ties included. What they leave to Python itself (``Cells.odd``, written by
+``Cells.spell``), a few numbers in a run: one Python writes with an exponent (below 10⁻⁴
+or from 10¹⁵ on), a power of two (its neighbours are not equally far), one whose shortest
+text float64 cannot settle (within 2⁻⁴⁶ of a boundary), one past 10¹⁸ at its decimals,
+NaN and ±inf. ``slots`` puts
 each text in a slot of bytes, four digits at a time; ``Block`` lays slots side by side and
 ``lines`` makes rows of blocks into lines of text. Every step is a numpy operation on a
 block of numbers, which lets go of the GIL while it runs: another thread (a client's
@@ -79,10 +81,11 @@ def fixed(values: np.ndarray, decimals: int | np.ndarray, spell: Spell, *,
     (to the nearest, of the exact binary value, half to even), trailing zeros dropped; a
     value that rounds to 0 is ``0``, or ``-0`` if it is negative and ``negative_zero``."""
     x = np.asarray(values, dtype=np.float64)
-    d = np.broadcast_to(np.asarray(decimals, dtype=np.int64), x.shape)
+    wanted = np.broadcast_to(np.asarray(decimals, dtype=np.int64), x.shape)
+    d = np.minimum(wanted, len(P10) - 1)
     a = np.abs(x)
     with np.errstate(invalid="ignore", over="ignore"):
-        odd = ~np.isfinite(a) | (a * P10[d] >= MAX_M)
+        odd = ~np.isfinite(a) | (a * P10[d] >= MAX_M) | (wanted != d)
         a = np.where(odd, 0.0, a)
         hi, lo = _times_power(a, *_split(a), d)
         whole = np.rint(hi)
