@@ -13,6 +13,7 @@ Everything is little-endian; the 8-byte counters sit on 8-byte boundaries.
 
 from __future__ import annotations
 
+import json
 import struct
 from dataclasses import dataclass
 from enum import IntEnum, IntFlag
@@ -27,7 +28,7 @@ from hw.machine import MAX_TAPS, Coefficients
 if TYPE_CHECKING:
     from control.latency import LatencyStats
 
-LAYOUT_VERSION = 4
+LAYOUT_VERSION = 5
 CONTROL_MAGIC = b"SDSK"
 MOVE_MAGIC = b"SDMV"
 HIST_BIN_NS = 5_000  # 5 µs bins, Table 2.1
@@ -265,8 +266,11 @@ class MoveLayout:
     header (64 B): magic, version, samples N, joints J; at offset 24 the number of rows
     recorded so far (one aligned 8-byte store per tick); at 32 the metadata's length.
     Then the status text the controller writes when the move ends (``STATUS_TEXT``
-    bytes, empty while it runs), the run's metadata as JSON (written by the client),
-    and ``record (N, 1 + 3J)`` rows of ``t, desired..., actual..., duty...`` as float64.
+    bytes, empty while it runs), the move's timeline as JSON (its stalls, feed changes,
+    feed holds and supply readings: ``TIMELINE_TEXT`` bytes, written by a controller whose
+    client is gone, for whoever saves the run), the run's metadata as JSON (written by the
+    client), and ``record (N, 1 + 3J)`` rows of ``t, desired..., actual..., duty...`` as
+    float64.
     """
 
     HEADER = struct.Struct("<4sIQI")
@@ -274,6 +278,8 @@ class MoveLayout:
     META_SIZE_OFFSET = 32
     STATUS_OFFSET = 64
     STATUS_TEXT = 256
+    TIMELINE_OFFSET = STATUS_OFFSET + STATUS_TEXT
+    TIMELINE_TEXT = 256 * 1024  # a move's bounded timelines as JSON (control/modes.py)
 
     def __init__(self, samples: int, n: int, meta_size: int = 0) -> None:
         if samples < 1:
@@ -283,7 +289,7 @@ class MoveLayout:
         self.meta_size = meta_size
         self.row = struct.Struct(f"<{1 + 3 * n}d")
         self.target = struct.Struct(f"<{n}d")
-        self.meta_offset = self.STATUS_OFFSET + self.STATUS_TEXT
+        self.meta_offset = self.TIMELINE_OFFSET + self.TIMELINE_TEXT
         self.record_offset = _align(self.meta_offset + meta_size)
         self.size = self.record_offset + self.row.size * samples
 
@@ -317,6 +323,24 @@ class MoveLayout:
         """How the move ended (the controller, once, when it ends); cut to fit."""
         text = status.encode()[:self.STATUS_TEXT - 1]
         buf[self.STATUS_OFFSET:self.STATUS_OFFSET + len(text) + 1] = text + b"\0"
+
+    def write_timeline(self, buf: memoryview, timeline: dict[str, object]) -> None:
+        """The ended move's timeline, for whoever saves its run after the controller (not in
+        a tick: after the loop). ValueError if it does not fit (it is bounded to)."""
+        text = json.dumps(timeline, separators=(",", ":")).encode()
+        if len(text) >= self.TIMELINE_TEXT:
+            raise ValueError(f"a timeline of {len(text)} bytes does not fit {self.TIMELINE_TEXT}")
+        buf[self.TIMELINE_OFFSET:self.TIMELINE_OFFSET + len(text) + 1] = text + b"\0"
+
+    def read_timeline(self, buf: memoryview) -> dict[str, list[list[float]]] | None:
+        """The timeline a controller wrote, or None (written by nobody, or unreadable)."""
+        raw = bytes(buf[self.TIMELINE_OFFSET:self.TIMELINE_OFFSET + self.TIMELINE_TEXT])
+        text = raw.split(b"\0", 1)[0]
+        try:
+            timeline = json.loads(text) if text else None
+        except ValueError:
+            return None
+        return timeline if isinstance(timeline, dict) else None
 
     def read_status(self, buf: memoryview) -> str:
         """The ended move's status, or "" while it runs (or if it never ended)."""

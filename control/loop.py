@@ -6,7 +6,8 @@ words, then the command channel), ``control`` (the mode machine and the eq. 5.1
 law), ``guard`` (E-stop, feedback, limits, the supervisor), record the move,
 ``write`` the valves, ``publish`` the status. On an overrun the loop skips to
 the next grid point; it never catches up with a burst of ticks, and it never
-blocks: no file I/O (runs are kept and saved after the loop, ``RunSaver``),
+blocks: no file I/O (a run whose client is gone is kept, and handed over to a saver
+after the loop, ``RunSaver``),
 events wait in the ``Outbox``. Each stage's state lives in its component:
 ``EncoderInput``, ``ClientWatch``, ``ModeMachine``, ``Guards``, ``Supervisor``,
 ``LatencyStats``, ``Outbox``.
@@ -370,18 +371,19 @@ class Controller:
                                self.encoders, self.backend, self.latency, self.valve,
                                bool(self.client.lost_since), self.realtime)
 
-    def release(self) -> None:
-        """After the loop: end any move, save what the client left behind, drop every view
-        into the segments."""
+    def release(self) -> list[str]:
+        """After the loop: end any move, hand over the runs the client left behind (each
+        segment says how its move ended, and its timeline), drop every view into the
+        segments; the segments handed over, for a saver to save (``control/saver.py``)."""
         self.end_move("stopped: controller shut down")
-        for saved in self.saver.save_kept():
-            self.outbox.put(Notice(f"saved a run its client left: {saved}"))
+        handed = self.saver.hand_over()
         self.outbox.flush()
         self.client.release()
         self.publisher.release()
         for reader in self.coefficient_readers.values():
             reader.release()
         self.latency.hist.release()
+        return handed
 
     # -- watch: the client may vanish, the machine may be overloaded --------------------
 
@@ -429,6 +431,6 @@ class Controller:
         self.modes.feed.end_move((self.clock.now_ns() - move.start_ns) / 1e9)
         self.outbox.put(MoveDone(move.move_id, status, move.index, **move.timeline()))
         if self.orphaned:
-            self.saver.keep(move, status)
+            self.saver.keep(move)
         else:
             release(move, unlink=False)

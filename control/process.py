@@ -9,8 +9,10 @@ from __future__ import annotations
 
 import contextlib
 import json
+import os
 import signal
 import socket
+import subprocess
 import sys
 import traceback
 from dataclasses import asdict, dataclass
@@ -96,9 +98,20 @@ def main(config: ProcessConfig, wire: Wire) -> None:
         raise
     finally:
         orphaned = controller is None or controller.orphaned
-        if controller is not None:
-            controller.release()
+        handed = controller.release() if controller is not None else []
         shm.release(segment, unlink=orphaned)
+        if handed:
+            hand_over(handed)
+
+
+def hand_over(segments: list[str]) -> None:
+    """Start the saver of the runs this controller kept for a client that has gone (in
+    ``segments``): a process of its own (``control/recovery.py``) that waits for this one to
+    exit, then saves them with the run keeper. The control process writes no run file."""
+    with contextlib.suppress(OSError):
+        subprocess.Popen([sys.executable, "-m", "control.recovery", "--after", str(os.getpid()),
+                          *segments], stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                         start_new_session=True)
 
 
 if __name__ == "__main__":

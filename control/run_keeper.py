@@ -61,11 +61,13 @@ class FinishedMove:
     def in_segment(cls, segment: SharedMemory, status: str | None = None,
                    timeline: Timeline | None = None) -> FinishedMove:
         """The move ``segment`` holds, its layout and metadata read from it; with no
-        ``status``, the one the controller wrote there when the move ended ("" if it never
-        did). ValueError if it is no move segment this servodesk can read."""
+        ``status`` or ``timeline``, those the controller wrote there when the move ended ("" and
+        None if it never did). ValueError if it is no move segment this servodesk can read."""
         layout = MoveLayout.read_header(segment.buf)
         meta = decode_meta(layout.read_meta(segment.buf))
         ended = layout.read_status(segment.buf) if status is None else status
+        if timeline is None:  # a controller whose client had gone wrote it there
+            timeline = layout.read_timeline(segment.buf)
         return cls(segment, layout, meta, ended, timeline)
 
     @property

@@ -1,61 +1,47 @@
-"""Saving the runs the controller finished on its own, its client gone — never in the tick.
+"""The runs the controller finished with its client gone: kept, then handed over — never
+saved in the control process.
 
 While its client is silent the controller keeps each finished move's segment
 (``keep``: no file I/O, nothing unlinked). If the client comes back it is told
 of the move and saves it itself (``drop``). Once the loop has ended — valves
-closed, nothing real-time left to do — ``save_kept`` writes what is still kept.
-A controller killed before that leaves the segments in /dev/shm, where the next
-client start finds them.
+closed, nothing real-time left to do — ``hand_over`` writes into each kept segment
+how the move ended and its timeline (stalls, feed changes, holds, supply), and the
+control process starts a saver (``python -m control.recovery --after PID SEGMENT…``) that saves
+them with the run keeper once the controller has exited. A controller killed before
+that leaves the segments in /dev/shm, where the next client start finds them.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 from control import shm
 from control.modes import ActiveMove
-from control.run_keeper import FinishedMove, keep
-
-
-@dataclass
-class KeptRun:
-    move: ActiveMove
-    status: str
 
 
 class RunSaver:
-    """Keeps an orphaned move's segment; after the loop, saves its run where its client saved
-    runs (the segment says where, ``control/runs.py``)."""
+    """Keeps an orphaned move's segment; after the loop, hands its run over to a saver."""
 
     def __init__(self) -> None:
-        self.kept: list[KeptRun] = []
+        self.kept: list[ActiveMove] = []
 
-    def keep(self, move: ActiveMove, status: str) -> None:
-        self.kept.append(KeptRun(move, status))
+    def keep(self, move: ActiveMove) -> None:
+        self.kept.append(move)
 
     def drop(self) -> None:
         """The client is back and will save what it is told of: let go of the segments."""
-        for kept in self.kept:
-            release(kept.move, unlink=False)
-        self.kept.clear()
-
-    def save_kept(self) -> list[str]:
-        """After the loop: save every kept run and unlink its segment; the JSON paths."""
-        saved = [path for kept in self.kept if (path := self.save(kept.move, kept.status))]
-        self.kept.clear()
-        return saved
-
-    def save(self, move: ActiveMove, status: str) -> str:
-        """Save ``move`` as recorded (``control/run_keeper.py``, here on the loop's thread, its
-        work done) and let go of it; its JSON path, or "" if it could not be saved (then its
-        segment stays for the next client to start: ``control/recovery.py``)."""
-        try:
-            finished = FinishedMove.in_segment(move.segment, status, move.timeline())
-        except (UnicodeDecodeError, ValueError):
+        for move in self.kept:
             release(move, unlink=False)
-            return ""
-        kept = keep(finished, release=lambda unlink: release(move, unlink))
-        return str(kept.files.json) if kept.files is not None else ""
+        self.kept.clear()
+
+    def hand_over(self) -> list[str]:
+        """After the loop: write each kept move's timeline into its segment (its status is
+        there already) and let go of it, not unlinked; the segments' names."""
+        names = []
+        for move in self.kept:
+            move.layout.write_timeline(move.segment.buf, move.timeline())
+            names.append(move.segment.name)
+            release(move, unlink=False)
+        self.kept.clear()
+        return names
 
 
 def release(move: ActiveMove, unlink: bool) -> None:

@@ -144,7 +144,12 @@ def adopting_orphans() -> Iterator[None]:
 
 
 def the_interrupted_run(runs: Path, rows_before: int, path: np.ndarray) -> Path:
-    """The saved run: interrupted, every row up to the hold, readable."""
+    """The saved run (by the saver the exiting controller started: wait for it):
+    interrupted, every row up to the hold, readable."""
+    deadline = time.monotonic() + 60.0
+    while not list_runs(runs):
+        assert time.monotonic() < deadline, "the controller's saver saved no run in 60 s"
+        time.sleep(0.05)
     (info,) = list_runs(runs)
     run = load_run(info.files.json)
     assert run.status == "interrupted: client silent"
@@ -211,8 +216,9 @@ def test_a_killed_client_leaves_a_holding_controller_that_saves_and_exits(
         tmp_path: Path, until, leftovers, measured) -> None:
     """SIGKILL of the client mid-move: the controller holds at once (measured), keeps
     ticking with no stall (the latest wake-up measured), exits with code 0 after its orphan
-    timeout (measured), and only then, its loop ended, saves the interrupted run with every
-    row recorded; no shared-memory segment is left."""
+    timeout (measured), and only then, its loop ended, hands the interrupted run over to a
+    saver of its own, which saves it with every row recorded; no shared-memory segment is
+    left."""
     runs = tmp_path / "runs"
     orphan_s = 1.5
     with adopting_orphans():
@@ -247,7 +253,7 @@ def test_a_client_killed_30_s_into_a_60_s_move_costs_the_loop_no_stall(
     its tick: the client dies 30 s into a 60 s move. The loop holds and goes on ticking with
     no stall (no more than a few ticks missed, where the save cost ~900; the latest wake-up
     around the kill measured: 110 µs on a quiet machine, the target is under 2 ms), and
-    after its orphan timeout, its loop ended, the controller saves the 30 s run."""
+    after its orphan timeout, its loop ended, the controller's saver saves the 30 s run."""
     runs = tmp_path / "runs"
     with adopting_orphans():
         script = ClientScript(runs, orphan_timeout_s=1.5, seconds=60.0)
