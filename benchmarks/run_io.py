@@ -51,9 +51,11 @@ def main(argv: list[str] | None = None) -> int:
             run = recorded_run(round(seconds / UNIMATE.sample_time_s))
             new = measure(recorder, run, Path(tmp) / f"new{seconds:g}", args.repeat)
             was = (measure(old, run, Path(tmp) / f"old{seconds:g}", args.repeat) if old
-                   else (float("nan"),) * 3)
-            print(f"{seconds:>5g}s  {new[0]:>7.2f}s {was[0]:>8.2f}s  {new[1]:>6.2f}s "
-                  f"{was[1]:>8.2f}s  {new[2]:>6.1f}MB {was[2]:>7.1f}MB")
+                   else None)
+            then = (f"{was[0]:>8.2f}s", f"{was[1]:>8.2f}s", f"{was[2]:>7.1f}MB") if was else \
+                (f"{'-':>9}",) * 3
+            print(f"{seconds:>5g}s  {new[0]:>7.2f}s {then[0]}  {new[1]:>6.2f}s {then[1]}  "
+                  f"{new[2]:>6.1f}MB {then[2]}")
     print(f"load average {os.getloadavg()[0]:.1f} at the end")
     return 0
 
