@@ -65,8 +65,20 @@ def test_status_decodes_what_was_packed() -> None:
 
 def test_move_layout_sizes_follow_the_move() -> None:
     small, big = MoveLayout(250, 6), MoveLayout(20_000, 6)
-    assert big.size > small.size * 50
-    assert big.size - big.record_offset == 8 * (1 + 3 * 6) * 20_000
+    record = 8 * (1 + 3 * 6)  # a row: t, desired, actual, duty
+    assert big.size - small.size == record * (20_000 - 250)  # the rest is fixed
+    assert big.size - big.record_offset == record * 20_000
+
+
+def test_a_timeline_written_after_the_loop_reads_back_and_none_is_none() -> None:
+    layout = MoveLayout(10, 6, meta_size=12)
+    buf = memoryview(bytearray(layout.size))
+    assert layout.read_timeline(buf) is None
+    timeline = {"gaps": [[1.5, 0.2]], "feed": [[0.0, 0.5]], "pauses": [], "supply": []}
+    layout.write_timeline(buf, timeline)
+    assert layout.read_timeline(buf) == timeline
+    with pytest.raises(ValueError, match="does not fit"):
+        layout.write_timeline(buf, {"supply": [[0.0, 1.0]] * 100_000})
 
 
 def test_histogram_percentiles_and_rows() -> None:
