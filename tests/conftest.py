@@ -103,6 +103,24 @@ SLOW_TESTS = (
     "tests/hw/test_machine_fuzz.py::"
     "test_ten_thousand_changed_machine_files_load_and_run_or_name_their_key",
 )
+# Parallel runs (pytest-xdist, ``-n 2 --dist loadgroup``: README's test command). Tests that
+# load the machine on purpose (burners of their own, twenty browser sessions, a starved
+# controller), that measure it, or that run the I/O board emulator (at SCHED_FIFO, with its
+# 50 ms watchdog) run on one worker, one after another, so no two of them ever overlap; the
+# other worker runs the rest beside them, as a sequential suite runs beside a burner. The
+# tests of a module that share a module-scoped fixture (one controller for the module) run
+# on one worker too, so that it is set up once.
+ONE_AT_A_TIME_FIXTURES = frozenset({"emulator"})
+ONE_AT_A_TIME = (
+    "tests/faults/test_cpu_starvation.py",   # every core burning
+    "tests/faults/test_stale_words.py::test_resets_after_watchdog_trips_hold_where_the_arm_is_"
+    "beside_a_cpu_burner",
+    "tests/faults/test_serial_link.py::test_losing_a_tcp_link_does_not_stall_the_loop",
+    "tests/app/test_tui_heartbeat.py",       # every tab opened beside a burner, 250 ms heartbeat
+    "tests/app/test_serve.py",               # headless Chromium, twenty sessions beside a burner
+    "tests/app/test_smoke_tmux.py",          # the app in tmux
+    "tests/control/test_run_keeper.py",      # an E-stop's delivery timed while a run saves
+)
 # Audit events (PEP 578) of a process start. A multiprocessing "spawn" start raises none
 # (CPython 3.11): such a test must be listed above by hand, as test_seqlock's is.
 PROCESS_EVENTS = frozenset({"subprocess.Popen", "os.fork", "os.forkpty", "os.posix_spawn",
@@ -121,10 +139,22 @@ def _starts_processes(item: pytest.Item) -> bool:
     return False
 
 
+@pytest.hookimpl(tryfirst=True)  # before pytest-xdist's, which reads the groups
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     for item in items:
         if _starts_processes(item):
             item.add_marker(pytest.mark.slow)
+        if (item.nodeid.startswith(ONE_AT_A_TIME)
+                or ONE_AT_A_TIME_FIXTURES & set(getattr(item, "fixturenames", ()))):
+            item.add_marker(pytest.mark.xdist_group("one_at_a_time"))
+        elif _shares_a_module_fixture(item):
+            item.add_marker(pytest.mark.xdist_group(item.path.relative_to(ROOT).as_posix()))
+
+
+def _shares_a_module_fixture(item: pytest.Item) -> bool:
+    """Whether ``item`` uses a fixture set up once for its module (or package)."""
+    definitions = getattr(getattr(item, "_fixtureinfo", None), "name2fixturedefs", {})
+    return any(defs[-1].scope in ("module", "package") for defs in definitions.values())
 
 
 class ProcessWatch:

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import time
 from collections.abc import Iterator
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -29,20 +28,31 @@ def wait_until(predicate, timeout: float, what: str) -> None:
         time.sleep(0.005)
 
 
-@pytest.fixture
-def robot(tmp_path: Path) -> Iterator[ControlClient]:
-    client = ControlClient("unimate2000b", lockstep=True, data_dir=tmp_path,
+@pytest.fixture(scope="module")
+def controller(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ControlClient]:
+    """One controller for the module: every test jogs from rest at ``START`` (``robot``)."""
+    client = ControlClient("unimate2000b", lockstep=True,
+                           data_dir=tmp_path_factory.mktemp("cartesian-jog-runs"),
                            heartbeat_timeout_s=3.0)
-    try:
-        result = client.wait(client.go_to(START, speed=1.0), timeout=60)
-        assert result.complete, result.status
-        # at full speed Yaw swings a few degrees for a while after the move: a jog planned
-        # from where it is then starts from a moving joint, which in lockstep has moved on by
-        # the time the move arrives (the controller refuses its row 0); these tests jog from rest
-        wait_until(lambda: settled(client, START), 30, "the arm settled at the start")
-        yield client
-    finally:
-        client.close()
+    yield client
+    client.close()
+
+
+@pytest.fixture
+def robot(controller: ControlClient) -> ControlClient:
+    """The module's controller, released, holding at rest at ``START``."""
+    controller.check()
+    if controller.latched:
+        controller.reset()
+        wait_until(lambda: not controller.status().estop, 10, "the E-stop released")
+    result = controller.wait(controller.go_to(START, speed=1.0), timeout=60)
+    assert result.complete, result.status
+    # at full speed Yaw swings a few degrees for a while after the move: a jog planned
+    # from where it is then starts from a moving joint, which in lockstep has moved on by
+    # the time the move arrives (the controller refuses its row 0); these tests jog from rest
+    wait_until(lambda: settled(controller, START), 30, "the arm settled at the start")
+    controller.poll_events()  # each test sees its own events only
+    return controller
 
 
 def tool_band(q: np.ndarray) -> float:

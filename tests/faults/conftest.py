@@ -16,7 +16,7 @@ import json
 import os
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import pytest
@@ -24,6 +24,7 @@ import pytest
 from control import ControlClient, shm
 
 REPORT_ENV = "SERVODESK_FAULT_REPORT"
+CASE_KEY = "servodesk_fault_case"  # a test report's user property: its CaseRecord as a dict
 
 
 @dataclass
@@ -82,6 +83,18 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo) -> Itera
                           else f"{report.when} {report.outcome}")
     if report.when == "call":
         record.duration_s = report.duration
+    report.user_properties.append((CASE_KEY, asdict(record)))
+
+
+def pytest_runtest_logreport(report: pytest.TestReport) -> None:
+    """Under pytest-xdist the cases run in workers: their records come back with each report,
+    for the summary and the report the main process writes."""
+    for key, value in report.user_properties:
+        if key == CASE_KEY:
+            record = _record(report.nodeid)  # the same record when the test ran here
+            for name, item in value.items():
+                setattr(record, name, item)
+            record.figures = {name: tuple(figure) for name, figure in value["figures"].items()}
 
 
 def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
@@ -99,7 +112,7 @@ def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
 
 def pytest_sessionfinish(session: pytest.Session) -> None:
     path = os.environ.get(REPORT_ENV)
-    if not path or not CASES:
+    if not path or not CASES or os.environ.get("PYTEST_XDIST_WORKER"):
         return
     doc = {nodeid: {"doc": r.doc, "outcome": r.outcome, "reason": r.reason,
                     "duration_s": r.duration_s,
