@@ -32,7 +32,7 @@ import numpy as np
 
 from app.cli_options import ALL, global_options, machine_for
 from app.run_text import summary_table
-from control.layout import Flag
+from control.rt.layout import Flag
 from control.motion import form_plans
 from control.motion.fields import (
     DWELL_S,

@@ -16,7 +16,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
 
-from control.law import SLIPS
+from control.rt.law import SLIPS
 from control.timing import TIMINGS
 from hw.factory import BACKENDS
 from hw.machine import Machine, load_machine

@@ -16,7 +16,7 @@ import tempfile
 from collections.abc import Mapping
 from pathlib import Path
 
-from control.layout import MAX_TAPS
+from control.rt.layout import MAX_TAPS
 from hw.machine import (
     Coefficients,
     Machine,

@@ -11,7 +11,7 @@ from pathlib import Path
 from app.event_log import EventLog, entries_of
 from app.history import History
 from control.client import ControlClient
-from control.events import Refused
+from control.rt.events import Refused
 from hw.machine import Machine
 from kinematics.unimate import Unimate2000B
 

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 
-from control.events import (
+from control.rt.events import (
     CoefficientsApplied,
     ControllerEvent,
     Died,

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from control.layout import Status
+from control.rt.layout import Status
 
 SAMPLE_HZ = 200.0
 CAPACITY = 24_000  # two minutes at SAMPLE_HZ

@@ -9,7 +9,7 @@ Run: ``PYTHONPATH=. python benchmarks/bounded_inputs.py [--gigabytes 4]`` (a few
 - ``form_plans.go_to`` (Rotate +40°) and ``cartesian_jog.plan_jog`` (x +50 mm) at speeds
   whose move would pass the move limit: the time to the ValueError, beside the time to plan
   the slowest speed that fits.
-- ``control.feed.Timeline``: 60,000 override changes 10 ms apart (a slider dragged for ten
+- ``control.rt.feed.Timeline``: 60,000 override changes 10 ms apart (a slider dragged for ten
   minutes): the entries kept and their final spacing, and what one thinning of a full list
   costs (the controller's tick pays it, a handful of times a move at most).
 """
@@ -29,7 +29,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # ahead of benchmarks/hw.py
 
-from control.feed import MAX_ENTRIES, Timeline
+from control.rt.feed import MAX_ENTRIES, Timeline
 from control.motion import form_plans
 from control.motion.cartesian_jog import plan_jog
 from control.recorder import RecorderError, Run, load_run, save_run

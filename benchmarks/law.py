@@ -14,7 +14,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # ahead of benchmarks/hw.py
 
-from control.law import DifferenceLaw, pid
+from control.rt.law import DifferenceLaw, pid
 from hw.machine import Coefficients, Machine, load_machine
 
 TICKS = 10_000

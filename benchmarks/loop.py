@@ -28,7 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from control import ControlClient
 from control.client import SPIN_US
-from control.layout import HIST_BIN_NS
+from control.rt.layout import HIST_BIN_NS
 from hw.transmission import valve_duty
 
 TABLE_2_1 = {"min_us": 11.5, "mean_us": 13.97, "max_us": 54.0, "ticks": 100_290}

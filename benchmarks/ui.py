@@ -61,9 +61,9 @@ from app.plotting.figure import decimate
 from app.tabs.latency import Lateness
 from app.tabs.scope import ScopeTab
 from app.tui import TABS, ServodeskApp
-from control import shm
-from control.layout import HEARTBEAT_WORD, ControlLayout
-from control.seqlock import SeqlockReader
+from control.rt import shm
+from control.rt.layout import HEARTBEAT_WORD, ControlLayout
+from control.rt.seqlock import SeqlockReader
 
 ROOT = Path(__file__).resolve().parents[1]
 POINTS = 2_000

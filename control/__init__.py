@@ -1,7 +1,7 @@
 """The real-time side: the control subprocess, its shared memory, channel and client.
 
 The client is loaded on first use, so the control process (``python -m
-control.process``) never imports it.
+control.rt.process``) never imports it.
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from control.client import ControlClient, ControllerError, Event, MoveHandle, MoveResult
-    from control.layout import Flag, LatencyHistogram, Mode, Status
+    from control.rt.layout import Flag, LatencyHistogram, Mode, Status
 
 _EXPORTS = {
     "ControlClient": "control.client",
@@ -19,10 +19,10 @@ _EXPORTS = {
     "Event": "control.client",
     "MoveHandle": "control.client",
     "MoveResult": "control.client",
-    "Flag": "control.layout",
-    "LatencyHistogram": "control.layout",
-    "Mode": "control.layout",
-    "Status": "control.layout",
+    "Flag": "control.rt.layout",
+    "LatencyHistogram": "control.rt.layout",
+    "Mode": "control.rt.layout",
+    "Status": "control.rt.layout",
 }
 
 __all__ = [

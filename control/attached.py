@@ -21,12 +21,14 @@ from collections.abc import Callable
 from multiprocessing.shared_memory import SharedMemory
 from pathlib import Path
 
-from control import rendezvous, shm
-from control.commands import Command, EmergencyStop
-from control.events import Commander, Refused
+from control import rendezvous
+
+from control.rt import shm
+from control.rt.commands import Command, EmergencyStop
+from control.rt.events import Commander, Refused
 from control.link import ControllerError, Link, NotCommanding, Setting
 from control.timing import Timing
-from control.wire import Broken, Message, Wire
+from control.rt.wire import Broken, Message, Wire
 from hw.machine import load_machine
 
 ANSWER_S = 2.0  # how long take_command and release_command wait for the service's answer

@@ -28,9 +28,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from control import sealed, shm
+from control.rt import sealed, shm
 from control.attached import ANSWER_S, ServiceLink
-from control.commands import (
+from control.rt.commands import (
     Command,
     EmergencyStop,
     FeedOverride,
@@ -48,7 +48,7 @@ from control.commands import (
     joint_index,
 )
 from control.embedded import EmbeddedLink
-from control.events import (
+from control.rt.events import (
     CoefficientsApplied,
     ControllerEvent,
     Crash,
@@ -59,7 +59,7 @@ from control.events import (
     MoveStarted,
     Notice,
 )
-from control.layout import ESTOP_WORD, HEARTBEAT_WORD, LatencyHistogram, Mode, MoveLayout, Status
+from control.rt.layout import ESTOP_WORD, HEARTBEAT_WORD, LatencyHistogram, Mode, MoveLayout, Status
 from control.link import OUTGOING, ControllerError, Link, NotCommanding, Setting
 from control.motion import form_plans
 from control.motion.acceptance import accept, starts_here
@@ -68,9 +68,9 @@ from control.motion.plan import MovePlan, Summary, moving_joints, result_records
 from control.recorder import Run, RunFiles, coefficients_record, default_data_dir
 from control.run_keeper import FinishedMove, RunKeeper, RunKept
 from control.runs import encode_meta, segment_meta
-from control.seqlock import SeqlockReader
+from control.rt.seqlock import SeqlockReader
 from control.timing import Timing
-from control.wire import Broken, Message, Unreadable
+from control.rt.wire import Broken, Message, Unreadable
 from hw.machine import Coefficients, Machine, load_machine
 from hw.sim import check_plant
 
@@ -91,7 +91,7 @@ SPIN_US = 150.0  # spin before each deadline: keeps the core and its caches (ben
 @dataclass(frozen=True)
 class Event:
     """Something the controller (or the client's watchdog) reported: a typed record from
-    ``control.events`` and when it arrived. ``kind`` and ``payload`` are the record's."""
+    ``control.rt.events`` and when it arrived. ``kind`` and ``payload`` are the record's."""
 
     record: ControllerEvent
     wall: float = field(default_factory=time.monotonic)
@@ -507,7 +507,7 @@ class ControlClient:
         self._manual = [0.0] * self.machine.n_joints
 
     def send(self, command: Command, fds: tuple[int, ...] = ()) -> None:
-        """Queue a typed command (``control.commands``) as it is, with the descriptors that
+        """Queue a typed command (``control.rt.commands``) as it is, with the descriptors that
         came with it (a move's sealed path), which are closed once sent: the controller checks
         it (a controller service relays its clients' commands this way)."""
         self._send(command, fds)
@@ -706,7 +706,7 @@ class ControlClient:
         return self.run(MovePlan(kind, kind, profile=duty, meta=dict(meta or {}), moving=moving))
 
     def _start(self, plan: MovePlan) -> MoveHandle:
-        """Send an accepted plan: its path or profile sealed (``control/sealed.py``) with the
+        """Send an accepted plan: its path or profile sealed (``control/rt/sealed.py``) with the
         StartMove, and all its run needs to be saved by whoever outlives the move in a new
         move segment, where the controller records it."""
         kind, path, profile = plan.kind, plan.path, plan.profile

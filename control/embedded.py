@@ -2,7 +2,7 @@
 
 It saves the runs a dead process left (``control/recovery.py``) and clears orphans
 first, makes the control segment (the machine's coefficient sets written in), starts
-``python -m control.process`` on one end of a socketpair and waits for it to say it is
+``python -m control.rt.process`` on one end of a socketpair and waits for it to say it is
 ready. It always commands; its heartbeat is a word in shared memory the controller reads
 every tick, so a full or frozen channel never delays it. Closing stops the controller
 (valves closed), kills it if it does not stop, and unlinks the segment.
@@ -24,14 +24,14 @@ from pathlib import Path
 from typing import IO
 
 import control
-from control import process, shm
-from control.channel import client_end
-from control.commands import Command, Shutdown
-from control.events import ControllerEvent, Crash, Ready
-from control.layout import HEARTBEAT_WORD, ControlLayout
+from control.rt import process, shm
+from control.rt.channel import client_end
+from control.rt.commands import Command, Shutdown
+from control.rt.events import ControllerEvent, Crash, Ready
+from control.rt.layout import HEARTBEAT_WORD, ControlLayout
 from control.link import ControllerError, Link, Setting
 from control.recovery import recover_runs
-from control.wire import Broken, Message, Unreadable, Wire
+from control.rt.wire import Broken, Message, Unreadable, Wire
 from hw.machine import Coefficients
 
 CLOSE_WAIT_S = 1.0  # how long the controller may take to stop before it is killed
@@ -69,7 +69,7 @@ class EmbeddedLink(Link):
         stderr = tempfile.TemporaryFile()  # noqa: SIM115  # lives as long as the link
         try:
             proc = subprocess.Popen(
-                [sys.executable, "-m", "control.process", config.to_json(), str(theirs.fileno())],
+                [sys.executable, "-m", "control.rt.process", config.to_json(), str(theirs.fileno())],
                 pass_fds=[theirs.fileno()], stdin=subprocess.DEVNULL,
                 stdout=subprocess.DEVNULL, stderr=stderr, env=_child_env())
         except BaseException:

@@ -19,11 +19,11 @@ from dataclasses import dataclass
 from multiprocessing.shared_memory import SharedMemory
 from pathlib import Path
 
-from control.commands import Command
-from control.layout import ControlLayout
-from control.seqlock import SeqlockReader, SeqlockWriter
+from control.rt.commands import Command
+from control.rt.layout import ControlLayout
+from control.rt.seqlock import SeqlockReader, SeqlockWriter
 from control.timing import Timing
-from control.wire import Broken, Message, Wire
+from control.rt.wire import Broken, Message, Wire
 from hw.machine import Coefficients, Machine
 
 OUTGOING = 64  # commands waiting for the wire; more means the other end is not reading

@@ -4,7 +4,7 @@ the runs a controller handed over as it exited, saved by the saver it started.
 A move segment is unlinked only once its run is saved (``control/recorder.py``). So
 a move segment whose creating client is dead, and whose controller is dead too, holds a
 run nobody else will save: the client was killed mid-move or mid-save, or both processes
-were, or the controller handed it over as it exited, its client gone (``control/saver.py``;
+were, or the controller handed it over as it exited, its client gone (``control/rt/saver.py``;
 its saver, ``main``, saves it as it ended). ``recover_runs`` saves each such run where its
 client saved runs (or, if that directory cannot take it, in the starting client's), marked
 ``recovered`` with the status the controller wrote when the move ended (or that it never
@@ -30,7 +30,7 @@ from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
 
-from control import shm
+from control.rt import shm
 from control.recorder import default_data_dir
 from control.run_keeper import FinishedMove, keep
 
@@ -124,7 +124,7 @@ def _recover(name: str, fallback: Path) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """``python -m control.recovery --after PID SEGMENT…``: the saver a controller starts as
-    it exits with runs its client left (``control/saver.py``): wait for it to be gone, then
+    it exits with runs its client left (``control/rt/saver.py``): wait for it to be gone, then
     save the runs in those segments. Each notice goes to stderr."""
     parser = argparse.ArgumentParser(prog="python -m control.recovery")
     parser.add_argument("--after", type=int, required=True, metavar="PID",

@@ -8,7 +8,7 @@ it; a directory given with ``--socket`` keeps its own mode), the socket and the 
 connection must also answer the other's challenge with that key (HMAC-SHA256), within
 ``HANDSHAKE_S``, so a process that can reach the socket but cannot read the key is refused,
 and one that never answers is dropped. Every message is a typed record in a bounded frame
-(``control/wire.py``), never pickle.
+(``control/rt/wire.py``), never pickle.
 """
 
 from __future__ import annotations
@@ -25,9 +25,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TypeVar
 
-from control.commands import COMMANDS
-from control.events import EVENTS
-from control.wire import Broken, Codec, Unreadable, Wire
+from control.rt.commands import COMMANDS
+from control.rt.events import EVENTS
+from control.rt.wire import Broken, Codec, Unreadable, Wire
 
 SOCKET_NAME = "controller.sock"
 ID_SPAN = 1_000_000  # move ids per client: client k numbers its moves from k * ID_SPAN

@@ -5,7 +5,7 @@ controller (its events, E-stops and faults, its death) never waits on a disk.
 Four parties save runs (``control/runs.py`` says why): the client when its move ends
 (``ControlClient._finish`` hands the move to its keeper and returns at once), the
 controller service for a client that has gone (``service.save_departed``, on its embedded
-client's keeper), the controller after its loop (``control/saver.py``) and the next client
+client's keeper), the controller after its loop (``control/rt/saver.py``) and the next client
 to start (``control/recovery.py``); the last two call ``keep`` on their own thread, where
 nothing waits on them. All keep one rule: a move's segment is unlinked only once its run
 is saved (or holds no sample, for a client that saves none of those), so a run that cannot
@@ -24,8 +24,8 @@ from multiprocessing.shared_memory import SharedMemory
 from pathlib import Path
 from typing import Any
 
-from control import shm
-from control.layout import MoveLayout
+from control.rt import shm
+from control.rt.layout import MoveLayout
 from control.recorder import (
     RecorderError,
     Run,

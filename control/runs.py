@@ -18,7 +18,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from control.layout import MoveLayout
+from control.rt.layout import MoveLayout
 from control.recorder import Run, resolution
 from hw.machine import Machine
 

@@ -7,7 +7,7 @@ relays between it and the clients that attach (``control/attached.py``):
   others are refused with the reason ("observing: command is held by …; take it first"),
   except the E-stop, which anyone may press (and whose count in shared memory reaches
   the controller whatever this process does); a move's sealed path comes with its command
-  and goes on to the controller as it came (``control/sealed.py``);
+  and goes on to the controller as it came (``control/rt/sealed.py``);
 - **events** from the controller to every client, and ``Commander`` when command changes
   hands (``TakeCommand``/``ReleaseCommand``, explicitly);
 - the **heartbeat**, along the commands' path: every client sends one every 50 ms, and
@@ -22,7 +22,7 @@ for ``SILENT_S`` (or three times ``release_after_s``, if longer) or not reading 
 for ``SEND_S`` is dropped; at most ``MAX_CLIENTS`` connections are served at once (more are
 closed at once), and running out of file descriptors is logged and waited out, never the
 end of the service. Messages are
-typed records in bounded frames (``control/wire.py``), never pickle.
+typed records in bounded frames (``control/rt/wire.py``), never pickle.
 
 A client's moves are its own (it makes their segments, numbered from its ``id_base``,
 and saves their runs); a move whose client has gone by its end is saved here.
@@ -43,13 +43,15 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from control import rendezvous, shm
-from control.channel import command_name
+from control import rendezvous
+
+from control.rt import shm
+from control.rt.channel import command_name
 from control.client import ControlClient, Event
-from control.commands import Command, EmergencyStop, Shutdown, StartMove
-from control.events import Commander, Died, MoveDone, Refused
+from control.rt.commands import Command, EmergencyStop, Shutdown, StartMove
+from control.rt.events import Commander, Died, MoveDone, Refused
 from control.run_keeper import FinishedMove, RunKeeper, RunKept
-from control.wire import Broken, Unreadable, Wire
+from control.rt.wire import Broken, Unreadable, Wire
 
 log = logging.getLogger("servodesk.controller")
 

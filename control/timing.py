@@ -11,7 +11,7 @@ k of eq. 5.1 is six interrupts (Δt = 6 interrupt periods, section 5.4.1), so at
 1 ms per interrupt each joint is updated every 6 ms, and at the 6 ms per joint
 that section 6.2 recommends, every 36 ms. ``Timing("thesis", interrupt_ms=1)``
 runs the controller that way, so that the thesis's experiments can be re-run as
-they were; ``slips`` switches on the listing's known slips (``control.law.SLIPS``,
+they were; ``slips`` switches on the listing's known slips (``control.rt.law.SLIPS``,
 docs/errata.md) to run its law as printed.
 """
 
@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from control.law import SLIPS
+from control.rt.law import SLIPS
 from hw.machine import Machine
 
 TIMINGS = ("servodesk", "thesis")
@@ -29,7 +29,7 @@ TIMINGS = ("servodesk", "thesis")
 class Timing:
     name: str = "servodesk"
     interrupt_ms: float = 1.0  # thesis: the period of one interrupt, one joint serviced
-    slips: tuple[str, ...] = ()  # thesis: the listing's slips to reproduce (control.law.SLIPS)
+    slips: tuple[str, ...] = ()  # thesis: the listing's slips to reproduce (control.rt.law.SLIPS)
 
     def __post_init__(self) -> None:
         if self.name not in TIMINGS:

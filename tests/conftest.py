@@ -56,7 +56,7 @@ SLOW_PATHS = (
     "tests/control/test_timing.py",    # the thesis's timing on the control subprocess
     "tests/control/test_feed.py",      # feed override and hold on the control subprocess
     "tests/control/test_client_cartesian_jog.py",  # Cartesian jogs on it
-    "tests/control/test_process.py",   # the control subprocess's imports
+    "tests/control/rt/test_process.py",   # the control subprocess's imports
     "tests/control/test_service.py",   # servodesk controller and clients attached to it
     "tests/control/test_service_trust.py",  # the same, tried as an attacker would
     "tests/control/test_run_keeper.py",  # a 600 s run saved beside a real controller
@@ -78,8 +78,8 @@ SLOW_FIXTURES = {
 }
 # Single tests that start one in their body, or that take seconds without one.
 SLOW_TESTS = (
-    "tests/control/test_seqlock.py::test_reader_never_sees_a_torn_record",  # spawned writer
-    "tests/control/test_shm.py::test_orphan_of_a_killed_process_is_cleaned_up",
+    "tests/control/rt/test_seqlock.py::test_reader_never_sees_a_torn_record",  # spawned writer
+    "tests/control/rt/test_shm.py::test_orphan_of_a_killed_process_is_cleaned_up",
     "tests/control/test_recorder.py::test_a_read_only_directory_raises_and_leaves_nothing",
     "tests/app/test_priority.py::"
     "test_without_the_privilege_the_ui_says_so_and_runs_at_its_own_priority",  # under setpriv
@@ -99,6 +99,16 @@ SLOW_TESTS = (
     # 1,000 Cartesian jogs planned and checked sample by sample, about 10 s
     "tests/control/motion/test_cartesian_jog.py::"
     "test_random_jogs_keep_the_branch_and_the_line_or_are_refused_with_a_reason",
+    # half a second or more each on a quiet machine (pytest --durations): out of the inner loop
+    "tests/hw/serial/test_frame.py::"
+    "test_a_damaged_stream_delivers_only_what_was_sent_and_every_intact_frame",
+    "tests/control/rt/test_jog.py::test_the_target_never_jumps_and_stops_on_the_goal",
+    "tests/hw/test_machine.py::test_any_corruption_gives_a_machine_error_or_a_valid_machine",
+    "tests/hw/sim/test_encoders.py::test_thesis_timing_gives_figure_6_1",
+    "tests/hw/test_machine_fuzz.py::test_a_changed_machine_file_loads_and_runs_or_names_its_key",
+    "tests/hw/sim/test_plant.py::test_full_duty_speed_is_what_the_plant_reaches",
+    "tests/control/motion/test_acceptance.py::"
+    "test_a_move_longer_than_the_move_limit_is_refused_approach_and_all",
     # 10,000 machine files changed and run on a controller, about a minute
     "tests/hw/test_machine_fuzz.py::"
     "test_ten_thousand_changed_machine_files_load_and_run_or_name_their_key",

@@ -5,7 +5,8 @@
 Every import statement of every module is read from its source, those inside functions and
 under ``TYPE_CHECKING`` too: a late import is still an arrow (``hw.machine`` once imported
 the simulator inside ``parse_machine``, which importing ``hw`` in a fresh interpreter would
-not have shown). The control process's own imports, as it runs, are tests/control/
+not have shown). ``control.rt``, the code the control process runs, imports nothing of
+``control`` outside itself. The process's own imports, as it runs, are tests/control/rt/
 test_process.py's.
 """
 
@@ -107,6 +108,15 @@ def test_the_machine_description_knows_no_backend() -> None:
 
 def test_control_imports_nothing_of_the_app() -> None:
     found = [a for a in ARROWS["control"] if under(a[2], "app")]
+    assert found == [], shown(found)
+
+
+def test_the_1_khz_code_imports_nothing_of_control_outside_it() -> None:
+    """``control/rt/`` is what runs at 1 kHz and in the control process: the client, planning,
+    identification and run files stand on it, never the other way round."""
+    found = [a for a in ARROWS["control"]
+             if under(a[0], "control.rt") and under(a[2], "control")
+             and not under(a[2], "control.rt")]
     assert found == [], shown(found)
 
 

@@ -33,7 +33,7 @@ from textual.widgets import Button, Static
 
 from app.desk import Desk
 from app.tabs.tab import TabPage
-from control.layout import HIST_BIN_NS, HIST_BINS, LatencyHistogram
+from control.rt.layout import HIST_BIN_NS, HIST_BINS, LatencyHistogram
 
 TEST_S = 10.0
 FINE_ROWS = 20  # 5 µs rows: 0-100 µs at most

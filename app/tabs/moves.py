@@ -63,7 +63,7 @@ from app.widgets.fields import FieldError, NumberField
 from app.widgets.figure_plot import FigurePlot
 from app.widgets.live_text import LiveText
 from control.client import ControlClient, MoveHandle, MoveResult
-from control.layout import Status
+from control.rt.layout import Status
 from control.motion.moves import summary_cells, summary_columns
 from control.motion.plan import MovePlan, Summary, moving_joints
 from control.motion.robot_model import has_unimate_model

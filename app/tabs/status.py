@@ -23,7 +23,7 @@ from app.tabs.tab import TabPage
 from app.widgets.header import MODE_NAMES
 from app.widgets.limit_bar import LimitBar
 from app.widgets.live_text import LiveText
-from control.layout import Flag, Status
+from control.rt.layout import Flag, Status
 from hw.machine import Machine
 
 POSE_LABELS = (("x", "mm"), ("y", "mm"), ("z", "mm"), ("γ", "°"), ("β", "°"), ("α", "°"))

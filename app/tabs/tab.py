@@ -13,7 +13,7 @@ from textual.timer import Timer
 from app.desk import Desk
 from app.widgets.staged import Staged
 from control.client import ControlClient, ControllerError
-from control.layout import Status
+from control.rt.layout import Status
 from hw.machine import Machine
 from kinematics.unimate import Unimate2000B
 

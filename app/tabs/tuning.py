@@ -41,7 +41,7 @@ from app.desk import Desk
 from app.tabs.tab import TabPage
 from app.widgets.dialogs import ConfirmScreen, EditValueScreen, ReviewScreen
 from control.client import ControlClient, ControllerError
-from control.layout import MAX_TAPS, Mode
+from control.rt.layout import MAX_TAPS, Mode
 from hw.machine import COEFFICIENT, FILTER_DIVISOR, Coefficients
 
 JOINT_COLUMNS = ("joint", "kp taps", "ki", "kd", "w taps", "kv feed-forward")

@@ -15,7 +15,7 @@ from textual.widgets import Static
 
 from app.event_log import LogEntry
 from app.widgets.live_text import LiveText
-from control.layout import Flag, Mode, Status
+from control.rt.layout import Flag, Mode, Status
 
 MODE_NAMES = {
     Mode.HOLD: "HOLD",

@@ -34,7 +34,7 @@ margin of 9.6°. The textbook's 2 (the proposals' design target) would refuse
 the thesis's own track set once In/Out is identified, and its hold set once
 the wrist is.
 
-The finite-number check (``control.commands.check_coefficients``) runs first
+The finite-number check (``control.rt.commands.check_coefficients``) runs first
 and cannot be overridden; it is also the control process's own check, which
 never imports this module (it needs scipy).
 """
@@ -47,7 +47,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from control.commands import check_coefficients
+from control.rt.commands import check_coefficients
 from control.identify import tuning
 from control.identify.sysid import DeadbandModel, nominal
 from hw.machine import Coefficients, Machine

@@ -1,6 +1,6 @@
 """Controller tuning from identified joint models (thesis sections 5.4, 6.3) and feed-forward.
 
-Loop model. The eq. 5.1 law (``control.law``) turns error e (gain units) into
+Loop model. The eq. 5.1 law (``control.rt.law``) turns error e (gain units) into
 output u; min-PWM compensation maps u onto the valve beyond ``pmin`` (section
 5.4.1); the valve and joint are the identified ``sysid.DeadbandModel``. With
 compensation matching the deadband, the joint sees u through the slope
@@ -58,7 +58,7 @@ from numpy.typing import ArrayLike
 from scipy import signal
 
 from control.identify.sysid import DeadbandModel
-from control.law import DifferenceLaw
+from control.rt.law import DifferenceLaw
 from hw.machine import Coefficients, Joint, Machine
 from hw.transmission import Transmission, output_min_pwm, output_of, valve_duty
 

@@ -3,7 +3,7 @@
 The client (``ControlClient.move``, ``run``, ``actuate``), the TUI (through the
 client) and the path-file reader all ask this module, so a path is accepted or
 refused alike wherever it comes from. The kinds are classified once, in
-``control.commands`` (``SMOOTH_KINDS``, ``STEP_KINDS``, ``DUTY_KINDS``), where
+``control.rt.commands`` (``SMOOTH_KINDS``, ``STEP_KINDS``, ``DUTY_KINDS``), where
 the control process can read them too.
 
 - **Every path** is ``(N, J)`` rows (mm, deg), each finite and inside every
@@ -47,7 +47,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from control.commands import DUTY_KINDS, MOVE_KINDS, SMOOTH_KINDS, STEP_KINDS
+from control.rt.commands import DUTY_KINDS, MOVE_KINDS, SMOOTH_KINDS, STEP_KINDS
 from hw.machine import Joint, Machine
 from hw.transmission import Transmission
 

@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from control.commands import STEP_KINDS
+from control.rt.commands import STEP_KINDS
 from control.motion import moves
 from control.motion.acceptance import starts_here
 from control.recorder import Run

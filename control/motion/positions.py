@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from control.recorder import remove_stale_temps, replace_file
-from control.shm import pid_alive
+from control.rt.shm import pid_alive
 from hw.machine import UNPRINTABLE, Joint, Machine, MachineError, parse_toml, read_text
 
 HOME, PARK = "home", "park"  # the machine file's positions; no taught one takes these names

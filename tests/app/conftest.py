@@ -18,7 +18,7 @@ from textual.pilot import Pilot
 from textual.widget import Widget
 
 from app.tui import ServodeskApp
-from control.layout import Status
+from control.rt.layout import Status
 
 START_S = 30.0  # a loaded machine can take a while to spawn the controller
 SIZE = (160, 48)

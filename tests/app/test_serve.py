@@ -34,7 +34,7 @@ from app.cli import main
 from app.cli_serve import MAX_SESSIONS
 from app.priority import UI_NICE
 from control.client import ControlClient, Event
-from control.layout import Mode
+from control.rt.layout import Mode
 from tests.app.browser import ROOT, Browser, Served, Session, browser, scripted, wait_until
 
 START_S = 90.0  # serve, a controller, Chromium and a TUI on a loaded two-core machine

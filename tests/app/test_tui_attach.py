@@ -8,7 +8,7 @@ import asyncio
 
 from app.tui import attached_app
 from app.widgets.live_text import LiveText
-from control.layout import Mode
+from control.rt.layout import Mode
 
 SIZE = (160, 48)
 

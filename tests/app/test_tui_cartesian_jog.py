@@ -11,7 +11,7 @@ import numpy as np
 
 from app.tabs.jog import JogPad, JogTab
 from app.widgets.live_text import LiveText
-from control.layout import Mode
+from control.rt.layout import Mode
 from control.motion.robot_model import unimate_model
 from hw.machine import load_machine
 

@@ -12,7 +12,7 @@ from app.tabs.jog import JogPad
 from app.tui import TABS, ServodeskApp
 from app.widgets.dialogs import ConfirmScreen
 from app.widgets.header import EStopLamp, FaultBanner
-from control.layout import Mode
+from control.rt.layout import Mode
 
 SIZE = (160, 48)
 OPEN = [30.0, -30.0, 30.0, -30.0, 30.0, -30.0]  # manual duties that open every valve

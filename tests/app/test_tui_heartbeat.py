@@ -18,7 +18,7 @@ from textual.widgets import OptionList
 from app.tabs.end_point_form import EndPointForm
 from app.tui import TABS, ServodeskApp
 from control.client import HEARTBEAT_S
-from control.layout import HEARTBEAT_WORD
+from control.rt.layout import HEARTBEAT_WORD
 
 SIZE = (160, 48)
 HEARTBEAT_TIMEOUT_S = 0.25  # the controller's own default, not the tests' relaxed 2 s

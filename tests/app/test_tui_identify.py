@@ -13,7 +13,7 @@ from textual.widgets import DataTable, Select, Switch
 
 from app.tabs.identify import IdentifyTab
 from app.widgets.fields import NumberField
-from control.layout import Mode
+from control.rt.layout import Mode
 
 SIZE = (160, 48)
 BEND = 3

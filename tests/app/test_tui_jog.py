@@ -8,8 +8,8 @@ import asyncio
 import time
 
 from app.tabs.jog import HOLD_DUTY_MAX, JogPad, KeyRepeat
-from control.commands import Manual
-from control.layout import Mode
+from control.rt.commands import Manual
+from control.rt.layout import Mode
 
 SIZE = (160, 48)
 

@@ -21,7 +21,7 @@ from app.tabs.latency import OVER_US, Lateness, StallWatch
 from app.tui import ServodeskApp
 from app.widgets.dialogs import ConfirmScreen
 from app.widgets.header import FaultBanner
-from control.layout import HEARTBEAT_WORD, HIST_BINS, LatencyHistogram
+from control.rt.layout import HEARTBEAT_WORD, HIST_BINS, LatencyHistogram
 from control.motion import moves
 
 SIZE = (160, 48)

@@ -19,7 +19,7 @@ from app.tabs.moves import MovesTab
 from app.tabs.runs import RunsTab
 from app.widgets.fields import NumberField
 from app.widgets.live_text import LiveText
-from control.layout import Mode
+from control.rt.layout import Mode
 from control.motion.robot_model import builtin_unimate
 from control.run_mcap import read_mcap
 

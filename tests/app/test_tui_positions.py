@@ -14,7 +14,7 @@ from app.tabs.path_forms import ViaPointsForm
 from app.tabs.positions import PositionsTab
 from app.widgets.dialogs import ConfirmScreen, EditValueScreen
 from app.widgets.live_text import LiveText
-from control.layout import Mode
+from control.rt.layout import Mode
 from control.motion.positions import load_positions, positions_file
 from control.motion.robot_model import builtin_unimate
 from control.recorder import list_runs, load_run

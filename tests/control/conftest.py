@@ -9,7 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from control import ControlClient, shm
+from control import ControlClient
+
+from control.rt import shm
 
 
 def leftover_segments_of(pid: int) -> list[str]:

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from control import ControlClient, Mode
-from control.feed import MAX_ENTRIES, SPACING_S
+from control.rt.feed import MAX_ENTRIES, SPACING_S
 from control.motion import moves
 from control.recorder import Run, load_run
 from hw.machine import load_machine

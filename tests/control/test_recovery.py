@@ -13,8 +13,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from control import shm
-from control.layout import MoveLayout
+from control.rt import shm
+from control.rt.layout import MoveLayout
 from control.recorder import list_runs, load_run, save_run, stem_base
 from control.recovery import recover_runs
 from control.run_keeper import FinishedMove, RunKeeper, keep

@@ -15,9 +15,11 @@ from pathlib import Path
 
 import numpy as np
 
-from control import ControlClient, shm
-from control.events import EStop
-from control.layout import ESTOP_WORD, MoveLayout
+from control import ControlClient
+
+from control.rt import shm
+from control.rt.events import EStop
+from control.rt.layout import ESTOP_WORD, MoveLayout
 from control.motion import moves
 from control.recorder import load_run
 from control.runs import encode_meta

@@ -19,13 +19,15 @@ from pathlib import Path
 
 import pytest
 
-from control import rendezvous, shm
+from control import rendezvous
+
+from control.rt import shm
 from control.attached import NotCommanding
 from control.client import ControlClient, ControllerError
-from control.commands import Hold
-from control.events import Refused
-from control.layout import Mode
-from control.wire import Broken, Wire
+from control.rt.commands import Hold
+from control.rt.events import Refused
+from control.rt.layout import Mode
+from control.rt.wire import Broken, Wire
 
 ROOT = Path(__file__).resolve().parents[2]
 

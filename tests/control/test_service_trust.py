@@ -22,9 +22,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from control import rendezvous, shm
+from control import rendezvous
+
+from control.rt import shm
 from control.client import ControlClient, ControllerError
-from control.layout import Mode
+from control.rt.layout import Mode
 from control.motion import moves
 from hw.machine import load_machine
 from tests.conftest import ROOT, ServiceProcess

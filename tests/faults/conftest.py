@@ -21,7 +21,9 @@ from pathlib import Path
 
 import pytest
 
-from control import ControlClient, shm
+from control import ControlClient
+
+from control.rt import shm
 
 REPORT_ENV = "SERVODESK_FAULT_REPORT"
 CASE_KEY = "servodesk_fault_case"  # a test report's user property: its CaseRecord as a dict

@@ -43,7 +43,7 @@ from app.coefficient_files import (
 )
 from app.widgets.fields import FieldError, NumberCheck, position_check
 from control import ControlClient
-from control.layout import MAX_TAPS
+from control.rt.layout import MAX_TAPS
 from control.motion import file_fields
 from control.motion.acceptance import SAMPLING_TOLERANCE, check_path
 from control.motion.cartesian import PoseFileError, PosePoints, parse_poses, read_poses

@@ -25,10 +25,12 @@ from pathlib import Path
 
 import numpy as np
 
-from control import Flag, Mode, shm
-from control.layout import ControlLayout, LatencyHistogram, Status
+from control import Flag, Mode
+
+from control.rt import shm
+from control.rt.layout import ControlLayout, LatencyHistogram, Status
 from control.recorder import list_runs, load_run
-from control.seqlock import SeqlockReader
+from control.rt.seqlock import SeqlockReader
 
 PR_SET_CHILD_SUBREAPER = 36
 ROOT = Path(__file__).resolve().parents[2]

@@ -20,7 +20,7 @@ from contextlib import contextmanager
 import numpy as np
 
 from control import ControlClient
-from control.layout import Status
+from control.rt.layout import Status
 from control.motion import moves
 from control.recorder import load_run
 from hw.machine import load_machine

@@ -20,7 +20,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from control import ControlClient, MoveResult, shm
+from control import ControlClient, MoveResult
+
+from control.rt import shm
 from control.motion import moves
 from control.recorder import RecorderError, as_written, load_run, save_run
 from hw.machine import load_machine

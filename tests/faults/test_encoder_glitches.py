@@ -17,8 +17,8 @@ from collections.abc import Callable
 import numpy as np
 
 from control import ControlClient
-from control.encoder_input import EARLIER
-from control.loop import LoopConfig
+from control.rt.encoder_input import EARLIER
+from control.rt.loop import LoopConfig
 from control.motion import moves
 from control.recorder import Run, as_written, load_run
 from hw.machine import load_machine

@@ -85,7 +85,7 @@ def test_a_board_flooding_the_link_with_valid_reports_stops_the_motion(
     (an overrun fault, and the controller holds) or the late commands let the board's 50 ms
     watchdog close the valves (a link fault, E-stop latched); which comes first depends on
     the machine's load, and both are safe. The overrun rule alone is pinned down in
-    tests/control/test_loop.py."""
+    tests/control/rt/test_loop.py."""
     board = emulator("--flood", "100", "--glitch-scale", "0")
     client = controller(backend="serial", port=board.url)
     start = np.array(client.status().position)

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from control import shm
+from control.rt import shm
 from control.recorder import RunFiles, list_runs, load_run
 from control.recovery import recover_runs
 

@@ -28,7 +28,7 @@ import numpy as np
 import pytest
 
 from control import ControlClient
-from control.layout import Status
+from control.rt.layout import Status
 from control.motion import moves
 from hw.machine import load_machine
 

@@ -6,7 +6,7 @@ The property changes one to three numbers of a built-in file, to extremes (0, ±
 ±1e300, inf and nan as TOML spells them, integers wider than a float and wider than int's
 4300-digit limit) or to the file's own value scaled across twelve decades. A machine that
 loads gets an in-process Controller on the lockstep simulator (built as in
-tests/control/test_loop.py): it holds, then drives every valve open one way and the other,
+tests/control/rt/test_loop.py): it holds, then drives every valve open one way and the other,
 and no tick may raise, no command break, no plant state turn non-finite.
 
 The CI-sized variant runs with the inner loop (CI replays it derandomized, tests/conftest.py);
@@ -29,15 +29,15 @@ from hypothesis import HealthCheck, event, example, given, settings
 from hypothesis import strategies as st
 
 from app.cli_machine import describe, summary
-from control import shm
-from control.channel import client_end, controller_end
-from control.commands import Manual
-from control.events import Refused
-from control.layout import ControlLayout
-from control.loop import Controller, LoopConfig
+from control.rt import shm
+from control.rt.channel import client_end, controller_end
+from control.rt.commands import Manual
+from control.rt.events import Refused
+from control.rt.layout import ControlLayout
+from control.rt.loop import Controller, LoopConfig
 from control.motion.robot_model import model_of
-from control.seqlock import SeqlockWriter
-from control.wire import Wire
+from control.rt.seqlock import SeqlockWriter
+from control.rt.wire import Wire
 from hw.machine import Machine, MachineError, parse_machine
 from hw.sim import SimBackend, check_plant
 
@@ -105,7 +105,7 @@ def edited(name: str, *edits: tuple[str, str]) -> tuple[str, str]:
 @contextmanager
 def controller_on(machine: Machine) -> Iterator[tuple[Controller, SimBackend, Wire]]:
     """A Controller on the lockstep simulator with the client's coefficient sets written, as
-    ControlClient and control.process would set it up; every segment released after."""
+    ControlClient and control.rt.process would set it up; every segment released after."""
     backend = SimBackend(machine, lockstep=True)
     layout = ControlLayout(machine.n_joints)
     segment = shm.create("fuzz", layout.size)

@@ -9,7 +9,7 @@ from dataclasses import replace
 
 import pytest
 
-from control.commands import CommandError
+from control.rt.commands import CommandError
 from control.identify import gains, tuning
 from control.identify.gains import MAX_MS_IDENTIFIED, MAX_MS_NOMINAL, GainError
 from control.identify.sysid import DeadbandModel

@@ -15,7 +15,9 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from control import ControlClient, shm
+from control import ControlClient
+
+from control.rt import shm
 from control.identify import excitation, sysid
 from control.identify.sysid import DeadbandModel
 from control.motion import trajectory

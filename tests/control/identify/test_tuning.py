@@ -13,10 +13,12 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from control import ControlClient, shm
+from control import ControlClient
+
+from control.rt import shm
 from control.identify import excitation, sysid, tuning
 from control.identify.sysid import DeadbandModel
-from control.law import DifferenceLaw, pi, pid
+from control.rt.law import DifferenceLaw, pi, pid
 from control.motion import moves, trajectory
 from hw.machine import Coefficients, Machine, load_machine
 from hw.transmission import output_min_pwm

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from control.commands import DUTY_KINDS, MOVE_KINDS, SMOOTH_KINDS, STEP_KINDS
+from control.rt.commands import DUTY_KINDS, MOVE_KINDS, SMOOTH_KINDS, STEP_KINDS
 from control.motion import acceptance, moves, trajectory
 from control.motion.acceptance import MoveRefused, accept, check_path, check_profile
 from control.motion.cartesian import cartesian_path
@@ -31,7 +31,7 @@ def jumping_path() -> np.ndarray:
 
 
 def test_every_kind_is_smooth_step_or_duty() -> None:
-    """(The control process reads them without numpy: tests/control/test_process.py.)"""
+    """(The control process reads them without numpy: tests/control/rt/test_process.py.)"""
     assert SMOOTH_KINDS | STEP_KINDS | DUTY_KINDS == MOVE_KINDS
     assert not SMOOTH_KINDS & STEP_KINDS and not (SMOOTH_KINDS | STEP_KINDS) & DUTY_KINDS
     assert sorted(STEP_KINDS) == ["multi_step", "step"]

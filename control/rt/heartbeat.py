@@ -21,7 +21,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 
-from control.layout import ESTOP_WORD, HEARTBEAT_WORD
+from control.rt.layout import ESTOP_WORD, HEARTBEAT_WORD
 
 STALL_NS = 20_000_000  # a gap between checks this long is the controller's own stall
 STALLS_FORGIVEN = 3  # stalls not counted against the client within one silence

@@ -9,12 +9,12 @@ from __future__ import annotations
 
 import time
 
-from control.encoder_input import EncoderInput
-from control.guards import Guards
-from control.latency import LatencyStats
-from control.layout import ControlLayout, Flag
-from control.modes import ModeMachine
-from control.seqlock import SeqlockWriter
+from control.rt.encoder_input import EncoderInput
+from control.rt.guards import Guards
+from control.rt.latency import LatencyStats
+from control.rt.layout import ControlLayout, Flag
+from control.rt.modes import ModeMachine
+from control.rt.seqlock import SeqlockWriter
 from hw.backend import Backend
 
 ESTOP_LATCHED, ESTOP_INPUT, HOMED, UI_LOST, LINK_FAULT, REALTIME, MOVING, FAULT, PAUSED = (

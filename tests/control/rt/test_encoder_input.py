@@ -11,7 +11,7 @@ and confirms no belief."""
 
 from __future__ import annotations
 
-from control.encoder_input import EncoderInput
+from control.rt.encoder_input import EncoderInput
 from hw.machine import load_machine
 from hw.sim.backend import SimBackend
 from hw.transmission import Transmission

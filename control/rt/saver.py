@@ -13,8 +13,8 @@ that leaves the segments in /dev/shm, where the next client start finds them.
 
 from __future__ import annotations
 
-from control import shm
-from control.modes import ActiveMove
+from control.rt import shm
+from control.rt.modes import ActiveMove
 
 
 class RunSaver:

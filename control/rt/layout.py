@@ -26,7 +26,7 @@ from hw.backend import LinkCounters
 from hw.machine import MAX_TAPS, Coefficients
 
 if TYPE_CHECKING:
-    from control.latency import LatencyStats
+    from control.rt.latency import LatencyStats
 
 LAYOUT_VERSION = 5
 CONTROL_MAGIC = b"SDSK"
@@ -90,7 +90,7 @@ class Status:
     compute_max_us: float
     compute_total_s: float
     io_total_s: float
-    feed_override: float  # the operator's feed override, 0…1 (control/feed.py)
+    feed_override: float  # the operator's feed override, 0…1 (control/rt/feed.py)
     feed_rate: float  # the rate the path advances at now: ramps to the override, 0 in a hold
     supply_mpa: float  # hydraulic supply pressure, MPa; NaN when the backend cannot measure it
     position: tuple[float, ...]
@@ -261,7 +261,7 @@ class ControlLayout:
 class MoveLayout:
     """A move segment: the recorded run, and all it needs to be saved by whoever outlives
     the move (``control/recovery.py``). The path the move follows is not here: it is sealed
-    in a memory file of its own (``control/sealed.py``), so no one can change it once sent.
+    in a memory file of its own (``control/rt/sealed.py``), so no one can change it once sent.
 
     header (64 B): magic, version, samples N, joints J; at offset 24 the number of rows
     recorded so far (one aligned 8-byte store per tick); at 32 the metadata's length.
@@ -279,7 +279,7 @@ class MoveLayout:
     STATUS_OFFSET = 64
     STATUS_TEXT = 256
     TIMELINE_OFFSET = STATUS_OFFSET + STATUS_TEXT
-    TIMELINE_TEXT = 256 * 1024  # a move's bounded timelines as JSON (control/modes.py)
+    TIMELINE_TEXT = 256 * 1024  # a move's bounded timelines as JSON (control/rt/modes.py)
 
     def __init__(self, samples: int, n: int, meta_size: int = 0) -> None:
         if samples < 1:

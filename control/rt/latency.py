@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from control.layout import HIST_BIN_NS, HIST_BINS
+from control.rt.layout import HIST_BIN_NS, HIST_BINS
 
 
 class LatencyStats:

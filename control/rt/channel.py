@@ -5,11 +5,11 @@ from __future__ import annotations
 import socket
 from collections.abc import Callable, Mapping
 
-from control.commands import COMMANDS, Command, StartMove
-from control.events import EVENTS, MoveDone, Refused
-from control.heartbeat import ClientWatch
-from control.outbox import Outbox
-from control.wire import Broken, Codec, Message, Unreadable, Wire
+from control.rt.commands import COMMANDS, Command, StartMove
+from control.rt.events import EVENTS, MoveDone, Refused
+from control.rt.heartbeat import ClientWatch
+from control.rt.outbox import Outbox
+from control.rt.wire import Broken, Codec, Message, Unreadable, Wire
 
 COMMANDS_PER_TICK = 16
 CODEC = Codec(COMMANDS + EVENTS)  # client and control process: commands in, events out

@@ -18,15 +18,15 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from control import sealed, shm
-from control.channel import client_end, controller_end
-from control.commands import JogPosition, Manual, Reset, StartMove
-from control.events import Notice
-from control.law import pi
-from control.layout import ESTOP_WORD, ControlLayout, Mode, MoveLayout
-from control.loop import Controller, LoopConfig
-from control.outbox import OUTBOX_LIMIT
-from control.wire import Wire
+from control.rt import sealed, shm
+from control.rt.channel import client_end, controller_end
+from control.rt.commands import JogPosition, Manual, Reset, StartMove
+from control.rt.events import Notice
+from control.rt.law import pi
+from control.rt.layout import ESTOP_WORD, ControlLayout, Mode, MoveLayout
+from control.rt.loop import Controller, LoopConfig
+from control.rt.outbox import OUTBOX_LIMIT
+from control.rt.wire import Wire
 from hw.backend import LinkCounters, StepClock
 from hw.gray import binary_to_gray
 from hw.machine import Machine, load_machine

@@ -1,8 +1,8 @@
 """Entry point of the control subprocess: owns the backend, runs the loop, cleans up.
 
-``ControlClient`` starts it as ``python -m control.process CONFIG_JSON FD``: a
+``ControlClient`` starts it as ``python -m control.rt.process CONFIG_JSON FD``: a
 fresh interpreter that shares nothing with the UI process but one end of a
-socketpair (the command channel, ``control/wire.py`` frames) and the shared memory.
+socketpair (the command channel, ``control/rt/wire.py`` frames) and the shared memory.
 """
 
 from __future__ import annotations
@@ -17,13 +17,13 @@ import sys
 import traceback
 from dataclasses import asdict, dataclass
 
-from control import shm
-from control.channel import controller_end
-from control.events import Crash, Ready
-from control.layout import ControlLayout
-from control.loop import Controller, LoopConfig
-from control.realtime import enter_realtime
-from control.wire import Broken, Wire
+from control.rt import shm
+from control.rt.channel import controller_end
+from control.rt.events import Crash, Ready
+from control.rt.layout import ControlLayout
+from control.rt.loop import Controller, LoopConfig
+from control.rt.realtime import enter_realtime
+from control.rt.wire import Broken, Wire
 from hw.backend import RealClock
 from hw.factory import make_backend
 from hw.machine import load_machine

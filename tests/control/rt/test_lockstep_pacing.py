@@ -14,14 +14,16 @@ import time
 
 import pytest
 
-from control import ControlClient, shm
-from control.commands import JogPosition, Manual
-from control.layout import ESTOP_WORD, Mode
-from control.loop import SETTLE_NS, Controller
+from control import ControlClient
+
+from control.rt import shm
+from control.rt.commands import JogPosition, Manual
+from control.rt.layout import ESTOP_WORD, Mode
+from control.rt.loop import SETTLE_NS, Controller
 from control.motion import moves
 from hw.backend import StepClock
-from tests.control.test_loop import HOME, UNIMATE, ScriptedBackend, controller_on, start_move
-from tests.control.test_loop import ticks as step
+from tests.control.rt.test_loop import HOME, UNIMATE, ScriptedBackend, controller_on, start_move
+from tests.control.rt.test_loop import ticks as step
 
 MS = 1_000_000
 

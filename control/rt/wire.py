@@ -4,14 +4,14 @@ Between the client and the control process, and between a controller service and
 clients, every message is one frame: a 4-byte big-endian length, then the record as UTF-8
 JSON, ``{"type": NAME, "fields": {...}}``. Only the record types a ``Codec`` was given
 decode, each rebuilt through its constructor, so its own checks run (a command is checked
-when built, ``control/commands.py``): a message can carry data, never code. A frame longer
+when built, ``control/rt/commands.py``): a message can carry data, never code. A frame longer
 than the reader's ``limit`` is refused before anything is allocated for it, and a frame
 must arrive whole within ``frame_s``; either failure leaves the stream unusable, so the
 connection is dropped (``Broken``). A well-framed message that is no known record is
 ``Unreadable``, and the stream goes on.
 
 A frame may carry file descriptors (``SCM_RIGHTS``, sent with the frame's first byte): a
-move's sealed path travels that way (``control/sealed.py``).
+move's sealed path travels that way (``control/rt/sealed.py``).
 """
 
 from __future__ import annotations

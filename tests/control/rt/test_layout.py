@@ -7,7 +7,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from control.layout import (
+from control.rt.layout import (
     HIST_BINS,
     CoefficientLayout,
     ControlLayout,

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from control.jog import PositionJog
+from control.rt.jog import PositionJog
 from hw.machine import load_machine
 
 UNIMATE = load_machine("unimate2000b")

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import select
 
-from control.events import ControllerEvent
-from control.wire import Broken, Wire
+from control.rt.events import ControllerEvent
+from control.rt.wire import Broken, Wire
 
 OUTBOX_LIMIT = 256
 

@@ -6,8 +6,8 @@ import multiprocessing as mp
 import struct
 import time
 
-from control import shm
-from control.seqlock import SeqlockReader, SeqlockWriter
+from control.rt import shm
+from control.rt.seqlock import SeqlockReader, SeqlockWriter
 
 RECORD = struct.Struct("<64q")
 WRITES = 1_000_000

@@ -75,7 +75,7 @@ class Command:
     def check(self, n_joints: int) -> None:
         """Raise CommandError unless this record, as it arrived, fits ``n_joints`` joints.
 
-        A decoded message is built through its constructor (``control/wire.py``); the
+        A decoded message is built through its constructor (``control/rt/wire.py``); the
         controller still re-runs every check here, for a record made any other way.
         """
         self.__post_init__()
@@ -219,7 +219,7 @@ class StartMove(Command):
     segment: str
     kind: str
     tracking: bool
-    samples: int  # rows of the sealed path sent with it (control/sealed.py)
+    samples: int  # rows of the sealed path sent with it (control/rt/sealed.py)
 
     def __post_init__(self) -> None:
         for name in ("move_id", "samples"):

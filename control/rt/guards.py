@@ -9,8 +9,8 @@ target on the limit itself), with a fault event naming the joint.
 
 from __future__ import annotations
 
-from control.events import Fault
-from control.outbox import Outbox
+from control.rt.events import Fault
+from control.rt.outbox import Outbox
 from hw.machine import Machine
 
 

@@ -14,13 +14,13 @@ from pathlib import Path
 
 import pytest
 
-from control import shm
+from control.rt import shm
 
 
 def test_orphan_of_a_killed_process_is_cleaned_up() -> None:
     code = textwrap.dedent("""
         import sys, time
-        from control import shm
+        from control.rt import shm
         seg = shm.create("orphan_test", 4096)
         print(seg.name, flush=True)
         time.sleep(60)

@@ -21,16 +21,16 @@ import mmap
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-from control import shm
-from control.commands import STEP_KINDS, FeedOverride, Pause, Resume, StartMove
-from control.encoder_input import EncoderInput
-from control.events import Fault, Initialised, Notice, Refused
-from control.feed import FeedRate
-from control.guards import Guards
-from control.jog import PositionJog
-from control.law import DifferenceLaw
-from control.layout import Mode, MoveLayout
-from control.outbox import Outbox
+from control.rt import shm
+from control.rt.commands import STEP_KINDS, FeedOverride, Pause, Resume, StartMove
+from control.rt.encoder_input import EncoderInput
+from control.rt.events import Fault, Initialised, Notice, Refused
+from control.rt.feed import FeedRate
+from control.rt.guards import Guards
+from control.rt.jog import PositionJog
+from control.rt.law import DifferenceLaw
+from control.rt.layout import Mode, MoveLayout
+from control.rt.outbox import Outbox
 from hw.machine import Coefficients, Machine
 from hw.transmission import Transmission
 
@@ -47,13 +47,13 @@ class ActiveMove:
     kind: str
     segment: object
     layout: MoveLayout
-    path_map: mmap.mmap  # the sealed path, read-only (control/sealed.py)
+    path_map: mmap.mmap  # the sealed path, read-only (control/rt/sealed.py)
     path: memoryview  # float64 view of it: samples rows of n joints
     recorded: memoryview  # uint64 progress counter
     tracking: bool
     smooth: bool  # its rows may not jump (commands.STEP_KINDS may)
     index: int = 0  # rows recorded: the next row of the path to record
-    phase: float = 0.0  # where on the path it is, in rows (feed override: control/feed.py)
+    phase: float = 0.0  # where on the path it is, in rows (feed override: control/rt/feed.py)
     start_ns: int = 0
     last_tick_ns: int = 0
     gaps: list[tuple[float, float]] = field(default_factory=list)  # (t s, length s) stalls
@@ -115,7 +115,7 @@ class ModeMachine:
     init_run: InitialiseRun | None = None
     coefficients: dict[str, Coefficients] = field(default_factory=dict)
     slots: int = 1  # ticks per sample: the thesis's timing serves one joint a tick
-    slips: frozenset[str] = frozenset()  # the listing's slips (control.law.SLIPS)
+    slips: frozenset[str] = frozenset()  # the listing's slips (control.rt.law.SLIPS)
 
     def __post_init__(self) -> None:
         n = self.n = self.machine.n_joints
@@ -170,14 +170,14 @@ class ModeMachine:
 
     def jog_by(self, j: int, delta: float) -> None:
         """Position jog (in hold): joint ``j``'s goal moves by ``delta``, inside its limits;
-        the hold target follows at the joint's jog speed (``control/jog.py``)."""
+        the hold target follows at the joint's jog speed (``control/rt/jog.py``)."""
         self.jog.move_goal(j, self.guards.clamp(j, self.jog.goal[j] + delta, self.encoders.homed))
 
     def hold_here(self) -> None:
         self.hold_at(self.position)
 
     def feed_command(self, command: FeedOverride | Pause | Resume, now: int) -> None:
-        """The operator's feed override, feed hold or resume (``control/feed.py``); a hold
+        """The operator's feed override, feed hold or resume (``control/rt/feed.py``); a hold
         with no move is refused."""
         if isinstance(command, Pause) and self.move is None:
             self.outbox.put(Refused(command.NAME, "no move is running"))
@@ -283,7 +283,7 @@ class ModeMachine:
 
     def follow_scaled(self, move: ActiveMove) -> None:
         """The path at the feed's rate: the desired position interpolated at the move's
-        phase, the desired velocity the path's times the rate (control/feed.py)."""
+        phase, the desired velocity the path's times the rate (control/rt/feed.py)."""
         n, last, cells = self.n, move.layout.samples - 1, move.path
         k = min(int(move.phase), last)
         frac = move.phase - k if k < last else 0.0

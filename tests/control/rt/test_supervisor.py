@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from control.supervisor import Supervisor
+from control.rt.supervisor import Supervisor
 from hw.machine import load_machine
 from hw.transmission import output_min_pwm
 

@@ -1,5 +1,5 @@
-"""Frames on servodesk's sockets (``control/wire.py``) and a move's sealed path
-(``control/sealed.py``): data in, never code; every read bounded; a path nobody can change."""
+"""Frames on servodesk's sockets (``control/rt/wire.py``) and a move's sealed path
+(``control/rt/sealed.py``): data in, never code; every read bounded; a path nobody can change."""
 
 from __future__ import annotations
 
@@ -14,13 +14,13 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from control.channel import CODEC, EVENT_LIMIT
-from control.commands import FeedOverride, Hold, Manual, StartMove
-from control.events import MoveDone
-from control.feed import MAX_ENTRIES
-from control.modes import TIMELINE_ENTRIES
-from control.sealed import NotSealed, open_sealed, seal
-from control.wire import HEADER, Broken, Unreadable, Wire
+from control.rt.channel import CODEC, EVENT_LIMIT
+from control.rt.commands import FeedOverride, Hold, Manual, StartMove
+from control.rt.events import MoveDone
+from control.rt.feed import MAX_ENTRIES
+from control.rt.modes import TIMELINE_ENTRIES
+from control.rt.sealed import NotSealed, open_sealed, seal
+from control.rt.wire import HEADER, Broken, Unreadable, Wire
 
 
 @pytest.fixture

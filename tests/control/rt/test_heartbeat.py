@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import pytest
 
-from control.heartbeat import STALL_NS, STALLS_FORGIVEN, ClientWatch
-from control.layout import HEARTBEAT_WORD
+from control.rt.heartbeat import STALL_NS, STALLS_FORGIVEN, ClientWatch
+from control.rt.layout import HEARTBEAT_WORD
 
 MS = 1_000_000
 TIMEOUT = 250 * MS

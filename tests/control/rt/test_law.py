@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from control.law import DifferenceLaw, pi, pid, preset
+from control.rt.law import DifferenceLaw, pi, pid, preset
 from hw.machine import Coefficients, Machine, load_machine
 from hw.transmission import output_min_pwm
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from control.feed import MAX_ENTRIES, SPACING_S, FeedRate
+from control.rt.feed import MAX_ENTRIES, SPACING_S, FeedRate
 from hw.machine import load_machine
 
 UNIMATE = load_machine("unimate2000b")

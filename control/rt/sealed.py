@@ -4,7 +4,7 @@ The desired path (or duty profile) of a move is put in an anonymous memory file
 (``memfd_create``) and sealed against writing, shrinking and growing before it is sent:
 the kernel then refuses every write to it, from any process, the client's own included.
 It has no name in /dev/shm; its descriptor travels with the ``StartMove`` command
-(``control/wire.py``), through a controller service too, and the controller maps it
+(``control/rt/wire.py``), through a controller service too, and the controller maps it
 read-only after checking its seals and size. So what the controller follows is exactly
 what the commanding client sent, whoever else can write this user's shared memory.
 """

@@ -17,22 +17,22 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from control import commands as cmd
-from control.channel import CommandChannel
-from control.encoder_input import EncoderInput
-from control.events import EStop, Fault, MoveDone, Notice, Refused
-from control.guards import Guards
-from control.heartbeat import ClientWatch
-from control.latency import LatencyStats
-from control.layout import HIST_BINS, ControlLayout, Mode
-from control.modes import ActiveMove, InitialiseConfig, ModeMachine
-from control.outbox import Outbox
-from control.publisher import Publisher
-from control.saver import RunSaver, release
-from control.sealed import open_sealed
-from control.seqlock import SeqlockReader
-from control.supervisor import Supervisor
-from control.wire import Wire
+from control.rt import commands as cmd
+from control.rt.channel import CommandChannel
+from control.rt.encoder_input import EncoderInput
+from control.rt.events import EStop, Fault, MoveDone, Notice, Refused
+from control.rt.guards import Guards
+from control.rt.heartbeat import ClientWatch
+from control.rt.latency import LatencyStats
+from control.rt.layout import HIST_BINS, ControlLayout, Mode
+from control.rt.modes import ActiveMove, InitialiseConfig, ModeMachine
+from control.rt.outbox import Outbox
+from control.rt.publisher import Publisher
+from control.rt.saver import RunSaver, release
+from control.rt.sealed import open_sealed
+from control.rt.seqlock import SeqlockReader
+from control.rt.supervisor import Supervisor
+from control.rt.wire import Wire
 from hw.backend import Backend, StepClock
 from hw.machine import Machine
 from hw.transmission import Transmission
@@ -48,11 +48,11 @@ class LoopConfig:
     period_ns: int
     heartbeat_timeout_ns: int = 250 * MS
     orphan_timeout_ns: int = 5_000 * MS
-    # plausible jump = margin x full_duty_speed x elapsed + 3 counts (control/encoder_input.py)
+    # plausible jump = margin x full_duty_speed x elapsed + 3 counts (control/rt/encoder_input.py)
     glitch_margin: float = 1.5
     initialise: InitialiseConfig = field(default_factory=InitialiseConfig)
     slots: int = 1  # ticks per sample: the thesis's timing (control/timing.py) serves n
-    slips: frozenset[str] = frozenset()  # the listing's slips to run (control.law.SLIPS)
+    slips: frozenset[str] = frozenset()  # the listing's slips to run (control.rt.law.SLIPS)
 
 
 class Controller:
@@ -270,7 +270,7 @@ class Controller:
         self.modes.start_initialise(self.clock.now_ns())
 
     def on_move(self, command: cmd.StartMove, path_fd: int) -> None:
-        """Follow the path sealed in ``path_fd`` (``control/sealed.py``), recording into the
+        """Follow the path sealed in ``path_fd`` (``control/rt/sealed.py``), recording into the
         move segment: a path that is not sealed is refused, so nobody can change it once sent."""
         if self.refused(command, closed_loop=not command.tracking):
             return
@@ -374,7 +374,7 @@ class Controller:
     def release(self) -> list[str]:
         """After the loop: end any move, hand over the runs the client left behind (each
         segment says how its move ended, and its timeline), drop every view into the
-        segments; the segments handed over, for a saver to save (``control/saver.py``)."""
+        segments; the segments handed over, for a saver to save (``control/rt/saver.py``)."""
         self.end_move("stopped: controller shut down")
         handed = self.saver.hand_over()
         self.outbox.flush()
