@@ -32,7 +32,6 @@ import numpy as np
 
 from app.cli_options import ALL, global_options, machine_for
 from app.run_text import summary_table
-from control.rt.layout import Flag
 from control.motion import form_plans
 from control.motion.fields import (
     DWELL_S,
@@ -54,6 +53,7 @@ from control.motion.fields import (
     seconds_rule,
 )
 from control.motion.plan import MovePlan, result_records
+from control.rt.layout import Flag
 from control.timing import Timing
 from hw.machine import Machine, MachineError
 

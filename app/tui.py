@@ -44,10 +44,10 @@ from app.widgets.dialogs import ConfirmScreen
 from app.widgets.header import FaultBanner, StatusHeader
 from app.widgets.key_bar import KeyBar
 from control.client import ControlClient, ControllerError, Event
-from control.rt.events import Commander, Died, EStop, Fault, Initialised, Notice, Refused
-from control.rt.layout import Mode
 from control.motion.robot_model import model_of
 from control.recorder import default_data_dir
+from control.rt.events import Commander, Died, EStop, Fault, Initialised, Notice, Refused
+from control.rt.layout import Mode
 from control.timing import Timing
 from hw.machine import Machine, load_machine
 

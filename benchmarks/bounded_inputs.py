@@ -29,10 +29,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # ahead of benchmarks/hw.py
 
-from control.rt.feed import MAX_ENTRIES, Timeline
 from control.motion import form_plans
 from control.motion.cartesian_jog import plan_jog
 from control.recorder import RecorderError, Run, load_run, save_run
+from control.rt.feed import MAX_ENTRIES, Timeline
 from hw.machine import load_machine
 
 UNIMATE = load_machine("unimate2000b")

@@ -22,13 +22,12 @@ from multiprocessing.shared_memory import SharedMemory
 from pathlib import Path
 
 from control import rendezvous
-
+from control.link import ControllerError, Link, NotCommanding, Setting
 from control.rt import shm
 from control.rt.commands import Command, EmergencyStop
 from control.rt.events import Commander, Refused
-from control.link import ControllerError, Link, NotCommanding, Setting
-from control.timing import Timing
 from control.rt.wire import Broken, Message, Wire
+from control.timing import Timing
 from hw.machine import load_machine
 
 ANSWER_S = 2.0  # how long take_command and release_command wait for the service's answer

@@ -28,8 +28,15 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from control.rt import sealed, shm
 from control.attached import ANSWER_S, ServiceLink
+from control.embedded import EmbeddedLink
+from control.link import OUTGOING, ControllerError, Link, NotCommanding, Setting
+from control.motion import form_plans
+from control.motion.acceptance import accept, starts_here
+from control.motion.cartesian_jog import plan_jog
+from control.motion.plan import MovePlan, Summary, moving_joints, result_records, summaries
+from control.recorder import Run, RunFiles, coefficients_record, default_data_dir
+from control.rt import sealed, shm
 from control.rt.commands import (
     Command,
     EmergencyStop,
@@ -47,7 +54,6 @@ from control.rt.commands import (
     finite,
     joint_index,
 )
-from control.embedded import EmbeddedLink
 from control.rt.events import (
     CoefficientsApplied,
     ControllerEvent,
@@ -60,17 +66,11 @@ from control.rt.events import (
     Notice,
 )
 from control.rt.layout import ESTOP_WORD, HEARTBEAT_WORD, LatencyHistogram, Mode, MoveLayout, Status
-from control.link import OUTGOING, ControllerError, Link, NotCommanding, Setting
-from control.motion import form_plans
-from control.motion.acceptance import accept, starts_here
-from control.motion.cartesian_jog import plan_jog
-from control.motion.plan import MovePlan, Summary, moving_joints, result_records, summaries
-from control.recorder import Run, RunFiles, coefficients_record, default_data_dir
+from control.rt.seqlock import SeqlockReader
+from control.rt.wire import Broken, Message, Unreadable
 from control.run_keeper import FinishedMove, RunKeeper, RunKept
 from control.runs import encode_meta, segment_meta
-from control.rt.seqlock import SeqlockReader
 from control.timing import Timing
-from control.rt.wire import Broken, Message, Unreadable
 from hw.machine import Coefficients, Machine, load_machine
 from hw.sim import check_plant
 

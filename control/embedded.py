@@ -24,13 +24,13 @@ from pathlib import Path
 from typing import IO
 
 import control
+from control.link import ControllerError, Link, Setting
+from control.recovery import recover_runs
 from control.rt import process, shm
 from control.rt.channel import client_end
 from control.rt.commands import Command, Shutdown
 from control.rt.events import ControllerEvent, Crash, Ready
 from control.rt.layout import HEARTBEAT_WORD, ControlLayout
-from control.link import ControllerError, Link, Setting
-from control.recovery import recover_runs
 from control.rt.wire import Broken, Message, Unreadable, Wire
 from hw.machine import Coefficients
 
@@ -69,7 +69,8 @@ class EmbeddedLink(Link):
         stderr = tempfile.TemporaryFile()  # noqa: SIM115  # lives as long as the link
         try:
             proc = subprocess.Popen(
-                [sys.executable, "-m", "control.rt.process", config.to_json(), str(theirs.fileno())],
+                [sys.executable, "-m", "control.rt.process", config.to_json(),
+                 str(theirs.fileno())],
                 pass_fds=[theirs.fileno()], stdin=subprocess.DEVNULL,
                 stdout=subprocess.DEVNULL, stderr=stderr, env=_child_env())
         except BaseException:

@@ -22,8 +22,8 @@ from pathlib import Path
 from control.rt.commands import Command
 from control.rt.layout import ControlLayout
 from control.rt.seqlock import SeqlockReader, SeqlockWriter
-from control.timing import Timing
 from control.rt.wire import Broken, Message, Wire
+from control.timing import Timing
 from hw.machine import Coefficients, Machine
 
 OUTGOING = 64  # commands waiting for the wire; more means the other end is not reading

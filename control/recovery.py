@@ -30,8 +30,8 @@ from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
 
-from control.rt import shm
 from control.recorder import default_data_dir
+from control.rt import shm
 from control.run_keeper import FinishedMove, keep
 
 UNENDED = "interrupted: the client and the controller died"

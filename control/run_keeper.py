@@ -24,8 +24,6 @@ from multiprocessing.shared_memory import SharedMemory
 from pathlib import Path
 from typing import Any
 
-from control.rt import shm
-from control.rt.layout import MoveLayout
 from control.recorder import (
     RecorderError,
     Run,
@@ -35,6 +33,8 @@ from control.recorder import (
     remove_stale_temps,
     save_run,
 )
+from control.rt import shm
+from control.rt.layout import MoveLayout
 from control.runs import decode_meta, run_from_segment
 
 log = logging.getLogger("servodesk.runs")

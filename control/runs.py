@@ -18,8 +18,8 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from control.rt.layout import MoveLayout
 from control.recorder import Run, resolution
+from control.rt.layout import MoveLayout
 from hw.machine import Machine
 
 STANDARD = ("run_id", "machine", "joints", "kind", "sample_time_s", "data_dir", "start_time",

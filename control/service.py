@@ -44,14 +44,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from control import rendezvous
-
+from control.client import ControlClient, Event
 from control.rt import shm
 from control.rt.channel import command_name
-from control.client import ControlClient, Event
 from control.rt.commands import Command, EmergencyStop, Shutdown, StartMove
 from control.rt.events import Commander, Died, MoveDone, Refused
-from control.run_keeper import FinishedMove, RunKeeper, RunKept
 from control.rt.wire import Broken, Unreadable, Wire
+from control.run_keeper import FinishedMove, RunKeeper, RunKept
 
 log = logging.getLogger("servodesk.controller")
 

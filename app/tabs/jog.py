@@ -58,8 +58,8 @@ from app.tabs.tab import TabPage
 from app.widgets.limit_bar import LimitBar
 from app.widgets.live_text import LiveText
 from control.client import ControlClient, MoveHandle
-from control.rt.layout import Mode, Status
 from control.motion.cartesian_jog import AXES
+from control.rt.layout import Mode, Status
 from hw.machine import Joint
 from hw.transmission import output_min_pwm
 

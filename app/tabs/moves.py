@@ -63,11 +63,11 @@ from app.widgets.fields import FieldError, NumberField
 from app.widgets.figure_plot import FigurePlot
 from app.widgets.live_text import LiveText
 from control.client import ControlClient, MoveHandle, MoveResult
-from control.rt.layout import Status
 from control.motion.moves import summary_cells, summary_columns
 from control.motion.plan import MovePlan, Summary, moving_joints
 from control.motion.robot_model import has_unimate_model
 from control.recorder import Run
+from control.rt.layout import Status
 from hw.machine import Machine
 
 PREVIEW_DELAY_S = 0.25

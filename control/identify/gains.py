@@ -47,9 +47,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from control.rt.commands import check_coefficients
 from control.identify import tuning
 from control.identify.sysid import DeadbandModel, nominal
+from control.rt.commands import check_coefficients
 from hw.machine import Coefficients, Machine
 
 MAX_MS_NOMINAL = 8.0

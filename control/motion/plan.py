@@ -23,10 +23,10 @@ from typing import Any
 
 import numpy as np
 
-from control.rt.commands import STEP_KINDS
 from control.motion import moves
 from control.motion.acceptance import starts_here
 from control.recorder import Run
+from control.rt.commands import STEP_KINDS
 from hw.machine import Machine
 
 APPROACH_SPEED = 0.5  # approach ramps keep this fraction of each joint's max_speed, max_accel

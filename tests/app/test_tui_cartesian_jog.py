@@ -11,8 +11,8 @@ import numpy as np
 
 from app.tabs.jog import JogPad, JogTab
 from app.widgets.live_text import LiveText
-from control.rt.layout import Mode
 from control.motion.robot_model import unimate_model
+from control.rt.layout import Mode
 from hw.machine import load_machine
 
 SIZE = (160, 48)

@@ -21,8 +21,8 @@ from app.tabs.latency import OVER_US, Lateness, StallWatch
 from app.tui import ServodeskApp
 from app.widgets.dialogs import ConfirmScreen
 from app.widgets.header import FaultBanner
-from control.rt.layout import HEARTBEAT_WORD, HIST_BINS, LatencyHistogram
 from control.motion import moves
+from control.rt.layout import HEARTBEAT_WORD, HIST_BINS, LatencyHistogram
 
 SIZE = (160, 48)
 

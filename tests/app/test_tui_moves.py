@@ -19,8 +19,8 @@ from app.tabs.moves import MovesTab
 from app.tabs.runs import RunsTab
 from app.widgets.fields import NumberField
 from app.widgets.live_text import LiveText
-from control.rt.layout import Mode
 from control.motion.robot_model import builtin_unimate
+from control.rt.layout import Mode
 from control.run_mcap import read_mcap
 
 SIZE = (160, 48)

@@ -14,10 +14,10 @@ from app.tabs.path_forms import ViaPointsForm
 from app.tabs.positions import PositionsTab
 from app.widgets.dialogs import ConfirmScreen, EditValueScreen
 from app.widgets.live_text import LiveText
-from control.rt.layout import Mode
 from control.motion.positions import load_positions, positions_file
 from control.motion.robot_model import builtin_unimate
 from control.recorder import list_runs, load_run
+from control.rt.layout import Mode
 
 SIZE = (160, 48)
 MOVE_S = 60.0  # a go-to of a few seconds on a loaded machine

@@ -10,7 +10,6 @@ from pathlib import Path
 import pytest
 
 from control import ControlClient
-
 from control.rt import shm
 
 

@@ -21,13 +21,12 @@ import numpy as np
 import pytest
 
 from control import ControlClient, ControllerError, Flag, Mode
-
-from control.rt import shm
 from control.identify.sysid import DeadbandModel
-from control.rt.layout import ControlLayout
 from control.motion import moves
 from control.motion.acceptance import check_path
 from control.recorder import as_written, load_run, table_text
+from control.rt import shm
+from control.rt.layout import ControlLayout
 from control.rt.seqlock import SeqlockReader
 from hw.machine import load_machine
 

@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from control import ControlClient, Mode
-from control.rt.feed import MAX_ENTRIES, SPACING_S
 from control.motion import moves
 from control.recorder import Run, load_run
+from control.rt.feed import MAX_ENTRIES, SPACING_S
 from hw.machine import load_machine
 
 UNIMATE = load_machine("unimate2000b")

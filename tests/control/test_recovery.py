@@ -13,10 +13,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from control.rt import shm
-from control.rt.layout import MoveLayout
 from control.recorder import list_runs, load_run, save_run, stem_base
 from control.recovery import recover_runs
+from control.rt import shm
+from control.rt.layout import MoveLayout
 from control.run_keeper import FinishedMove, RunKeeper, keep
 from control.runs import encode_meta, run_from_segment, segment_meta
 from hw.machine import load_machine

@@ -16,12 +16,11 @@ from pathlib import Path
 import numpy as np
 
 from control import ControlClient
-
+from control.motion import moves
+from control.recorder import load_run
 from control.rt import shm
 from control.rt.events import EStop
 from control.rt.layout import ESTOP_WORD, MoveLayout
-from control.motion import moves
-from control.recorder import load_run
 from control.runs import encode_meta
 
 SAMPLES = 600_000  # 600 s at 1 ms, the longest move

@@ -20,10 +20,9 @@ from pathlib import Path
 import pytest
 
 from control import rendezvous
-
-from control.rt import shm
 from control.attached import NotCommanding
 from control.client import ControlClient, ControllerError
+from control.rt import shm
 from control.rt.commands import Hold
 from control.rt.events import Refused
 from control.rt.layout import Mode

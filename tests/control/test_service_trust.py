@@ -23,11 +23,10 @@ import numpy as np
 import pytest
 
 from control import rendezvous
-
-from control.rt import shm
 from control.client import ControlClient, ControllerError
-from control.rt.layout import Mode
 from control.motion import moves
+from control.rt import shm
+from control.rt.layout import Mode
 from hw.machine import load_machine
 from tests.conftest import ROOT, ServiceProcess
 

@@ -22,7 +22,6 @@ from pathlib import Path
 import pytest
 
 from control import ControlClient
-
 from control.rt import shm
 
 REPORT_ENV = "SERVODESK_FAULT_REPORT"

@@ -43,7 +43,6 @@ from app.coefficient_files import (
 )
 from app.widgets.fields import FieldError, NumberCheck, position_check
 from control import ControlClient
-from control.rt.layout import MAX_TAPS
 from control.motion import file_fields
 from control.motion.acceptance import SAMPLING_TOLERANCE, check_path
 from control.motion.cartesian import PoseFileError, PosePoints, parse_poses, read_poses
@@ -57,6 +56,7 @@ from control.motion.path_files import (
     resample,
 )
 from control.motion.robot_model import builtin_unimate
+from control.rt.layout import MAX_TAPS
 from hw.machine import Machine, MachineError, load_machine, parse_machine
 from hw.serial.emulator import EmulatedBoard
 from hw.serial.messages import BoardConfig, Config, Duty, Heartbeat, MessageWriter

@@ -26,10 +26,9 @@ from pathlib import Path
 import numpy as np
 
 from control import Flag, Mode
-
+from control.recorder import list_runs, load_run
 from control.rt import shm
 from control.rt.layout import ControlLayout, LatencyHistogram, Status
-from control.recorder import list_runs, load_run
 from control.rt.seqlock import SeqlockReader
 
 PR_SET_CHILD_SUBREAPER = 36

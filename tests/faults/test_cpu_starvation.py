@@ -20,9 +20,9 @@ from contextlib import contextmanager
 import numpy as np
 
 from control import ControlClient
-from control.rt.layout import Status
 from control.motion import moves
 from control.recorder import load_run
+from control.rt.layout import Status
 from hw.machine import load_machine
 
 UNIMATE = load_machine("unimate2000b")

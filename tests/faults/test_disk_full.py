@@ -21,10 +21,9 @@ import numpy as np
 import pytest
 
 from control import ControlClient, MoveResult
-
-from control.rt import shm
 from control.motion import moves
 from control.recorder import RecorderError, as_written, load_run, save_run
+from control.rt import shm
 from hw.machine import load_machine
 
 UNIMATE = load_machine("unimate2000b")

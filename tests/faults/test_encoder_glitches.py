@@ -17,10 +17,10 @@ from collections.abc import Callable
 import numpy as np
 
 from control import ControlClient
-from control.rt.encoder_input import EARLIER
-from control.rt.loop import LoopConfig
 from control.motion import moves
 from control.recorder import Run, as_written, load_run
+from control.rt.encoder_input import EARLIER
+from control.rt.loop import LoopConfig
 from hw.machine import load_machine
 from hw.transmission import Transmission
 

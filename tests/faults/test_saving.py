@@ -17,9 +17,9 @@ from pathlib import Path
 
 import pytest
 
-from control.rt import shm
 from control.recorder import RunFiles, list_runs, load_run
 from control.recovery import recover_runs
+from control.rt import shm
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -28,8 +28,8 @@ import numpy as np
 import pytest
 
 from control import ControlClient
-from control.rt.layout import Status
 from control.motion import moves
+from control.rt.layout import Status
 from hw.machine import load_machine
 
 UNIMATE = load_machine("unimate2000b")

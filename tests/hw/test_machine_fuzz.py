@@ -29,13 +29,13 @@ from hypothesis import HealthCheck, event, example, given, settings
 from hypothesis import strategies as st
 
 from app.cli_machine import describe, summary
+from control.motion.robot_model import model_of
 from control.rt import shm
 from control.rt.channel import client_end, controller_end
 from control.rt.commands import Manual
 from control.rt.events import Refused
 from control.rt.layout import ControlLayout
 from control.rt.loop import Controller, LoopConfig
-from control.motion.robot_model import model_of
 from control.rt.seqlock import SeqlockWriter
 from control.rt.wire import Wire
 from hw.machine import Machine, MachineError, parse_machine

@@ -9,10 +9,10 @@ from dataclasses import replace
 
 import pytest
 
-from control.rt.commands import CommandError
 from control.identify import gains, tuning
 from control.identify.gains import MAX_MS_IDENTIFIED, MAX_MS_NOMINAL, GainError
 from control.identify.sysid import DeadbandModel
+from control.rt.commands import CommandError
 from hw.machine import Coefficients, Machine, load_machine
 
 UNIMATE = load_machine("unimate2000b")

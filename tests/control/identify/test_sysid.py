@@ -16,12 +16,11 @@ import pytest
 from scipy import signal
 
 from control import ControlClient
-
-from control.rt import shm
 from control.identify import excitation, sysid
 from control.identify.sysid import DeadbandModel
 from control.motion import trajectory
 from control.recorder import Run
+from control.rt import shm
 from hw.machine import load_machine
 
 UNIMATE = load_machine("unimate2000b")

@@ -14,12 +14,11 @@ import pytest
 from scipy import signal
 
 from control import ControlClient
-
-from control.rt import shm
 from control.identify import excitation, sysid, tuning
 from control.identify.sysid import DeadbandModel
-from control.rt.law import DifferenceLaw, pi, pid
 from control.motion import moves, trajectory
+from control.rt import shm
+from control.rt.law import DifferenceLaw, pi, pid
 from hw.machine import Coefficients, Machine, load_machine
 from hw.transmission import output_min_pwm
 

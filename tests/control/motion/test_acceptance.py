@@ -8,12 +8,12 @@ import math
 import numpy as np
 import pytest
 
-from control.rt.commands import DUTY_KINDS, MOVE_KINDS, SMOOTH_KINDS, STEP_KINDS
 from control.motion import acceptance, moves, trajectory
 from control.motion.acceptance import MoveRefused, accept, check_path, check_profile
 from control.motion.cartesian import cartesian_path
 from control.motion.plan import MovePlan, approach_ramp
 from control.motion.robot_model import builtin_unimate
+from control.rt.commands import DUTY_KINDS, MOVE_KINDS, SMOOTH_KINDS, STEP_KINDS
 from hw.machine import load_machine
 
 UNIMATE = load_machine("unimate2000b")

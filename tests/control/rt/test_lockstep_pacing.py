@@ -15,12 +15,11 @@ import time
 import pytest
 
 from control import ControlClient
-
+from control.motion import moves
 from control.rt import shm
 from control.rt.commands import JogPosition, Manual
 from control.rt.layout import ESTOP_WORD, Mode
 from control.rt.loop import SETTLE_NS, Controller
-from control.motion import moves
 from hw.backend import StepClock
 from tests.control.rt.test_loop import HOME, UNIMATE, ScriptedBackend, controller_on, start_move
 from tests.control.rt.test_loop import ticks as step
