@@ -59,6 +59,13 @@ CARTESIAN_JOG_SPEED = (25.0, 10.0)
 CARTESIAN_JOG_ACCEL = (100.0, 40.0)
 CARTESIAN_JOG_SPEED_RANGE = (0.1, 1000.0)
 CARTESIAN_JOG_ACCEL_RANGE = (1.0, 10_000.0)
+# In position (ros2_control's joint_trajectory_controller goal tolerances, LinuxCNC's
+# in-position): a joint's speed is judged over this window, so a one-count step of the
+# encoder is count / window; goal_time is the longest a move may take to settle.
+GOAL_WINDOW_S = 0.1
+GOAL_TIME_S = (0.2, 600.0)
+GOAL_TIME_DEFAULT_S = 2.0
+STOPPED_SPEED_FRACTION = 0.02  # stopped_speed defaults to 2 % of max_speed
 
 
 @dataclass(frozen=True)
@@ -116,10 +123,16 @@ class Joint:
     min_following_error: float = 0.0  # MIN_FERROR: the limit at standstill (units)
     jog_speed: float = 0.0  # how fast a position jog moves the hold target (units/s)
     full_duty_speed: float = 0.0  # fastest the joint moves at 100 % duty (units/s); glitch filter
+    goal_tolerance: float = 0.0  # in position: this close to a move's end (units)
+    stopped_speed: float = 0.0  # and slower than this (units/s), judged over GOAL_WINDOW_S
 
     def __post_init__(self) -> None:
         if not self.full_duty_speed:  # not given: the path rules' speed
             object.__setattr__(self, "full_duty_speed", self.max_speed)
+        if not self.goal_tolerance:  # not given: the settle band
+            object.__setattr__(self, "goal_tolerance", self.tolerance)
+        if not self.stopped_speed:
+            object.__setattr__(self, "stopped_speed", STOPPED_SPEED_FRACTION * self.max_speed)
 
     @property
     def symbol(self) -> str:
@@ -163,6 +176,7 @@ class Coefficients:
     integral_limit: float
     duty_limit: float = 100.0
     kv: tuple[float, ...] = ()
+    deadband: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -223,6 +237,7 @@ class Machine:
     cartesian_jog_speed: tuple[float, float] = CARTESIAN_JOG_SPEED  # mm/s, deg/s
     cartesian_jog_accel: tuple[float, float] = CARTESIAN_JOG_ACCEL  # mm/s², deg/s²
     encoder_threshold: float = 0.5
+    goal_time_s: float = GOAL_TIME_DEFAULT_S  # after a path's end, to come in position
 
     @property
     def n_joints(self) -> int:
@@ -465,7 +480,8 @@ class _Reader:
         self.only(doc, "", {"machine", "valve", "encoder", "kinematics", "joints",
                             "coefficients", "plant", "supervisor"})
         head = self.table(doc, "", "machine")
-        self.only(head, "machine", {"name", "title", "sample_time_ms", "home", "park"})
+        self.only(head, "machine", {"name", "title", "sample_time_ms", "home", "park",
+                                    "goal_time"})
         valve = self.table(doc, "", "valve")
         self.only(valve, "valve", {"period_us", "resolution_pct"})
         enc = self.table(doc, "", "encoder")
@@ -513,6 +529,8 @@ class _Reader:
                                               CARTESIAN_JOG_SPEED_RANGE),
             cartesian_jog_accel=self.jog_pair(doc, "cartesian_jog_accel", CARTESIAN_JOG_ACCEL,
                                               CARTESIAN_JOG_ACCEL_RANGE),
+            goal_time_s=self.number(head, "machine", "goal_time", GOAL_TIME_DEFAULT_S,
+                                    *GOAL_TIME_S),
         )
 
     def joint_vector(self, head: Mapping[str, Any], name: str, joints: tuple[Joint, ...]
@@ -583,8 +601,8 @@ class _Reader:
         self.only(doc, key, {"key", "name", "kind", "unit", "limits", "min_pwm", "polarity",
                              "max_speed", "max_accel", "tolerance", "following_error",
                              "min_following_error", "jog_speed", "encoder", "down_scale",
-                             "gain_unit", "full_duty_speed",
-                             "plant"})
+                             "gain_unit", "full_duty_speed", "goal_tolerance",
+                             "stopped_speed", "plant"})
         name = self.string(doc, key, "name")
         kind = self.string(doc, key, "kind", choices=tuple(JOINT_KINDS))
         unit = self.string(doc, key, "unit", choices=(JOINT_KINDS[kind],))
@@ -623,7 +641,37 @@ class _Reader:
             down_scale=self.number(doc, key, "down_scale", 1.0, *DOWN_SCALE),
             gain_unit=self.number(doc, key, "gain_unit", 1.0, *GAIN_UNIT),
             plant=self.plant(doc, key),
+            goal_tolerance=self.goal_tolerance(doc, key, abs(encoder.gradient), tolerance,
+                                               upper - lower, unit),
+            stopped_speed=self.stopped_speed(doc, key, abs(encoder.gradient), max_speed, unit),
         )
+
+    def goal_tolerance(self, doc: Mapping[str, Any], key: str, count: float, tolerance: float,
+                       span: float, unit: str) -> float:
+        """In position: at least one encoder count, at most the joint's range; by default
+        the settle band (``tolerance``)."""
+        goal = self.number(doc, key, "goal_tolerance", tolerance, 0.0, span, strict_low=True)
+        if goal < count:
+            raise self.fail(f"{key}.goal_tolerance",
+                            f"{goal:g} {unit} is less than one encoder count ({count:g} "
+                            f"{unit}): a move could never end in position; give at least "
+                            f"{count:g}")
+        return goal
+
+    def stopped_speed(self, doc: Mapping[str, Any], key: str, count: float, max_speed: float,
+                      unit: str) -> float:
+        """Stopped: slower than this, judged over ``GOAL_WINDOW_S``; one encoder count in
+        the window must pass (a joint dithering by a count is at rest), at most max_speed."""
+        least = count / GOAL_WINDOW_S
+        speed = self.number(doc, key, "stopped_speed", max(STOPPED_SPEED_FRACTION * max_speed,
+                                                           least), 0.0, max_speed,
+                            strict_low=True)
+        if speed < least:
+            raise self.fail(f"{key}.stopped_speed",
+                            f"{speed:g} {unit}/s is less than one encoder count in "
+                            f"{GOAL_WINDOW_S * 1e3:g} ms ({least:.3g} {unit}/s): a joint at "
+                            f"rest could never be judged stopped; give at least {least:.3g}")
+        return speed
 
     def tolerance(self, doc: Mapping[str, Any], key: str, count: float, span: float,
                   unit: str) -> float:
@@ -680,7 +728,7 @@ class _Reader:
         if not isinstance(doc, dict):
             raise self.fail(key, "must be a table")
         self.only(doc, key, {"note", "kp", "ki", "kd", "w", "filter", "filter_divisor",
-                             "integral_limit", "duty_limit", "kv"})
+                             "integral_limit", "duty_limit", "kv", "deadband"})
         return Coefficients(
             name=name,
             note=self.string(doc, key, "note", default=name),
@@ -694,6 +742,8 @@ class _Reader:
             duty_limit=self.number(doc, key, "duty_limit", 100.0, low=0, high=100,
                                    strict_low=True),
             kv=self.coefficient_list(doc["kv"], f"{key}.kv", n) if "kv" in doc else (),
+            deadband=(self.numbers(doc["deadband"], f"{key}.deadband", n, 0.0, COEFFICIENT)
+                      if "deadband" in doc else ()),
         )
 
     def taps(self, value: Any, full: str, n: int) -> tuple[tuple[float, ...], ...]:
