@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import contextlib
 import itertools
+import math
 import os
 import queue
 import threading
@@ -32,7 +33,7 @@ from control.attached import ANSWER_S, ServiceLink
 from control.embedded import EmbeddedLink
 from control.link import OUTGOING, ControllerError, Link, NotCommanding, Setting
 from control.motion import form_plans
-from control.motion.acceptance import accept, starts_here
+from control.motion.acceptance import accept
 from control.motion.cartesian_jog import plan_jog
 from control.motion.plan import MovePlan, Summary, moving_joints, result_records, summaries
 from control.recorder import Run, RunFiles, coefficients_record, default_data_dir
@@ -125,8 +126,24 @@ class MoveResult:
 
     @property
     def complete(self) -> bool:
-        """Every row was followed (a stall in it is listed in the run and its status)."""
+        """Every row was followed and then every joint came within its goal tolerance of the
+        end, stopped, within the machine's goal_time (``docs/motion.md``); a stall in it is
+        listed in the run and its status."""
         return self.status == "complete" or self.status.startswith("complete, ")
+
+    @property
+    def unsettled(self) -> bool:
+        """Every row was followed, but a joint was not in position within goal_time (the
+        status names it); the controller holds the path's end."""
+        return self.status.startswith("unsettled")
+
+    @property
+    def settle(self) -> dict:
+        """The settle after the path (``control/rt/settle.py``): ``path_end_s``,
+        ``goal_time_s``, ``settle_s`` (per joint, s after the path's end; None: never in
+        position) and ``goal_error`` (per joint, at the end); empty for an open-loop move or
+        one that ended on its path."""
+        return dict(self.run.meta.get("settle") or {})
 
     def summaries(self) -> list[tuple[str, Summary]]:
         """``(label, summary)`` per joint that moved, the approach left out, by the move's
@@ -662,20 +679,23 @@ class ControlClient:
         """Move the tool by ``displacement`` ``[dx, dy, dz (mm), dγ, dβ, dα (deg)]`` along a
         straight line in ``frame`` (``world`` or ``tool``) at ``speed`` (0 < speed ≤ 1) of
         the machine's Cartesian jog speed, on the branch the arm is on; returns the move's
-        handle as soon as it is sent (``control.motion.cartesian_jog``). It starts from the
-        hold target while the arm holds within its tolerance of it (so steps add up exactly
-        and the desired position never jumps), else from where the joints are.
+        handle as soon as it is sent (``control.motion.cartesian_jog``). The line starts where
+        the joints were last commanded (the hold target, the end a move settles at, the
+        running move's desired), never at a swinging pose, so steps add up exactly; an arm
+        farther than its goal tolerance from there gets an approach in front of the line.
 
         ``Unreachable`` (a ValueError), nothing sent, when the line leaves the workspace,
         needs a joint past its limit or comes near a singularity: the reason names which.
         ``stop_short`` instead jogs as far as the line allows and says why in the handle's
         ``meta["stopped"]``. ValueError for bad input or a machine without kinematics."""
         status = self.status()
-        start = np.array(status.position)
+        here = start = np.array(status.position)
         target = np.array(status.desired)
-        if (status.mode == Mode.HOLD and np.isfinite(target).all()
-                and starts_here(start, target, self.machine)):
+        if status.mode in (Mode.HOLD, Mode.FOLLOW_TRACK) and np.isfinite(target).all():
             start = target
+            goal = np.array([j.goal_tolerance for j in self.machine.joints])
+            if np.all(np.abs(here - target) <= goal):
+                here = target  # in position: no approach
         jog = plan_jog(start, displacement, self.machine, frame=frame, dt=self.dt, speed=speed,
                        stop_short=stop_short)
         meta = {"displacement": jog.displacement.tolist(), "frame": frame, "speed": speed,
@@ -683,9 +703,8 @@ class ControlClient:
                 "start_pose": jog.poses[0].tolist(), "end_pose": jog.poses[-1].tolist()}
         plan = MovePlan("cartesian_jog", f"Cartesian jog ({frame})", jog.q, meta=meta,
                         moving=moving_joints(jog.q))
-        # judged from the snapshot it was planned from: a second look (run) at a joint still
-        # settling could find it past its tolerance and put an approach in front of the jog
-        return self._start(accept(plan, start, self.machine, self.dt))
+        # judged from the snapshot it was planned from, not a second look (run) at the joints
+        return self._start(accept(plan, here, self.machine, self.dt))
 
     def run(self, plan: MovePlan) -> MoveHandle:
         """Run a planned move (``control.motion.plan``): its path, with an approach from where
@@ -722,7 +741,8 @@ class ControlClient:
             **plan.meta,
         })
         encoded = encode_meta(meta)
-        layout = MoveLayout(samples, self.machine.n_joints, len(encoded))
+        layout = MoveLayout(samples, self.machine.n_joints, len(encoded),
+                            self.settle_rows if path is not None else 0)
         move_id = next(self._ids)
         segment = shm.create(f"mv{next(_MOVES)}", layout.size,
                              f"a {kind} move of {samples * self.dt:.1f} s")
@@ -744,8 +764,16 @@ class ControlClient:
         self._dispatch(Event(MoveStarted(move_id, kind, samples * self.dt)))
         return handle
 
+    @property
+    def settle_rows(self) -> int:
+        """Rows a closed-loop move's segment has after its path for its settle: goal_time's,
+        and two to spare (the controller records no more than there is room for)."""
+        return math.ceil(self.machine.goal_time_s / self.dt) + 2
+
     def wait(self, handle: MoveHandle, timeout: float | None = None) -> MoveResult:
-        """Block until the move ends (complete, aborted, E-stop or fault) and return its result."""
+        """Block until the move ends and return its result: ``complete`` once in position
+        after its path (``MoveResult.complete``), ``unsettled`` if not within goal_time, or
+        aborted, E-stop or fault."""
         if not handle.done.wait(timeout):
             raise TimeoutError(f"move {handle.move_id} ({handle.kind}) still running after "
                                f"{timeout:g} s")

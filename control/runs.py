@@ -61,15 +61,19 @@ def decode_meta(data: bytes) -> dict[str, Any]:
 
 def run_from_segment(buf: memoryview, layout: MoveLayout, meta: dict[str, Any], status: str,
                      timeline: Mapping[str, Sequence[tuple[float, float]]] | None = None) -> Run:
-    """The run recorded so far in a move segment; ``timeline`` (the controller's ``gaps``,
-    ``feed`` and ``pauses``: ``ActiveMove.timeline``) goes into its metadata."""
+    """The run recorded so far in a move segment (its path's rows, then its settle's);
+    ``timeline`` (the controller's ``gaps``, ``feed``, ``pauses``, ``supply`` and ``settle``:
+    ``ActiveMove.timeline``) goes into its metadata."""
     joints = [(str(name), str(unit)) for name, unit, *_ in meta["joints"]]
     resolutions = tuple(float(j[2]) for j in meta["joints"] if len(j) > 2)
     n = len(joints)
     record = layout.record(buf)[:layout.recorded(buf)].reshape(-1, 1 + 3 * n).copy()
     extra = {k: v for k, v in meta.items() if k not in STANDARD or k == "run_id"}
     for key, entries in (timeline or {}).items():
-        if entries:
+        if key == "settle" and entries:  # a record of its own (control/rt/settle.py)
+            extra[key] = {k: list(v) if isinstance(v, list | tuple) else v
+                          for k, v in dict(entries).items()}
+        elif entries:
             extra[key] = [list(entry) for entry in entries]
     return Run(
         machine=str(meta["machine"]),

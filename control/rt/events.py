@@ -6,7 +6,7 @@
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from typing import ClassVar
 
 
@@ -53,8 +53,8 @@ class Refused(ControllerEvent):
 
 @dataclass(frozen=True)
 class MoveDone(ControllerEvent):
-    """A move ended: complete, aborted, refused, interrupted; ``saved`` is the run's JSON path
-    when the controller saved it itself (its client gone)."""
+    """A move ended: complete (in position), unsettled, aborted, refused, interrupted;
+    ``saved`` is the run's JSON path when the controller saved it itself (its client gone)."""
 
     KIND: ClassVar[str] = "move_done"
     move_id: int
@@ -65,11 +65,14 @@ class MoveDone(ControllerEvent):
     feed: tuple[tuple[float, float], ...] = ()  # (t s, override): the feed override as set
     pauses: tuple[tuple[float, float], ...] = ()  # (t s, length s): feed holds
     supply: tuple[tuple[float, float], ...] = ()  # (t s, MPa): the supply pressure every 0.1 s
+    # a closed-loop move's settle after its path (control/rt/settle.py): path_end_s, goal_time_s,
+    # settle_s per joint (s after the path's end; None: never in position), goal_error per joint
+    settle: dict[str, object] = field(default_factory=dict)
 
     @property
-    def timeline(self) -> dict[str, tuple[tuple[float, float], ...]]:
+    def timeline(self) -> dict[str, object]:
         return {"gaps": self.gaps, "feed": self.feed, "pauses": self.pauses,
-                "supply": self.supply}
+                "supply": self.supply, "settle": self.settle}
 
     @property
     def message(self) -> str:

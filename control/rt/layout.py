@@ -28,7 +28,7 @@ from hw.machine import MAX_TAPS, Coefficients
 if TYPE_CHECKING:
     from control.rt.latency import LatencyStats
 
-LAYOUT_VERSION = 5
+LAYOUT_VERSION = 6
 CONTROL_MAGIC = b"SDSK"
 MOVE_MAGIC = b"SDMV"
 HIST_BIN_NS = 5_000  # 5 µs bins, Table 2.1
@@ -59,6 +59,7 @@ class Flag(IntFlag):
     MOVING = 64
     FAULT = 128
     PAUSED = 256  # feed hold on the move
+    SETTLING = 512  # the move's path is over: it holds the end until in position (settle.py)
 
 
 def _align(n: int) -> int:
@@ -97,6 +98,7 @@ class Status:
     desired: tuple[float, ...]
     duty: tuple[float, ...]
     valve: tuple[float, ...]
+    settle_s: tuple[float, ...]  # settling: s after the path's end each joint came in position
     raw: tuple[int, ...]
     glitches: tuple[int, ...]
     link: dict[str, int]
@@ -118,6 +120,11 @@ class Status:
     def paused(self) -> bool:
         return bool(self.flags & Flag.PAUSED)
 
+    @property
+    def settling(self) -> bool:
+        """The move's path is over and it waits to be in position (``docs/motion.md``)."""
+        return bool(self.flags & Flag.SETTLING)
+
 
 class StatusLayout:
     """The packed status record for ``n`` joints: its field order, encoding and decoding."""
@@ -125,7 +132,7 @@ class StatusLayout:
     def __init__(self, n: int) -> None:
         self.n = n
         self.struct = struct.Struct(
-            f"<qqqiiqqqqqqqqqqddd{n}d{n}d{n}d{n}d{n}q{n}q{len(LINK_FIELDS)}q{FAULT_TEXT}s"
+            f"<qqqiiqqqqqqqqqqddd{n}d{n}d{n}d{n}d{n}d{n}q{n}q{len(LINK_FIELDS)}q{FAULT_TEXT}s"
         )
         self._link = attrgetter(*LINK_FIELDS)
         self._fault = ("", b"")  # the last fault text and its bytes: it rarely changes
@@ -134,8 +141,8 @@ class StatusLayout:
                move_id: int, move_done: int, move_total: int, latency: LatencyStats,
                feed: tuple[float, float], supply_mpa: float, position: list[float],
                desired: list[float],
-               duty: list[float], valve: list[float], raw: list[int], glitches: list[int],
-               link: LinkCounters, fault: str) -> tuple:
+               duty: list[float], valve: list[float], settle_s: list[float], raw: list[int],
+               glitches: list[int], link: LinkCounters, fault: str) -> tuple:
         """The values of one record in struct order (the loop's ``publish``, every tick)."""
         if fault != self._fault[0]:
             self._fault = (fault, fault.encode()[:FAULT_TEXT])
@@ -143,7 +150,7 @@ class StatusLayout:
                 latency.late_ns, latency.late_max_ns, latency.overruns, latency.compute_ns,
                 latency.compute_max_ns, latency.compute_total_ns, latency.io_total_ns, *feed,
                 supply_mpa,
-                *position, *desired, *duty, *valve, *raw, *glitches, *self._link(link),
+                *position, *desired, *duty, *valve, *settle_s, *raw, *glitches, *self._link(link),
                 self._fault[1])
 
     def decode(self, values: tuple) -> Status:
@@ -151,8 +158,8 @@ class StatusLayout:
         (tick, time_ns, wall_ns, mode, flags, move_id, done, total,
          late_last, late_max, overruns, comp_last, comp_max, comp_total, io_total,
          feed_override, feed_rate, supply_mpa) = values[:18]
-        arrays = values[18:18 + 6 * n]
-        link = values[18 + 6 * n:18 + 6 * n + len(LINK_FIELDS)]
+        arrays = values[18:18 + 7 * n]
+        link = values[18 + 7 * n:18 + 7 * n + len(LINK_FIELDS)]
         fault = values[-1].rstrip(b"\0").decode("utf-8", "replace")
         return Status(
             tick=tick, time_s=time_ns / 1e9, wall_ns=wall_ns, mode=Mode(mode), flags=Flag(flags),
@@ -162,7 +169,8 @@ class StatusLayout:
             compute_total_s=comp_total / 1e9, io_total_s=io_total / 1e9,
             feed_override=feed_override, feed_rate=feed_rate, supply_mpa=supply_mpa,
             position=arrays[0:n], desired=arrays[n:2 * n], duty=arrays[2 * n:3 * n],
-            valve=arrays[3 * n:4 * n], raw=arrays[4 * n:5 * n], glitches=arrays[5 * n:6 * n],
+            valve=arrays[3 * n:4 * n], settle_s=arrays[4 * n:5 * n], raw=arrays[5 * n:6 * n],
+            glitches=arrays[6 * n:7 * n],
             link=dict(zip(LINK_FIELDS, link, strict=True)), fault=fault,
         )
 
@@ -172,7 +180,7 @@ class CoefficientLayout:
 
     def __init__(self, n: int) -> None:
         self.n = n
-        joint = f"{MAX_TAPS}di{MAX_TAPS}diddd"
+        joint = f"{MAX_TAPS}di{MAX_TAPS}didddd"
         self.struct = struct.Struct("<" + joint * n + f"{MAX_TAPS}diddd")
 
     def encode(self, c: Coefficients) -> tuple:
@@ -180,14 +188,15 @@ class CoefficientLayout:
         for j in range(self.n):
             values += [*_padded(c.kp[j], f"kp[{j}]"), len(c.kp[j])]
             values += [*_padded(c.w[j], f"w[{j}]"), len(c.w[j])]
-            values += [c.ki[j], c.kd[j], c.kv[j] if c.kv else 0.0]
+            values += [c.ki[j], c.kd[j], c.kv[j] if c.kv else 0.0,
+                       c.deadband[j] if c.deadband else 0.0]
         values += [*_padded(c.filter, "filter"), len(c.filter)]
         values += [c.filter_divisor, c.integral_limit, c.duty_limit]
         return tuple(values)
 
     def decode(self, values: tuple, name: str) -> Coefficients:
-        per_joint = 2 * MAX_TAPS + 5
-        kp, w, ki, kd, kv = [], [], [], [], []
+        per_joint = 2 * MAX_TAPS + 6
+        kp, w, ki, kd, kv, deadband = [], [], [], [], [], []
         for j in range(self.n):
             v = values[j * per_joint:(j + 1) * per_joint]
             kp.append(tuple(v[:v[MAX_TAPS]]))
@@ -195,12 +204,14 @@ class CoefficientLayout:
             ki.append(v[2 * MAX_TAPS + 2])
             kd.append(v[2 * MAX_TAPS + 3])
             kv.append(v[2 * MAX_TAPS + 4])
+            deadband.append(v[2 * MAX_TAPS + 5])
         tail = values[self.n * per_joint:]
         return Coefficients(
             name=name, note=name, kp=tuple(kp), ki=tuple(ki), kd=tuple(kd), w=tuple(w),
             filter=tuple(tail[:tail[MAX_TAPS]]), filter_divisor=tail[MAX_TAPS + 1],
             integral_limit=tail[MAX_TAPS + 2], duty_limit=tail[MAX_TAPS + 3],
             kv=tuple(kv) if any(kv) else (),
+            deadband=tuple(deadband) if any(deadband) else (),
         )
 
 
@@ -263,35 +274,40 @@ class MoveLayout:
     the move (``control/recovery.py``). The path the move follows is not here: it is sealed
     in a memory file of its own (``control/rt/sealed.py``), so no one can change it once sent.
 
-    header (64 B): magic, version, samples N, joints J; at offset 24 the number of rows
-    recorded so far (one aligned 8-byte store per tick); at 32 the metadata's length.
+    header (64 B): magic, version, samples N (the path's rows), joints J; at offset 24 the
+    number of rows recorded so far (one aligned 8-byte store per tick); at 32 the
+    metadata's length; at 40 S, the rows of the settle after the path (the controller
+    records the hold of the path's end there until the move is in position: ``settle.py``).
     Then the status text the controller writes when the move ends (``STATUS_TEXT``
     bytes, empty while it runs), the move's timeline as JSON (its stalls, feed changes,
     feed holds and supply readings: ``TIMELINE_TEXT`` bytes, written by a controller whose
     client is gone, for whoever saves the run), the run's metadata as JSON (written by the
-    client), and ``record (N, 1 + 3J)`` rows of ``t, desired..., actual..., duty...`` as
+    client), and ``record (N + S, 1 + 3J)`` rows of ``t, desired..., actual..., duty...`` as
     float64.
     """
 
     HEADER = struct.Struct("<4sIQI")
     RECORDED_OFFSET = 24
     META_SIZE_OFFSET = 32
+    SETTLE_ROWS_OFFSET = 40
     STATUS_OFFSET = 64
     STATUS_TEXT = 256
     TIMELINE_OFFSET = STATUS_OFFSET + STATUS_TEXT
     TIMELINE_TEXT = 256 * 1024  # a move's bounded timelines as JSON (control/rt/modes.py)
 
-    def __init__(self, samples: int, n: int, meta_size: int = 0) -> None:
+    def __init__(self, samples: int, n: int, meta_size: int = 0, settle_rows: int = 0) -> None:
         if samples < 1:
             raise ValueError("a move needs at least one sample")
         self.samples = samples
+        self.settle_rows = settle_rows
+        self.rows = samples + settle_rows  # the record's room: the path, then its settle
         self.n = n
         self.meta_size = meta_size
         self.row = struct.Struct(f"<{1 + 3 * n}d")
         self.target = struct.Struct(f"<{n}d")
         self.meta_offset = self.TIMELINE_OFFSET + self.TIMELINE_TEXT
         self.record_offset = _align(self.meta_offset + meta_size)
-        self.size = self.record_offset + self.row.size * samples
+        self.size = self.record_offset + self.row.size * self.rows
 
     @classmethod
     def read_header(cls, buf: memoryview) -> MoveLayout:
@@ -299,15 +315,15 @@ class MoveLayout:
         if magic != MOVE_MAGIC or version != LAYOUT_VERSION:
             raise ValueError(f"move segment is {magic!r} v{version}, expected {MOVE_MAGIC!r} "
                              f"v{LAYOUT_VERSION}")
-        (meta_size,) = struct.unpack_from("<Q", buf, cls.META_SIZE_OFFSET)
-        return cls(samples, n, meta_size)
+        meta_size, settle_rows = struct.unpack_from("<QQ", buf, cls.META_SIZE_OFFSET)
+        return cls(samples, n, meta_size, settle_rows)
 
     def write_header(self, buf: memoryview) -> None:
         self.HEADER.pack_into(buf, 0, MOVE_MAGIC, LAYOUT_VERSION, self.samples, self.n)
-        struct.pack_into("<Q", buf, self.META_SIZE_OFFSET, self.meta_size)
+        struct.pack_into("<QQ", buf, self.META_SIZE_OFFSET, self.meta_size, self.settle_rows)
 
     def record(self, buf: memoryview) -> np.ndarray:
-        return np.ndarray((self.samples, 1 + 3 * self.n), np.float64, buf, self.record_offset)
+        return np.ndarray((self.rows, 1 + 3 * self.n), np.float64, buf, self.record_offset)
 
     def recorded(self, buf: memoryview) -> int:
         """Rows recorded so far."""

@@ -169,9 +169,8 @@ class Controller:
         self.watch(woke)
         self.modes.control(self.guards.latched, woke)
         self.guard(woke)
-        if (self.modes.move is not None and self.modes.sample_end
-                and self.modes.record(self.clock.now_ns(), self.backend.supply_mpa)):
-            self.finish_move()
+        if self.modes.move is not None and self.modes.sample_end:
+            self.record(self.clock.now_ns())
         self.write()
         self.latency.computed(self.clock.now_ns() - woke)
         self.publish()
@@ -249,8 +248,8 @@ class Controller:
         if self.refused(command, closed_loop=True):
             return
         modes = self.modes
+        self.end_move("aborted: position jog")  # a settling move too: its goal would move
         if modes.mode != Mode.HOLD:
-            self.end_move("aborted: position jog")
             self.hold_here()
         modes.jog_by(command.joint, command.delta)
 
@@ -329,10 +328,15 @@ class Controller:
                                                  "reset"))
         self.latch_estop(message)
 
-    def abort(self, fault: Fault) -> None:
-        """End the move (if any) and hold where the joints are; tell the client why."""
+    def abort(self, fault: Fault, commanded: bool = False) -> None:
+        """End the move (if any) and hold where the joints are, or (``commanded``: a stall,
+        not the arm, is to blame) where they were last commanded; tell the client why."""
         self.end_move(f"fault: {fault.message}")
-        self.hold_here()
+        if commanded:
+            self.modes.hold_commanded()
+            self.rearm()
+        else:
+            self.hold_here()
         self.outbox.put(fault)
 
     def latch_estop(self, reason: str) -> None:
@@ -389,9 +393,10 @@ class Controller:
 
     def watch(self, now: int) -> None:
         lost, back, orphaned = self.client.check()
-        if lost:
+        if lost:  # the stall holds (here and below) keep the target: docs/supervisor.md
             self.end_move("interrupted: client silent")
-            self.hold_here()
+            self.modes.hold_commanded()
+            self.rearm()
             self.outbox.put(Fault("ui_lost", -1, "client silent for 250 ms: holding position"))
         elif back:
             self.saver.drop()
@@ -399,10 +404,11 @@ class Controller:
         elif orphaned:
             self.running = False
         if self.modes.held_too_long(now):
-            self.abort(Fault("feed_hold", -1, self.modes.held_too_long_text))
+            self.abort(Fault("feed_hold", -1, self.modes.held_too_long_text), commanded=True)
         if overloaded := self.latency.overloaded(now):
             self.abort(Fault("overrun", -1, f"overrun: {overloaded:.0%} of the last second's "
-                             "ticks were late (a flooded link or a starved CPU); holding"))
+                             "ticks were late (a flooded link or a starved CPU); holding the "
+                             "commanded position"), commanded=True)
 
     @property
     def orphaned(self) -> bool:
@@ -411,12 +417,21 @@ class Controller:
 
     # -- moves ending ---------------------------------------------------------------
 
-    def finish_move(self) -> None:
-        """After the last sample: hold at the path's end, or where an open-loop move left it."""
-        target = self.modes.desired if self.modes.mode == Mode.FOLLOW_TRACK else None
-        self.end_move("complete")
-        self.modes.hold_at(target or self.modes.position)
-        self.rearm()
+    def record(self, now: int) -> None:
+        """A sample of the move into its record; after the path's last row a closed-loop move
+        settles (``control/rt/settle.py``): it stays the move, holding the path's end, until
+        in position (``complete``) or out of ``goal_time`` (``unsettled: …``, still holding)."""
+        modes = self.modes
+        move = modes.move
+        if modes.record(now, self.backend.supply_mpa):
+            if modes.mode == Mode.FOLLOW_TRACK:
+                modes.start_settle(now)
+                self.rearm()
+            else:  # open loop: no goal, it holds where the duty left it
+                self.end_move("complete")
+                self.hold_here()
+        elif move.settle is not None and (verdict := move.settle.sample(now, modes.position)):
+            self.end_move(verdict)
 
     def end_move(self, status: str) -> None:
         """Finish the move (if any), tell the client; if it is gone, keep it for the saver."""

@@ -31,6 +31,7 @@ from control.rt.jog import PositionJog
 from control.rt.law import DifferenceLaw
 from control.rt.layout import Mode, MoveLayout
 from control.rt.outbox import Outbox
+from control.rt.settle import GoalCheck
 from hw.machine import Coefficients, Machine
 from hw.transmission import Transmission
 
@@ -61,6 +62,7 @@ class ActiveMove:
     pauses: list[tuple[float, float]] = field(default_factory=list)  # (t s, length s) holds
     supply: list[tuple[float, float]] = field(default_factory=list)  # (t s, MPa) every 0.1 s
     supply_every: float = SUPPLY_EVERY_S  # doubled, the list thinned, when it is full
+    settle: GoalCheck | None = None  # after the path's last row: holding its end (settle.py)
 
     @classmethod
     def attach(cls, command: StartMove, path_map: mmap.mmap, now: int) -> ActiveMove:
@@ -82,10 +84,14 @@ class ActiveMove:
                    recorded=recorded, tracking=command.tracking,
                    smooth=command.kind not in STEP_KINDS, start_ns=now, last_tick_ns=now)
 
-    def timeline(self) -> dict[str, tuple[tuple[float, float], ...]]:
-        """Its stalls and feed changes, as the run lists them."""
+    def timeline(self) -> dict[str, object]:
+        """Its stalls, feed changes and supply, and its settle, as the run lists them."""
+        settle = {}
+        if self.settle is not None:
+            settle = {"path_end_s": round((self.settle.start_ns - self.start_ns) / 1e9, 4),
+                      **self.settle.record()}
         return {"gaps": tuple(self.gaps), "feed": tuple(self.feed), "pauses": tuple(self.pauses),
-                "supply": tuple(self.supply)}
+                "supply": tuple(self.supply), "settle": settle}
 
 
 @dataclass(frozen=True)
@@ -175,6 +181,27 @@ class ModeMachine:
 
     def hold_here(self) -> None:
         self.hold_at(self.position)
+
+    def hold_commanded(self) -> None:
+        """Hold where the joints were last commanded (the move's desired, the hold target
+        while holding), so a stall never moves the target to where the arm drifted; a joint
+        with no such position (open loop) or one outside its limits holds where it is."""
+        commanded = self.desired if self.mode == Mode.FOLLOW_TRACK else self.hold_target
+        if self.mode not in (Mode.FOLLOW_TRACK, Mode.HOLD):
+            commanded = self.position
+        lower, upper, position = self.lower, self.upper, self.position
+        self.hold_at([c if lower[j] <= c <= upper[j] else position[j]  # NaN fails both
+                      for j, c in enumerate(commanded)])
+
+    @property
+    def settling(self) -> bool:
+        """The move's path is over; it holds the end until in position (``settle.py``)."""
+        return self.move is not None and self.move.settle is not None
+
+    def start_settle(self, now: int) -> None:
+        """After the path's last row: hold its end, judged each sample until in position."""
+        self.hold_at(self.desired)
+        self.move.settle = GoalCheck(self.machine, self.hold_target, now, self.dt)
 
     def feed_command(self, command: FeedOverride | Pause | Resume, now: int) -> None:
         """The operator's feed override, feed hold or resume (``control/rt/feed.py``); a hold
@@ -367,8 +394,10 @@ class ModeMachine:
     def record(self, now: int, supply_mpa: float) -> bool:
         """Append a row to the move's record once the move reaches the next row of its path
         (every tick at full feed; the duty is what the valves get, after the guards), then
-        advance the phase by the feed's rate; True after its last row. A gap longer than
-        ``stall_s`` between two ticks of the move is a controller stall, listed in ``gaps``.
+        advance the phase by the feed's rate; True after the path's last row. While the move
+        settles, a row a sample of the hold of its end, as long as the segment has room. A gap
+        longer than ``stall_s`` between two ticks of the move is a controller stall, listed in
+        ``gaps``.
         Every ``SUPPLY_EVERY_S`` the supply pressure (when the backend knows it) goes into
         ``supply``. Both lists are bounded (``TIMELINE_ENTRIES``), as a slow feed can make a
         move long: past it the supply's interval doubles and every other reading goes, and
@@ -393,12 +422,15 @@ class ModeMachine:
             if len(move.supply) >= TIMELINE_ENTRIES:
                 move.supply_every *= 2
                 del move.supply[1::2]
-        if move.phase >= move.index:
+        settling = move.settle is not None
+        if (move.phase >= move.index or settling) and move.index < layout.rows:
             layout.row.pack_into(move.segment.buf,
                                  layout.record_offset + move.index * layout.row.size,
                                  t, *self.desired, *self.position, *self.duty)
             move.index += 1
             move.recorded[0] = move.index
+        if settling:
+            return False
         move.phase = min(move.phase + rate, layout.samples - 1.0) if move.index < \
             layout.samples else move.phase
         return move.index >= layout.samples

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -47,9 +48,10 @@ def test_too_many_taps_is_a_clear_error() -> None:
 
 def test_status_decodes_what_was_packed() -> None:
     layout = ControlLayout(6).status
-    values = [7, 2_000_000_000, 123, 1, 4 | 64 | 256, 3, 10, 100, 5000, 9000, 2, 1500, 4000,
-              10**9, 5 * 10**8, 0.5, 0.25, 6.4]
-    values += [float(i) for i in range(24)] + list(range(6)) + [0, 1, 0, 2, 0, 0] + list(range(8))
+    values = [7, 2_000_000_000, 123, 1, 4 | 64 | 256 | 512, 3, 10, 100, 5000, 9000, 2, 1500,
+              4000, 10**9, 5 * 10**8, 0.5, 0.25, 6.4]
+    values += [float(i) for i in range(24)] + [0.25, math.nan, 0.5, 0.0, 1.0, 2.0]
+    values += [*range(6), 0, 1, 0, 2, 0, 0, *range(8)]
     values += [b"link lost"]
     status = layout.decode(layout.struct.unpack(layout.struct.pack(*values)))
     assert status.tick == 7 and status.time_s == 2.0 and status.homed and status.moving
@@ -57,6 +59,7 @@ def test_status_decodes_what_was_packed() -> None:
     assert status.supply_mpa == 6.4
     assert status.position == (0.0, 1.0, 2.0, 3.0, 4.0, 5.0)
     assert status.valve == (18.0, 19.0, 20.0, 21.0, 22.0, 23.0)
+    assert status.settling and status.settle_s[0] == 0.25 and math.isnan(status.settle_s[1])
     assert status.glitches == (0, 1, 0, 2, 0, 0)
     assert status.link["crc_errors"] == 2 and status.fault == "link lost"
     assert status.late_last_us == 5.0 and status.compute_max_us == 4.0
@@ -68,6 +71,18 @@ def test_move_layout_sizes_follow_the_move() -> None:
     record = 8 * (1 + 3 * 6)  # a row: t, desired, actual, duty
     assert big.size - small.size == record * (20_000 - 250)  # the rest is fixed
     assert big.size - big.record_offset == record * 20_000
+
+
+def test_a_move_segment_has_room_for_its_settle_after_the_path() -> None:
+    """Issue 24: the record holds the path's rows, then the settle's; the header says how
+    many of each, so whoever saves the run reads both."""
+    layout = MoveLayout(250, 6, meta_size=12, settle_rows=2002)
+    assert layout.size - MoveLayout(250, 6, meta_size=12).size == 8 * (1 + 3 * 6) * 2002
+    buf = memoryview(bytearray(layout.size))
+    layout.write_header(buf)
+    read = MoveLayout.read_header(buf)
+    assert (read.samples, read.settle_rows, read.rows, read.meta_size) == (250, 2002, 2252, 12)
+    assert read.record(buf).shape == (2252, 19)
 
 
 def test_a_timeline_written_after_the_loop_reads_back_and_none_is_none() -> None:

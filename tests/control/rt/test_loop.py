@@ -9,6 +9,7 @@ simulator is exercised in test_client.py and tests/faults.
 from __future__ import annotations
 
 import math
+import re
 import socket
 import time
 from collections.abc import Iterator
@@ -306,11 +307,12 @@ def test_a_joint_past_its_limit_in_hold_gets_no_duty_toward_it(rig) -> None:
     assert limit["joint"] == 2 and "is past its limit" in limit["message"]
 
 
-def start_move(controller: Controller, path: list[list[float]], kind: str) -> Iterator[None]:
-    layout = MoveLayout(len(path), UNIMATE.n_joints)
+def start_move(controller: Controller, path: list[list[float]], kind: str,
+               settle_rows: int = 300, tracking: bool = False) -> Iterator[None]:
+    layout = MoveLayout(len(path), UNIMATE.n_joints, settle_rows=settle_rows)
     segment = shm.create("loopmove", layout.size)
     layout.write_header(segment.buf)
-    controller.channel.deliver(StartMove(1, segment.name, kind, False, len(path)),
+    controller.channel.deliver(StartMove(1, segment.name, kind, tracking, len(path)),
                                (sealed.seal(np.array(path)),))
     return segment
 
@@ -341,8 +343,77 @@ def test_a_step_kind_may_jump(rig) -> None:
                                                                         *HOME[2:]]], "step")
     try:
         ticks(controller, backend, 3)
+        teleport(controller, backend, 1, 5.0)  # the scripted arm is there: in position
+        ticks(controller, backend, 250)
         done = next(p for name, p in events(client) if name == "move_done")
         assert done["status"] == "complete", done
+    finally:
+        shm.release(segment, unlink=True)
+
+
+def settle_path(target: float) -> list[list[float]]:
+    """A step of Rotate to ``target``, three rows."""
+    return [HOME, [HOME[0], target, *HOME[2:]], [HOME[0], target, *HOME[2:]]]
+
+
+def test_a_move_settles_at_its_end_before_it_is_complete(rig) -> None:
+    """Issue 24: after its path's last row the move holds the end and stays the move,
+    SETTLING, recording rows, until every joint has been within its goal tolerance and
+    slower than its stopped speed for 100 ms; each joint's settle time goes into MoveDone."""
+    controller, backend, client = rig
+    segment = start_move(controller, settle_path(0.3), "step", settle_rows=1000)
+    try:
+        ticks(controller, backend, 3)  # the path: the arm, at 0, is 0.3° off, inside 0.5
+        layout = controller.modes.move.layout
+        settling = []
+        for _ in range(400):
+            ticks(controller, backend, 1)
+            move = controller.modes.move
+            if move is None:
+                break
+            settling.append(controller.modes.settling)
+        assert all(settling) and 200 <= len(settling) <= 215, len(settling)
+        assert controller.modes.hold_target[1] == 0.3 and controller.modes.mode == Mode.HOLD
+        done = next(p for name, p in events(client) if name == "move_done")
+        assert done["status"] == "complete", done
+        settle = done["settle"]
+        assert settle["settle_s"][1] == pytest.approx(0.1, abs=0.005)  # the speed window filled
+        assert settle["goal_error"][1] == pytest.approx(-0.3, abs=0.03)
+        assert settle["path_end_s"] == pytest.approx(0.003, abs=0.0015)
+        assert layout.recorded(segment.buf) == done["recorded"] > 200  # the settle's rows too
+    finally:
+        shm.release(segment, unlink=True)
+
+
+def test_a_move_not_in_position_by_goal_time_ends_unsettled_naming_the_joint_and_holds(
+        rig) -> None:
+    controller, backend, client = rig
+    controller.modes.set_coefficients("hold", pi(UNIMATE, 0.0, 0.0))  # hold gains zeroed
+    segment = start_move(controller, settle_path(5.0), "step", settle_rows=10)
+    try:
+        ticks(controller, backend, 3)  # the scripted arm never moves: 5° off
+        flags = []
+        while controller.modes.move is not None and len(flags) < 3000:
+            ticks(controller, backend, 1)
+            flags.append(controller.modes.settling)
+        done = next(p for name, p in events(client) if name == "move_done")
+        assert re.fullmatch(r"unsettled: Rotate 4\.99° from its goal after 2 s", done["status"])
+        assert 1990 <= len(flags) <= 2010 and all(flags[:-1])
+        assert done["settle"]["settle_s"][1] is None and done["settle"]["settle_s"][0] > 0
+        assert done["recorded"] == 3 + 10  # the segment's room, no more
+        assert controller.modes.mode == Mode.HOLD and controller.modes.hold_target[1] == 5.0
+    finally:
+        shm.release(segment, unlink=True)
+
+
+def test_an_open_loop_move_has_no_goal(rig) -> None:
+    controller, backend, client = rig
+    segment = start_move(controller, [[0.0] * 6] * 3, "tracking_actuate", settle_rows=0,
+                         tracking=True)
+    try:
+        ticks(controller, backend, 4)
+        done = next(p for name, p in events(client) if name == "move_done")
+        assert done["status"] == "complete" and done["settle"] == {}, done
     finally:
         shm.release(segment, unlink=True)
 
@@ -364,6 +435,39 @@ def test_a_second_with_over_a_fifth_of_its_ticks_overrun_aborts_the_move_and_hol
         assert not controller.guards.latched
     finally:
         shm.release(segment, unlink=True)
+
+
+def overload(controller: Controller, backend: ScriptedBackend, drift_mm: float) -> None:
+    """A flooded link for a second, In/Out drifting ``drift_mm`` meanwhile, unopposed."""
+    for k in range(1000):  # three ticks in ten end past their deadline
+        backend.positions[0] += drift_mm / 1000
+        ticks(controller, backend, 1)
+        deadline = controller.deadline
+        controller.latency.next_deadline(deadline, deadline + (1_500_000 if k % 10 < 3
+                                                               else 100_000))
+
+
+@pytest.mark.parametrize("moving", [False, True], ids=["holding", "in a move"])
+def test_an_overrun_hold_keeps_the_commanded_position_not_where_the_arm_drifted(
+        rig, moving: bool) -> None:
+    """Issue 24 item 4: a stall is the controller's fault, not the arm's: the hold after it is
+    where the arm was commanded to be (the hold target, the move's desired), so starvation
+    never moves the target, however often it holds."""
+    controller, backend, client = rig
+    for which in ("hold", "track"):
+        controller.modes.set_coefficients(which, pi(UNIMATE, 0.0, 0.0))  # nothing opposes it
+    segment = start_move(controller, [HOME] * 5000, "path") if moving else None
+    try:
+        for _ in range(3):
+            overload(controller, backend, 1.0)
+            fault = next(p for name, p in events(client) if name == "fault")
+            assert fault["kind"] == "overrun" and "holding the commanded" in fault["message"]
+            assert controller.modes.move is None and controller.modes.mode == Mode.HOLD
+            assert controller.modes.position[0] > HOME[0] + 0.5  # it drifted
+            assert controller.modes.hold_target[0] == pytest.approx(HOME[0], abs=0.27)
+    finally:
+        if segment is not None:
+            shm.release(segment, unlink=True)
 
 
 def test_one_long_stall_is_not_an_overload(rig) -> None:
@@ -388,7 +492,7 @@ def test_a_stall_in_a_move_is_listed_and_said(rig) -> None:
     try:
         ticks(controller, backend, 2)
         backend.clock.sleep_until(backend.clock.now_ns() + 300_000_000)  # a 0.3 s stall
-        ticks(controller, backend, 3)
+        ticks(controller, backend, 250)  # the path's rows, then its settle
         done = next(p for name, p in events(client) if name == "move_done")
         assert done["status"] == "complete, with a 0.3 s controller stall", done
         ((at, length),) = done["gaps"]
