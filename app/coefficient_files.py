@@ -72,6 +72,7 @@ def dump_coefficients(sets: Mapping[str, Coefficients], machine: Machine) -> str
             f"integral_limit = {_number(c.integral_limit)}",
             f"duty_limit = {_number(c.duty_limit)}",
             *([f"kv = {_numbers(c.kv)}"] if c.kv else []),
+            *([f"deadband = {_numbers(c.deadband)}"] if c.deadband else []),
             "",
         ]
     return "\n".join(lines)
@@ -106,7 +107,7 @@ def coefficient_changes(before: Coefficients, after: Coefficients, machine: Mach
     before, after)`` rows in the machine file's keys (taps newest first, ``–`` for none)."""
     rows = []
     for j, joint in enumerate(machine.joints):
-        for key in ("kp", "ki", "kd", "w", "kv"):
+        for key in ("kp", "ki", "kd", "w", "kv", "deadband"):
             old, new = _entry(before, key, j), _entry(after, key, j)
             if old != new:
                 rows.append((joint.name, key, old, new))
@@ -119,8 +120,8 @@ def coefficient_changes(before: Coefficients, after: Coefficients, machine: Mach
 
 def _entry(c: Coefficients, key: str, j: int) -> str:
     values = getattr(c, key)
-    if key == "kv" and not values:
-        return "0"  # a set without feed-forward has none: kv 0
+    if key in ("kv", "deadband") and not values:
+        return "0"  # a set without feed-forward or deadband has none: 0
     return _shown(values[j])
 
 

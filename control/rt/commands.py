@@ -267,6 +267,12 @@ def check_coefficients(coefficients: Coefficients, n_joints: int) -> None:
     if c.kv and len(c.kv) != n_joints:
         raise CommandError(f"coefficient set {c.name!r}: kv has {len(c.kv)} joints, the "
                            f"machine {n_joints}")
+    if c.deadband and len(c.deadband) != n_joints:
+        raise CommandError(f"coefficient set {c.name!r}: deadband has {len(c.deadband)} "
+                           f"joints, the machine {n_joints}")
+    if any(not 0.0 <= d < math.inf for d in c.deadband):
+        raise CommandError(f"coefficient set {c.name!r}: deadband {list(c.deadband)} must be "
+                           "finite and not negative (joint units)")
     numbers = {"ki": c.ki, "kd": c.kd, "kv": c.kv, "filter": c.filter,
                "filter_divisor": (c.filter_divisor,), "integral_limit": (c.integral_limit,),
                "duty_limit": (c.duty_limit,)}

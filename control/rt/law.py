@@ -60,6 +60,7 @@ class _JointGains:
     nmin: float
     duty_limit: float
     kv: float  # velocity feed-forward, % per joint unit/s
+    deadband: float  # |e| (gain units) at rest the law ignores; 0: none
 
 
 class _JointState:
@@ -139,6 +140,9 @@ class DifferenceLaw:
         e = error / g.gain_unit  # error in gain units, errata #18
         if not -_INF < e < _INF:  # a NaN would poison the integrator for good
             raise ValueError(f"{self.machine.joints[j].name}: error {error} is not a number")
+        rest = g.deadband and velocity == 0.0 and -g.deadband <= e <= g.deadband
+        if rest:
+            e = 0.0  # inside the deadband at rest: no error (LinuxCNC pid's deadband)
         errors = s.e
         errors.pop()
         errors.insert(0, e)  # e(k), e(k−1), … newest first
@@ -160,7 +164,12 @@ class DifferenceLaw:
             u = SATURATION
         elif u < -SATURATION:
             u = -SATURATION
-        if u > 0.0:  # minimum PWM maps (0, 100] onto (pmin, 100], errata #5
+        if rest:  # the valve stays inside its overlap: no minimum-PWM step to chatter across
+            if u > g.pmin:
+                u = g.pmin
+            elif u < -g.nmin:
+                u = -g.nmin
+        elif u > 0.0:  # minimum PWM maps (0, 100] onto (pmin, 100], errata #5
             u = g.pos_scale * u + g.pmin
         elif u < 0.0:
             u = g.neg_scale * u - g.nmin
@@ -238,6 +247,7 @@ def _prepare(joint: Joint, c: Coefficients, j: int, dt: float,
         nmin=down,
         duty_limit=c.duty_limit,
         kv=c.kv[j] if c.kv else 0.0,
+        deadband=c.deadband[j] / joint.gain_unit if c.deadband else 0.0,
     )
 
 

@@ -64,7 +64,8 @@ def test_derivative_of_a_ramp_is_its_slope() -> None:
 
 
 def test_rig_pid_of_eq_3_3_sees_error_in_encoder_counts() -> None:
-    law = DifferenceLaw(RIG, RIG.track, RIG.sample_time_s)  # {Kp, Kd, Ki} = {0.75, 0.002, 0.01}
+    # the thesis's track set: {Kp, Kd, Ki} = {0.75, 0.002, 0.01}
+    law = DifferenceLaw(RIG, RIG.coefficients["thesis_track"], RIG.sample_time_s)
     # 1 mm of error is 10 counts (gain_unit 0.1, errata #18); constant error, Δt = 1 ms:
     #   P = 0.75·10 = 7.5;  I = 0.01·10·0.001 = 0.0001 per tick;  D = 0.002·S/0.006
     #   k=1: S = 110                  D =  36.6667  u = 7.5 + 36.6667 + 0.0001 = 44.1668
@@ -112,7 +113,8 @@ def test_minimum_pwm_maps_onto_the_starting_duty_of_the_valve_side() -> None:
 
 
 def test_duty_limit_after_saturation() -> None:
-    law = DifferenceLaw(RIG, RIG.hold, RIG.sample_time_s)  # Kp 0.5, Ki 0.05, duty ≤ 20 %
+    # the thesis's hold set (function.c): Kp 0.5, Ki 0.05, duty ≤ 20 %
+    law = DifferenceLaw(RIG, RIG.coefficients["thesis_hold"], RIG.sample_time_s)
     # 100 mm = 1000 counts: 0.5·1000 = 500 → 100 → 20
     assert law.update(0, 100.0) == 20.0
     assert law.update(0, -100.0) == -20.0
@@ -163,7 +165,7 @@ def test_the_w_taps_weigh_the_final_output() -> None:
 
 
 def test_unimate_hold_acts_per_joint() -> None:
-    law = DifferenceLaw(UNIMATE, UNIMATE.hold, UNIMATE.sample_time_s)
+    law = DifferenceLaw(UNIMATE, UNIMATE.coefficients["option_hold"], UNIMATE.sample_time_s)
     # Up/Down hold: Kp 11, Ki 100; 1° error: 11 + 100·1·0.001 = 11.1; polarity −1, so the
     # valve's negative side (26 %, section 5.4.1) starts it: (1 − 26/100)·11.1 + 26
     assert law.update(2, 1.0) == pytest.approx(0.74 * 11.1 + 26)
@@ -196,14 +198,15 @@ def test_pid_pi_and_preset_build_coefficient_sets() -> None:
     assert p.note.startswith("P.I. of section 5.4.2")
     with pytest.raises(ValueError, match="kp: expected one gain or 6, got 2"):
         pid(UNIMATE, kp=[1, 2], ki=0, kd=0)
-    with pytest.raises(KeyError, match=r"no coefficient set 'observer'.*hold, track, thesis_pi"):
+    with pytest.raises(KeyError, match=r"no coefficient set 'observer'.*hold, track, "
+                                       r"option_hold, option_track, thesis_pi"):
         preset("observer", UNIMATE)
 
 
 @given(st.lists(st.floats(-1e4, 1e4), min_size=1, max_size=50),
        st.integers(0, UNIMATE.n_joints - 1))
 def test_output_is_zero_or_between_min_pwm_and_the_limit(errors: list[float], j: int) -> None:
-    law = DifferenceLaw(UNIMATE, UNIMATE.track, UNIMATE.sample_time_s)
+    law = DifferenceLaw(UNIMATE, UNIMATE.coefficients["option_track"], UNIMATE.sample_time_s)
     joint = UNIMATE.joints[j]
     up, down = output_min_pwm(joint)
     for e in errors:
@@ -220,6 +223,40 @@ def test_velocity_feed_forward_adds_kv_times_the_desired_velocity() -> None:
     assert law.update(0, 0.0, velocity=0.0) == 0.0
     assert DifferenceLaw(machine, base, 0.001).update(0, 0.0, velocity=200.0) == 0.0
 
+
+
+def test_inside_the_deadband_at_rest_the_valve_stays_inside_its_overlap() -> None:
+    """Issue 24: the P.I. of the hold integrates a one-count error, so without a deadband the
+    output crosses zero and min-PWM compensation steps the valve from +25 % to −28 % and back
+    (Bend). Inside the deadband at rest the law sees no error: the integral stops and what it
+    holds goes out uncompensated, clipped to the minimum PWM, inside the spool's overlap."""
+    bend = 3
+    count = UNIMATE.joints[bend].encoder.gradient
+    up, down = output_min_pwm(UNIMATE.joints[bend])
+    c = replace(UNIMATE.hold, deadband=(0.0,) * 3 + (count,) + (0.0,) * 2)
+    law = DifferenceLaw(UNIMATE, c, UNIMATE.sample_time_s)
+    outside = law.update(bend, 1.5 * count)  # P and I act, compensated past the minimum PWM
+    assert outside > up
+    held = law.state(bend).integral
+    inside = [law.update(bend, e) for e in (0.9 * count, -0.9 * count, 0.0, 0.5 * count)]
+    assert inside == pytest.approx([held] * 4)  # the integral alone, no step to ±min PWM
+    assert law.state(bend).integral == held
+    law = DifferenceLaw(UNIMATE, replace(c, kp=((0.0,),) * 6, ki=(5e4,) * 6),
+                        UNIMATE.sample_time_s)
+    law.update(bend, -1.0)  # the integral to −50 %
+    assert law.update(bend, 0.5 * count) == -down  # a large integral: at the overlap's edge
+    none = DifferenceLaw(UNIMATE, UNIMATE.coefficients["option_hold"], UNIMATE.sample_time_s)
+    assert none.update(bend, 0.5 * count) > up and none.update(bend, -0.5 * count) < -down
+
+
+def test_a_move_ignores_the_deadband() -> None:
+    """While the path moves (a desired velocity) a one-count error is acted on, compensated."""
+    bend = 3
+    count = UNIMATE.joints[bend].encoder.gradient
+    up, _ = output_min_pwm(UNIMATE.joints[bend])
+    law = DifferenceLaw(UNIMATE, UNIMATE.track, UNIMATE.sample_time_s)
+    assert law.update(bend, 0.5 * count, velocity=0.0) == 0.0
+    assert law.update(bend, 0.5 * count, velocity=1.0) > up
 
 # -- the listings' slips (errata), for the thesis's timing mode ---------------------------------
 
@@ -261,7 +298,7 @@ def test_the_integral_does_not_wind_up_while_saturated() -> None:
     # section 3.6.1's anti-windup intent (errata #31): 400 mm below the target the rig's
     # PID is saturated, so the integral stays put; the listing's clamp alone (slip "windup")
     # sums Ki·e·Δt = 0.01 · 4000 counts · 1 ms = 0.04 % a tick
-    pi_only = replace(preset("track", RIG), kd=(0.0,))  # no derivative kick on the step
+    pi_only = replace(preset("thesis_track", RIG), kd=(0.0,))  # no derivative kick on the step
     law = DifferenceLaw(RIG, pi_only, 1e-3)
     printed = DifferenceLaw(RIG, pi_only, 1e-3, slips=frozenset({"windup"}))
     for _ in range(100):
