@@ -46,6 +46,7 @@ from control.rt.commands import (
     Initialise,
     Inject,
     JogPosition,
+    JogVelocity,
     Manual,
     Pause,
     Reset,
@@ -588,6 +589,13 @@ class ControlClient:
     def jog_position(self, joint: int | str, delta: float) -> None:
         """Closed-loop jog: move the hold target of one joint by ``delta`` (mm or deg)."""
         self._send(JogPosition.of(self.machine, joint, delta))
+
+    def jog_velocity(self, velocities: Sequence[float]) -> None:
+        """Streamed jog: each joint's hold target moves at its velocity (mm/s or deg/s, one a
+        joint, capped at its jog_speed) until the next call; send again within 150 ms to keep
+        moving, or it brakes to a stop (the deadman). Refused while a move runs; all zeros
+        stops. ValueError (nothing sent) for a wrong count or a number that is not finite."""
+        self._send(JogVelocity.of(self.machine, velocities))
 
     def feed_override(self, value: float) -> None:
         """The path being followed advances at ``value`` (0…1) of its speed, now and for the

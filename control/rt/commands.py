@@ -196,6 +196,33 @@ class JogPosition(Command):
 
 
 @dataclass(frozen=True)
+class JogVelocity(Command):
+    """Streamed closed-loop jog (MoveIt Servo's): each joint's hold target moves at
+    ``velocity`` (mm/s or deg/s, capped at its jog_speed) until the next one; not renewed
+    within 150 ms, it brakes to a stop (``control/rt/jog.py``)."""
+
+    NAME: ClassVar[str] = "velocity jog"
+    velocity: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.velocity, tuple):
+            raise CommandError(f"velocity jog needs a tuple of velocities, got {self.velocity!r}")
+        velocity = tuple(finite(f"velocity jog {i}", v) for i, v in enumerate(self.velocity))
+        object.__setattr__(self, "velocity", velocity)
+
+    @classmethod
+    def of(cls, machine: Machine, velocity: Sequence[float]) -> JogVelocity:
+        command = cls(tuple(velocity))
+        command.fits(machine.n_joints)
+        return command
+
+    def fits(self, n_joints: int) -> None:
+        if len(self.velocity) != n_joints:
+            raise CommandError(f"velocity jog needs {n_joints} velocities (one a joint, units/s), "
+                               f"got {len(self.velocity)}")
+
+
+@dataclass(frozen=True)
 class SetCoefficients(Command):
     """The hold or track set in shared memory changed: apply it (section 6.3)."""
 
@@ -284,4 +311,4 @@ def check_coefficients(coefficients: Coefficients, n_joints: int) -> None:
 
 
 COMMANDS = (Shutdown, Hold, EmergencyStop, Reset, FeedOverride, Pause, Resume, Initialise, Manual,
-            JogPosition, SetCoefficients, StartMove, Inject)  # what a channel carries
+            JogPosition, JogVelocity, SetCoefficients, StartMove, Inject)  # what a channel carries

@@ -97,7 +97,8 @@ class Controller:
             cmd.Shutdown: self.on_shutdown,
             cmd.Hold: self.on_hold, cmd.EmergencyStop: self.on_estop, cmd.Reset: self.on_reset,
             cmd.Initialise: self.on_initialise, cmd.Manual: self.on_manual,
-            cmd.JogPosition: self.on_jog_position, cmd.SetCoefficients: self.on_coefficients,
+            cmd.JogPosition: self.on_jog_position, cmd.JogVelocity: self.on_jog_velocity,
+            cmd.SetCoefficients: self.on_coefficients,
             cmd.StartMove: self.on_move, cmd.Inject: self.on_inject,
             cmd.FeedOverride: self.on_feed, cmd.Pause: self.on_feed, cmd.Resume: self.on_feed,
         })
@@ -252,6 +253,23 @@ class Controller:
         if modes.mode != Mode.HOLD:
             self.hold_here()
         modes.jog_by(command.joint, command.delta)
+
+    def on_jog_velocity(self, command: cmd.JogVelocity) -> None:
+        """Streamed jog (``control/rt/jog.py``): refused while a move follows its path (a
+        settling one ends, as for a position jog); all zeros with no stream asks nothing."""
+        modes = self.modes
+        if not any(command.velocity) and not any(modes.jog.streamed):
+            return
+        if modes.move is not None and not modes.settling:
+            self.outbox.put(Refused(command.NAME, "a move is running: hold it (or wait for it "
+                                                  "to end) first"))
+            return
+        if self.refused(command, closed_loop=True):
+            return
+        self.end_move("aborted: velocity jog")
+        if modes.mode != Mode.HOLD:
+            self.hold_here()
+        modes.jog.stream(command.velocity)
 
     def on_coefficients(self, command: cmd.SetCoefficients) -> None:
         values = self.coefficient_readers[command.which].read()
