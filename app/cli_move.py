@@ -5,12 +5,15 @@ the same rules and planned the same way; the move gets the approach the TUI give
 (``ControlClient.run``). It starts the control process, runs the move, saves the run in
 the data directory, prints the summary (or, with ``--json``, one JSON object) and exits:
 
-- 0: the move was followed to its end;
-- 1: it ended otherwise (a fault, the E-stop, the controller lost); its run is saved;
+- 0: the move was followed to its end and came in position (every joint within its goal
+  tolerance of the end, stopped, within the machine's goal_time: ``docs/motion.md``);
+- 1: it ended otherwise (unsettled, a fault, the E-stop, the controller lost); its run is
+  saved;
 - 2: bad input, nothing moved (the message on stderr names the option and the fix).
 
 Ctrl+C (SIGINT, and SIGTERM) during the move is the E-stop: latched at once, the run
-recorded so far is saved, exit 1. Progress goes to stderr, the summary to stdout.
+recorded so far is saved, exit 1. Progress goes to stderr (``settling`` once the path is
+over and the arm is coming in position), the summary and the settle to stdout.
 ``--lockstep`` runs the simulator as fast as the controller computes, not in real time
 (scripts, tests); an I/O board keeps real time, so ``--backend serial`` refuses it.
 """
@@ -52,7 +55,7 @@ from control.motion.fields import (
     position_rule,
     seconds_rule,
 )
-from control.motion.plan import MovePlan, result_records
+from control.motion.plan import SETTLE_COLUMNS, MovePlan, result_records, settle_rows
 from control.rt.layout import Flag
 from control.timing import Timing
 from hw.machine import Machine, MachineError
@@ -484,8 +487,12 @@ def _move(args: argparse.Namespace, kind: Kind, client: ControlClient, machine: 
             print(f"servodesk: {exc}", file=sys.stderr)
             return ENDED
         _announce(client, handle, estop)
-        announced = False
+        announced = settling = False
         while not handle.done.wait(0.05) or (estop.pressed and not announced):
+            if not settling and _settling(client, handle):
+                settling = True
+                print(f"settling: holding the end until every joint is in position (at most "
+                      f"{machine.goal_time_s:g} s)", file=sys.stderr, flush=True)
             if estop.pressed and not announced:
                 announced = True
                 print("servodesk: E-stop: every valve closed and latched; saving the run "
@@ -496,6 +503,16 @@ def _move(args: argparse.Namespace, kind: Kind, client: ControlClient, machine: 
     assert result is not None
     _report(args, result, machine)
     return DONE if result.complete and result.files is not None else ENDED
+
+
+def _settling(client: ControlClient, handle: MoveHandle) -> bool:
+    from control.client import ControllerError
+
+    try:
+        status = client.status()
+    except (ControllerError, TimeoutError):
+        return False
+    return status.move_id == handle.move_id and status.settling
 
 
 def _initialise(client: ControlClient) -> bool:
@@ -536,7 +553,8 @@ def _report(args: argparse.Namespace, result: MoveResult, machine: Machine) -> N
         print(f"servodesk: {result.save_error}", file=sys.stderr)
     if args.json:
         print(json.dumps({
-            "status": result.status, "complete": result.complete, "kind": plan.kind,
+            "status": result.status, "complete": result.complete,
+            "unsettled": result.unsettled, "settle": result.settle or None, "kind": plan.kind,
             "title": plan.title, "machine": machine.name, "backend": args.backend,
             "samples": result.run.samples,
             "duration_s": result.run.samples * result.run.sample_time_s,
@@ -554,3 +572,20 @@ def _report(args: argparse.Namespace, result: MoveResult, machine: Machine) -> N
         print(f"a {plan.approach * result.run.sample_time_s:.2f} s approach to the start came "
               "first (left out of the summary)")
     print("\n".join(summary_table(summaries)))
+    print("\n".join(_settle_table(result, machine)))
+
+
+def _settle_table(result: MoveResult, machine: Machine) -> list[str]:
+    """When each joint came in position after the path, and its error at the end."""
+    rows = settle_rows(result.settle, machine)
+    if not rows:
+        return []
+    cells = [SETTLE_COLUMNS, *rows]
+    widths = [max(len(row[c]) for row in cells) for c in range(len(SETTLE_COLUMNS))]
+    ended = f"the path ended {result.settle.get('path_end_s', 0):.2f} s into the run"
+    head = (f"\nin position after the path ({ended}):" if result.complete else
+            f"\nUNSETTLED: not in position {result.settle.get('goal_time_s')} s after the "
+            f"path ({ended}):")
+    return [head, *("  ".join(cell.ljust(w) if c == 0 else cell.rjust(w)
+                              for c, (cell, w) in enumerate(zip(row, widths, strict=True)))
+                    .rstrip() for row in cells)]

@@ -687,8 +687,10 @@ class ControlClient:
         """Move the tool by ``displacement`` ``[dx, dy, dz (mm), dγ, dβ, dα (deg)]`` along a
         straight line in ``frame`` (``world`` or ``tool``) at ``speed`` (0 < speed ≤ 1) of
         the machine's Cartesian jog speed, on the branch the arm is on; returns the move's
-        handle as soon as it is sent (``control.motion.cartesian_jog``). The line starts where
-        the joints were last commanded (the hold target, the end a move settles at, the
+        handle as soon as it is sent (``control.motion.cartesian_jog``). A step waits first for
+        a move in progress to end (its path and its settle: at most their time; not one in a
+        feed hold, nor for a ``stop_short`` jog, which supersedes it); the line then starts
+        where the joints were last commanded (the hold target, the end a move settled at, a
         running move's desired), never at a swinging pose, so steps add up exactly; an arm
         farther than its goal tolerance from there gets an approach in front of the line.
 
@@ -696,7 +698,7 @@ class ControlClient:
         needs a joint past its limit or comes near a singularity: the reason names which.
         ``stop_short`` instead jogs as far as the line allows and says why in the handle's
         ``meta["stopped"]``. ValueError for bad input or a machine without kinematics."""
-        status = self.status()
+        status = self.status() if stop_short else self._after_move()
         here = start = np.array(status.position)
         target = np.array(status.desired)
         if status.mode in (Mode.HOLD, Mode.FOLLOW_TRACK) and np.isfinite(target).all():
@@ -713,6 +715,20 @@ class ControlClient:
                         moving=moving_joints(jog.q))
         # judged from the snapshot it was planned from, not a second look (run) at the joints
         return self._start(accept(plan, here, self.machine, self.dt))
+
+    def _after_move(self) -> Status:
+        """The status once the move in progress has ended (in position, or not within
+        goal_time), waiting at most its path's time left and goal_time (and a second); at
+        once if none runs, or it stands in a feed hold (it stands on its path)."""
+        status = self.status()
+        left_s = ((status.move_total - status.move_done) * self.dt
+                  / max(status.feed_override, 0.05) + self.machine.goal_time_s + 1.0)
+        deadline = time.monotonic() + left_s
+        while status.moving and not status.paused and time.monotonic() < deadline:
+            self.check()
+            time.sleep(0.002)
+            status = self.status()
+        return status
 
     def run(self, plan: MovePlan) -> MoveHandle:
         """Run a planned move (``control.motion.plan``): its path, with an approach from where

@@ -64,7 +64,7 @@ from app.widgets.figure_plot import FigurePlot
 from app.widgets.live_text import LiveText
 from control.client import ControlClient, MoveHandle, MoveResult
 from control.motion.moves import summary_cells, summary_columns
-from control.motion.plan import MovePlan, Summary, moving_joints
+from control.motion.plan import SETTLE_COLUMNS, MovePlan, Summary, moving_joints, settle_cell
 from control.motion.robot_model import has_unimate_model
 from control.recorder import Run
 from control.rt.layout import Status
@@ -334,16 +334,20 @@ class MovesTab(TabPage):
         saved = (f"saved as {result.files.stem}" if result.files else
                  result.save_error or "nothing recorded")
         bar = self.query_one("#move-progress", ProgressBar)
-        bar.update(total=max(1, plan.samples), progress=result.run.samples)  # where it stopped
+        bar.update(total=max(1, plan.samples),  # where it stopped: the settle is past the path
+                   progress=min(result.run.samples, plan.samples))
         if result.complete:
             self._state(Text(f"{plan.title}: {result.status} · {saved}", "green"))
+        elif result.unsettled:
+            self._state(Text(f"{plan.title}: {result.status}; holding the path's end · {saved}",
+                             "bold yellow"))
         else:
             dt = self.desk.dt
             self._state(Text(
                 f"{plan.title}: {result.status} at {result.run.samples * dt:.2f} of "
                 f"{plan.samples * dt:.2f} s ({100 * result.run.samples / max(1, plan.samples):.0f}"
                 f" %) · {saved}", "bold yellow"))
-        self._result_table(message.summaries)
+        self._result_table(message.summaries, result.settle)
         if result.files is None and result.run.samples:
             self.post_message(self.RunUnsaved(result.run))
         self.form.fill(self.current())  # "here" has moved
@@ -356,12 +360,15 @@ class MovesTab(TabPage):
         self.initialising = False
         self._state(Text(f"initialise: {status}", "green" if "complete" in status else "yellow"))
 
-    def _result_table(self, summaries: list[tuple[str, Summary]]) -> None:
+    def _result_table(self, summaries: list[tuple[str, Summary]],
+                      settle: dict | None = None) -> None:
+        """The move's results, and when each joint came in position after the path."""
         table = self.query_one("#move-result", DataTable)
         table.clear(columns=True)
-        table.add_columns(*summary_columns(summaries))
+        table.add_columns(*summary_columns(summaries), SETTLE_COLUMNS[1])
         for label, s in summaries:
-            table.add_row(*summary_cells(label, s))
+            table.add_row(*summary_cells(label, s),
+                          settle_cell(label, settle or {}, self.machine))
 
     def _feed_label(self, paused: bool, override: float) -> None:
         """The feed button says what it will do and, off 100 %, the override."""
@@ -385,9 +392,20 @@ class MovesTab(TabPage):
             bar = self.query_one("#move-progress", ProgressBar)
             bar.update(total=status.move_total, progress=status.move_done)
             dt = self.desk.dt
+            if status.settling:
+                self._state(settling_text(handle.kind, status, self.machine))
+                return
             self._state(Text(f"running {handle.kind}: {status.move_done * dt:.2f} / "
                              f"{status.move_total * dt:.2f} s", "cyan"))
 
+
+
+def settling_text(kind: str, status: Status, machine: Machine) -> Text:
+    """A move whose path is over, coming in position: the joints not in it yet."""
+    out = [j.name for j, s in zip(machine.joints, status.settle_s, strict=True) if s != s]
+    waiting = f"waiting for {', '.join(out)}" if out else "every joint in position"
+    return Text.assemble(("settling ", "bold yellow"), f"{kind}: the path is over, holding its "
+                         f"end until in position (at most {machine.goal_time_s:g} s); {waiting}")
 
 
 def start_text(plan: MovePlan, current: np.ndarray, machine: Machine, dt: float,

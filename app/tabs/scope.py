@@ -1,6 +1,10 @@
 """Scope: live desired vs actual (or error) and duty of every joint, the plots the thesis
 drew offline with plotsix.m, drawn here at 25 frames per second with the braille raster.
 
+A move's settle (its path over, the arm coming in position: ``docs/motion.md``) is marked
+on each joint's plot by its goal band, the end ± the joint's goal tolerance, from when the
+settle began to when it ended, and the bar says ``SETTLING`` while it lasts.
+
 Only the visible tab draws. Data comes from the app's ``History``, filled by a
 sampler thread at 200 Hz, so a frame copies at most a window of samples and
 rasterises it in a few milliseconds (``benchmarks/ui.py``).
@@ -10,6 +14,8 @@ from __future__ import annotations
 
 import math
 import time
+from collections import deque
+from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
@@ -33,7 +39,19 @@ DESIRED = Style(color="red")
 ACTUAL = Style(color="bright_cyan")
 DUTY = Style(color="yellow")
 ERROR = Style(color="magenta")
+SETTLE = Style(color="green", dim=True)
 NICE_DUTY = (5.0, 10.0, 25.0, 50.0, 100.0)
+SETTLES_KEPT = 8  # the settles the scope can mark, newest last
+
+
+@dataclass
+class Settle:
+    """A move's settle seen on the status: controller time it began and ended (None while it
+    lasts), and the end it held."""
+
+    start_s: float
+    goal: tuple[float, ...]
+    end_s: float | None = None
 
 
 def position_range(window: Window, j: int, joint: Joint, fixed: bool) -> tuple[float, float]:
@@ -107,6 +125,7 @@ class ScopeTab(TabPage, can_focus=True):
         self.paused_at = 0.0
         self.pan_s = 0.0
         self.frame_s = 0.0  # time the last frame took to compute, for the status line
+        self.settles: deque[Settle] = deque(maxlen=SETTLES_KEPT)
 
     def compose(self) -> ComposeResult:
         yield LiveText(id="scope-bar")
@@ -185,7 +204,21 @@ class ScopeTab(TabPage, can_focus=True):
         grid.styles.grid_size_columns = 2 if shown >= 3 else 1
         grid.styles.grid_size_rows = max(1, math.ceil(shown / (2 if shown >= 3 else 1)))
 
+    def watch_settle(self) -> bool:
+        """Note a settle beginning or ending (the status's SETTLING flag); True while one
+        lasts."""
+        status = self.status()
+        if status is None:
+            return False
+        last = self.settles[-1] if self.settles else None
+        if status.settling and (last is None or last.end_s is not None):
+            self.settles.append(Settle(status.time_s, tuple(status.desired)))
+        elif not status.settling and last is not None and last.end_s is None:
+            last.end_s = status.time_s
+        return status.settling
+
     def refresh_live(self, force: bool = False) -> None:
+        settling = self.watch_settle()
         if self.paused and not force:
             return
         started = time.perf_counter()
@@ -202,7 +235,7 @@ class ScopeTab(TabPage, can_focus=True):
             if scope.display:
                 self._draw_joint(scope, window, x, x_range, labels)
         self.frame_s = time.perf_counter() - started
-        self._bar(len(window))
+        self._bar(len(window), settling)
 
     def _draw_joint(self, scope: JointScope, window: Window, x: np.ndarray,
                     x_range: tuple[float, float], labels: tuple[str, str, str]) -> None:
@@ -223,7 +256,8 @@ class ScopeTab(TabPage, can_focus=True):
             title = Text.assemble((f"{joint.name} [{joint.symbol}] ", "bold"),
                                   ("━ desired ", DESIRED),
                                   _value(d, last), ("  ━ actual ", ACTUAL), _value(q, last))
-            position.plot([Trace(x, d, DESIRED), Trace(x, q, ACTUAL)], x_range,
+            position.plot([*self._settle_band(j, joint, x, window),
+                           Trace(x, d, DESIRED), Trace(x, q, ACTUAL)], x_range,
                           position_range(window, j, joint, self.fixed_y), title,
                           x_labels=labels)
         if self.show_duty:
@@ -231,8 +265,25 @@ class ScopeTab(TabPage, can_focus=True):
             duty.plot([Trace(x, u, DUTY)], x_range, duty_range(u), title, zero_line=True,
                       x_labels=labels)
 
-    def _bar(self, samples: int) -> None:
+    def _settle_band(self, j: int, joint: Joint, x: np.ndarray, window: Window) -> list[Trace]:
+        """Each settle in the window as its goal band, goal ± goal_tolerance, drawn over the
+        time it lasted."""
+        if not len(window):
+            return []
+        t_end = float(window.t[-1]) - float(x[-1])  # x = t − t_end
+        traces = []
+        for settle in self.settles:
+            ends = np.array([settle.start_s, settle.end_s if settle.end_s is not None
+                             else float(window.t[-1])]) - t_end
+            for side in (-1.0, 1.0):
+                band = settle.goal[j] + side * joint.goal_tolerance
+                traces.append(Trace(ends, np.array([band, band]), SETTLE))
+        return traces
+
+    def _bar(self, samples: int, settling: bool = False) -> None:
         state = Text("PAUSED", "bold yellow") if self.paused else Text("LIVE", "bold green")
+        if settling:
+            state.append("  SETTLING", "bold yellow")
         joints = " ".join(f"{j + 1}" if on else "·" for j, on in enumerate(self.selected))
         view = "error" if self.error_view else "desired vs actual"
         self.query_one("#scope-bar", LiveText).show(Text.assemble(

@@ -186,6 +186,8 @@ class StatusHeader(Horizontal):
         if status.move_total:
             pct = 100.0 * status.move_done / status.move_total
             text.append(f"  move {status.move_id} {pct:3.0f} %", "cyan")
+        if status.settling:  # the path is over: the move holds its end until in position
+            text.append("  settling", "bold yellow")
         if status.paused:
             text.append("  FEED HOLD", "bold yellow")
         if status.feed_override != 1.0:

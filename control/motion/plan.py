@@ -1,7 +1,10 @@
 """A move as planned, before it is sent: its path or duty profile, the approach in front of
 it, and how its result is summarised afterwards, by its kind: a step's response, a smooth
 path's tracking error, a sine's amplitude ratio and phase lag (``summaries``), for the
-joints the move moved; the same metrics are saved with the run (``result_records``).
+joints the move moved; the same metrics are saved with the run (``result_records``). A step's
+response is judged with the settle after its path (where it came to rest), a path's
+tracking on its own rows; the settle itself, when each joint came in position, is
+``settle_rows``.
 
 The thesis's ``move()`` first drove the robot to a move's start position; here a
 path that begins away from where the joints are (beyond a joint's tolerance:
@@ -18,6 +21,7 @@ from __future__ import annotations
 import contextlib
 import itertools
 import math
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields, replace
 from typing import Any
 
@@ -109,13 +113,24 @@ def summaries(plan: MovePlan, run: Run, machine: Machine) -> list[tuple[str, Sum
     t, desired, actual = run.t[first:], run.desired[first:], run.actual[first:]
     if "steps" in plan.meta:
         return _sequence(t, desired, actual, machine)
-    if plan.kind in STEP_KINDS:
+    if plan.kind in STEP_KINDS:  # the settle too: the response's end, where it came to rest
         rows: list[Summary] = list(moves.summary(t, desired, actual, joints))
-    elif plan.kind == "sine":
-        rows = list(moves.sine_summary(t, desired, actual, joints, plan.meta.get("period")))
-    else:
-        rows = list(moves.tracking_summary(t, desired, actual, joints))
+    else:  # how the path was tracked: its own rows, not the hold of its end
+        end = path_rows(run) - first
+        t, desired, actual = t[:end], desired[:end], actual[:end]
+        rows = (list(moves.sine_summary(t, desired, actual, joints, plan.meta.get("period")))
+                if plan.kind == "sine" else list(moves.tracking_summary(t, desired, actual,
+                                                                        joints)))
     return [(rows[j].joint, rows[j]) for j in moved(plan, desired, machine)]
+
+
+def path_rows(run: Run) -> int:
+    """The rows of ``run`` that followed its path: those up to its settle's start (the
+    run's ``settle.path_end_s``), all of them for a run without one."""
+    end = (run.meta.get("settle") or {}).get("path_end_s")
+    if not isinstance(end, int | float):
+        return run.samples
+    return int(np.searchsorted(run.t, end, side="right"))
 
 
 def moved(plan: MovePlan, desired: np.ndarray, machine: Machine) -> list[int]:
@@ -139,6 +154,30 @@ def _sequence(t: np.ndarray, desired: np.ndarray, actual: np.ndarray, machine: M
         if abs(s.step) > tolerance:
             rows.append((f"{s.joint} step {len(rows) + 1}", s))
     return rows
+
+
+SETTLE_COLUMNS = ("joint", "in position", "error at end")
+
+
+def settle_rows(settle: Mapping[str, Any], machine: Machine) -> list[tuple[str, str, str]]:
+    """A move's settle after its path (``MoveResult.settle``, the run's ``settle``) per joint:
+    when it came in position, s after the path's end ("not in position" when it never did
+    within goal_time), and its error from the goal when the move ended; none for a move
+    that had no settle (open loop, or ended on its path)."""
+    times, errors = settle.get("settle_s") or (), settle.get("goal_error") or ()
+    if len(times) != machine.n_joints or len(errors) != machine.n_joints:
+        return []
+    return [(j.name, "not in position" if t is None else f"{t:.3f} s",
+             f"{e:+.3f}{j.symbol}") for j, t, e in zip(machine.joints, times, errors,
+                                                        strict=True)]
+
+
+def settle_cell(label: str, settle: Mapping[str, Any], machine: Machine) -> str:
+    """The "in position" cell of a result row (labelled by its joint's name)."""
+    for name, when, _ in settle_rows(settle, machine):
+        if label == name or label.startswith(name + " "):
+            return when
+    return "–"
 
 
 def result_records(rows: list[tuple[str, Summary]]) -> list[dict[str, Any]]:

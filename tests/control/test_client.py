@@ -24,6 +24,7 @@ from control import ControlClient, ControllerError, Flag, Mode
 from control.identify.sysid import DeadbandModel
 from control.motion import moves
 from control.motion.acceptance import check_path
+from control.motion.plan import path_rows
 from control.recorder import as_written, load_run, table_text
 from control.rt import shm
 from control.rt.layout import ControlLayout
@@ -73,12 +74,14 @@ def test_follow_track_completes_and_the_run_is_saved(lockstep: ControlClient,
     assert result.files.json.parent == tmp_path
     saved = load_run(result.files.json)
     assert saved.kind == "sine" and saved.machine == "unimate2000b"
-    assert len(saved.t) == len(path)
+    assert path_rows(saved) == len(path) < len(saved.t)  # then the settle's rows
     assert saved == as_written(result.run)
-    np.testing.assert_allclose(result.run.desired, path, atol=1e-9)
+    np.testing.assert_allclose(result.run.desired[:len(path)], path, atol=1e-9)
+    np.testing.assert_allclose(result.run.desired[len(path):], [path[-1]] * (len(saved.t)
+                                                                            - len(path)))
     assert saved.coefficients["track"]["kp"] == [list(k) for k in UNIMATE.track.kp]
     tsv_rows = table_text(result.files.tsv).strip().splitlines()
-    assert len(tsv_rows) == len(path) and len(tsv_rows[0].split("\t")) == 1 + 3 * 6
+    assert len(tsv_rows) == len(saved.t) and len(tsv_rows[0].split("\t")) == 1 + 3 * 6
     status = lockstep.status()
     assert status.mode == Mode.HOLD and not status.moving
     np.testing.assert_allclose(status.desired, path[-1], atol=1e-9)
@@ -93,7 +96,7 @@ def test_a_path_that_starts_away_gets_an_approach_and_the_tuis_summary(
     result = lockstep.wait(lockstep.move(path, kind="step"), timeout=60)
     assert result.complete, result.status
     plan = result.plan
-    assert plan.approach > 0 and result.run.samples == plan.approach + len(path)
+    assert plan.approach > 0 and path_rows(result.run) == plan.approach + len(path)
     assert abs(result.run.desired[0, 1] - here[1]) < 1.0  # the approach starts where Rotate was
     rows = result.summaries()
     assert [label for label, _ in rows] == ["Up/Down"]  # Rotate moved only in the approach
@@ -118,7 +121,7 @@ def test_a_jump_is_refused_as_a_path_and_runs_as_a_step(lockstep: ControlClient)
     assert lockstep.status().move_id == 0 and lockstep.status().mode == Mode.HOLD
     result = lockstep.wait(lockstep.move(path, kind="step"), timeout=60)
     assert result.complete, result.status
-    assert result.run.samples == len(path) and result.plan.approach == 0
+    assert path_rows(result.run) == len(path) and result.plan.approach == 0
     assert abs(result.run.actual[-1, 2] - path[-1, 2]) <= UNIMATE.joints[2].tolerance
 
 
@@ -134,7 +137,7 @@ def test_a_smooth_move_that_starts_away_runs_behind_a_smooth_approach(
     path = moves.sine(start, end, period=2.0, duration=2.0, machine=UNIMATE)
     result = lockstep.wait(lockstep.move(path, kind="sine"), timeout=60)
     assert result.complete, result.status
-    sent = result.run.desired
+    sent = result.run.desired[:path_rows(result.run)]
     assert result.plan.approach > 0 and len(sent) == result.plan.approach + len(path)
     assert np.abs(sent[0] - here).max() < 1e-9
     np.testing.assert_allclose(sent[result.plan.approach:], path, atol=1e-9)
