@@ -37,6 +37,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from control.rt.jog import rest_margin
 from hw.machine import Machine
 from hw.transmission import output_min_pwm
 
@@ -83,6 +84,8 @@ class Supervisor:
         self.count = [abs(j.encoder.gradient) for j in joints]
         self.speed_per_ns = [j.max_speed * 1e-9 for j in joints]
         self.min_pwm = [output_min_pwm(j) for j in joints]
+        self.stop_below = [j.lower + rest_margin(j) for j in joints]  # on a limit's stop
+        self.stop_above = [j.upper - rest_margin(j) for j in joints]
         self.open_at = [(p + s.open_margin_pct, q + s.open_margin_pct) for p, q in self.min_pwm]
         self.min_ferror = [j.min_following_error for j in joints]
         self.ferror_per_speed = [j.following_error / j.max_speed for j in joints]
@@ -174,6 +177,8 @@ class Supervisor:
         where = (f"{joint.name}'s valve has been open at {u:+.0f} % (minimum PWM "
                  f"{self.min_pwm[j][0 if u > 0 else 1]:g} %) for {span:.2f} s")
         if abs(moved) <= STILL_COUNTS * count:
+            if self.on_stop(j, w.a[new], expected):
+                return None
             return Trip(j, f"feedback fault: {where} and its reading has not moved from "
                            f"{w.a[new]:.2f}{joint.symbol} (it should have moved about "
                            f"{abs(expected):.1f}{joint.symbol}): frozen encoder, cut cable, "
@@ -184,6 +189,13 @@ class Supervisor:
                            f"{joint.symbol}, the other way: check the encoder and the valve's "
                            "wiring", feedback=True)
         return None
+
+    def on_stop(self, j: int, actuator: float, expected: float) -> bool:
+        """Whether joint ``j`` rests on a limit's stop with its valve pushing it there (the
+        stops act on the actuator, at the joint's limits)."""
+        if expected > 0.0:
+            return actuator >= self.stop_above[j]
+        return actuator <= self.stop_below[j]
 
     def following(self, j: int, w: _Window, old: int, new: int, velocity: float) -> Trip | None:
         """Beyond the limit at both ends of the window: a fault if its duty was zero and the

@@ -77,3 +77,101 @@ def test_a_goal_moved_again_on_the_way_is_followed_without_a_jump() -> None:
     path = np.concatenate([[0.0], first, second])
     assert np.abs(np.diff(path)).max() <= UNIMATE.joints[UPDOWN].jog_speed * DT * (1 + 1e-9)
     assert path[-1] == -5.0
+
+
+# -- the streamed velocity jog -----------------------------------------------------------------
+
+
+def stream(jog: PositionJog, target: list[float], velocity: float, samples: int,
+           renew: bool = True) -> np.ndarray:
+    """Up/Down's target each sample while ``velocity`` is streamed (renewed every sample, or
+    sent once)."""
+    rows = []
+    command = [0.0] * 6
+    command[UPDOWN] = velocity
+    jog.stream(command)
+    for _ in range(samples):
+        if renew:
+            jog.stream(command)
+        jog.advance(target)
+        rows.append(target[UPDOWN])
+    return np.array(rows)
+
+
+def started(at: float = 0.0) -> tuple[PositionJog, list[float]]:
+    jog = PositionJog(UNIMATE, DT)
+    target = [1500.0, 0.0, at, 0.0, 0.0, 0.0]
+    jog.stop_at(target)
+    return jog, target
+
+
+def test_a_streamed_velocity_moves_the_target_at_it_ramped_within_max_accel() -> None:
+    joint = UNIMATE.joints[UPDOWN]
+    jog, target = started()
+    path = np.concatenate([[0.0], stream(jog, target, 4.0, 1_000)])
+    velocity = np.diff(path) / DT
+    assert velocity[-500:] == pytest.approx(4.0)
+    assert np.abs(np.diff(np.concatenate([[0.0], velocity]))).max() / DT <= \
+        joint.max_accel * (1 + 1e-6)
+
+
+def test_a_streamed_velocity_is_capped_at_jog_speed() -> None:
+    jog, target = started()
+    velocity = np.diff(stream(jog, target, -1_000.0, 1_000)) / DT
+    assert np.abs(velocity).max() == pytest.approx(UNIMATE.joints[UPDOWN].jog_speed)
+
+
+def test_a_stream_not_renewed_stops_within_its_braking_distance() -> None:
+    """The deadman: sent once, the target moves for 150 ms of samples, then brakes at
+    max_accel and stops, no farther than v²/2a (and a sample's step) on."""
+    joint = UNIMATE.joints[UPDOWN]
+    jog, target = started()
+    path = stream(jog, target, 6.0, 2_000, renew=False)
+    deadman = round(0.150 / DT)
+    velocity = np.diff(np.concatenate([[0.0], path])) / DT
+    assert velocity[deadman - 2] == pytest.approx(6.0)
+    braking = 6.0 ** 2 / (2 * joint.max_accel)
+    assert path[-1] - path[deadman - 1] <= braking + 6.0 * DT
+    assert not jog.moving and jog.velocity[UPDOWN] == 0.0 and path[-1] == path[-500]
+    assert np.abs(np.diff(velocity)).max() / DT <= joint.max_accel * (1 + 1e-6)
+
+
+def test_a_streamed_jog_slows_before_the_soft_limit_and_rests_inside_it() -> None:
+    joint = UNIMATE.joints[UPDOWN]
+    low, high = rest_range(joint)
+    assert joint.upper - high == pytest.approx(joint.goal_tolerance)
+    for velocity, edge in ((100.0, high), (-100.0, low)):
+        jog, target = started(at=0.5 * (joint.upper + joint.lower))
+        path = np.concatenate([[target[UPDOWN]], stream(jog, target, velocity, 20_000)])
+        speed = np.diff(path) / DT
+        assert path[-1] == edge and speed[-1] == 0.0
+        assert low <= path.min() and path.max() <= high  # never past the edge, then back
+        assert np.all(np.diff(path) * np.sign(velocity) >= 0)
+        assert np.abs(np.diff(speed)).max() / DT <= 2 * joint.max_accel * (1 + 1e-6)
+        pressed = stream(jog, target, velocity, 500)  # held against the edge: it stays
+        assert np.all(pressed == edge)
+        back = stream(jog, target, -velocity, 500)  # and leaves it the other way at once
+        assert abs(back[-1] - edge) > 1.0
+
+
+def test_position_jog_steps_onto_the_limit_stop_a_goal_tolerance_inside_it() -> None:
+    """Issue 25: 1° steps from 27° to 30° left the target on the limit, the arm pressing on
+    its stop; now the goal (and the target) stop a goal tolerance inside it."""
+    joint = UNIMATE.joints[UPDOWN]
+    jog, target = started(at=27.0)
+    for _ in range(4):
+        jog.move_goal(UPDOWN, min(jog.goal[UPDOWN] + 1.0, joint.upper))
+        jog_to_the_end(jog, target)
+    assert target[UPDOWN] == pytest.approx(joint.upper - joint.goal_tolerance)
+    jog.move_goal(UPDOWN, joint.upper)  # a goal on the limit itself
+    jog_to_the_end(jog, target)
+    assert target[UPDOWN] == pytest.approx(joint.upper - joint.goal_tolerance)
+
+
+def test_a_target_held_outside_the_rest_range_is_not_pushed_further_out() -> None:
+    joint = UNIMATE.joints[UPDOWN]
+    jog = started(at=joint.upper - 0.1)[0]  # the arm was held there
+    jog.move_goal(UPDOWN, jog.goal[UPDOWN] + 1.0)
+    assert jog.goal[UPDOWN] == joint.upper - 0.1
+    jog.move_goal(UPDOWN, jog.goal[UPDOWN] - 1.0)
+    assert jog.goal[UPDOWN] == pytest.approx(joint.upper - 1.1)

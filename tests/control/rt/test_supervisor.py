@@ -17,12 +17,15 @@ PERIOD = 1_000_000
 
 
 def drive(machine, j: int, duty: float, speed: float, *, error: float = math.nan,
-          ms: int = 400, desired_speed: float = 0.0):
+          ms: int = 400, desired_speed: float = 0.0, at: float | None = None):
     """Tick a supervisor ``ms`` ms: joint ``j`` at ``duty`` %, its actuator moving at ``speed``
-    units/s, its error ``error`` (nan: open loop). The first trip and its tick, or None."""
+    units/s from ``at`` (default mid-range), its error ``error`` (nan: open loop). The first
+    trip and its tick, or None."""
     supervisor = Supervisor(machine, PERIOD)
     n = machine.n_joints
     a = [0.5 * (jt.lower + jt.upper) for jt in machine.joints]
+    if at is not None:
+        a[j] = at
     duties, velocity = [0.0] * n, [0.0] * n
     duties[j], velocity[j] = duty, desired_speed
     closed = not math.isnan(error)
@@ -94,3 +97,21 @@ def test_the_limit_grows_with_the_desired_speed_as_linuxcncs_ferror() -> None:
 def test_a_valve_under_its_minimum_pwm_is_not_expected_to_move_anything() -> None:
     joint = UNIMATE.joints[0]
     assert drive(UNIMATE, 0, 0.9 * output_min_pwm(joint)[0], 0.0) is None
+
+
+@pytest.mark.parametrize("closed", [True, False])
+def test_a_joint_resting_on_its_limit_with_its_valve_pushing_there_is_no_feedback_fault(
+        closed: bool) -> None:
+    """Issue 25: a target on 30.00° left Up/Down a count short, on its stop, the integrator
+    opening the valve against it: that was called a frozen encoder. Resting on the limit the
+    valve pushes toward, it is not; pushing away from it, or still anywhere else, it is."""
+    joint = UNIMATE.joints[2]
+    count = abs(joint.encoder.gradient)
+    error = 0.5 * count if closed else math.nan
+    for duty, at in ((60.0, joint.upper - 0.45 * count), (-60.0, joint.lower + 0.3 * count)):
+        assert drive(UNIMATE, 2, duty, 0.0, at=at, error=math.copysign(error, duty)) is None
+        trip, _ = drive(UNIMATE, 2, -duty, 0.0, at=at, error=math.copysign(error, -duty))
+        assert trip.feedback and "has not moved" in trip.message
+    trip, _ = drive(UNIMATE, 2, 60.0, 0.0, at=joint.upper - 2 * joint.goal_tolerance,
+                    error=error)
+    assert trip.feedback and "has not moved" in trip.message
