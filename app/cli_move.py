@@ -556,7 +556,7 @@ def _report(args: argparse.Namespace, result: MoveResult, machine: Machine) -> N
             "status": result.status, "complete": result.complete,
             "unsettled": result.unsettled, "settle": result.settle or None, "kind": plan.kind,
             "title": plan.title, "machine": machine.name, "backend": args.backend,
-            "samples": result.run.samples,
+            "samples": result.run.samples, "path_samples": plan.samples,
             "duration_s": result.run.samples * result.run.sample_time_s,
             "approach_s": plan.approach * result.run.sample_time_s,
             "run": None if files is None else {

@@ -16,7 +16,6 @@ overwritten.
 from __future__ import annotations
 
 import threading
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import ClassVar
@@ -48,9 +47,6 @@ from control.motion.positions import (
 )
 
 SPEEDS = (0.05, 1.0)  # the speed fraction a go-to may ask for
-SETTLE_S = 10.0  # after its path a go-to waits this long at most for every joint to settle
-SETTLE_POLL_S = 0.02
-SETTLED_S = 0.5  # within tolerance this long (controller time): settled, not swinging by
 
 
 class PositionsTab(TabPage):
@@ -91,8 +87,8 @@ class PositionsTab(TabPage):
 
     @dataclass
     class Arrived(Message, bubble=False):
-        """A go-to ended (from the waiting worker): ``away`` names the joints not within
-        their tolerance of the position once it settled (empty: there)."""
+        """A go-to ended (from the waiting worker): ``away`` names the joints the controller
+        did not find in position within the machine's goal_time (empty: there)."""
 
         name: str
         result: MoveResult
@@ -358,29 +354,12 @@ class PositionsTab(TabPage):
 
     @work(thread=True, group="positions-go")
     def _wait(self, client: ControlClient, handle: MoveHandle, p: Position) -> None:
-        """Wait for the path's end, then for the joints to settle on the position (the hold
-        takes out what they lag or overshoot), so that "at" means there."""
+        """Wait for the move to end in position (the controller's settle after the path:
+        ``docs/motion.md``), so that "at" means there."""
         result = client.wait(handle)
-        target = np.array(p.joints)
-        tolerance = np.array([j.tolerance for j in self.machine.joints])
-        deadline = time.monotonic() + SETTLE_S
-        away = np.ones(len(target), dtype=bool)
-        inside_since: float | None = None  # controller time the joints came within tolerance
-        while result.complete and not client.dead and time.monotonic() < deadline:
-            try:
-                status = client.status()
-            except (ValueError, TimeoutError):  # closed while we waited
-                break
-            away = np.abs(np.array(status.position) - target) > tolerance
-            if away.any():
-                inside_since = None
-            elif inside_since is None:
-                inside_since = status.time_s
-            elif status.time_s - inside_since >= SETTLED_S:  # staying, not swinging through
-                break
-            time.sleep(SETTLE_POLL_S)
-        names = ", ".join(j.name for j, off in zip(self.machine.joints, away, strict=True)
-                          if off)
+        times = result.settle.get("settle_s") or ()
+        names = ", ".join(j.name for j, t in zip(self.machine.joints, times, strict=False)
+                          if t is None)
         self.post_message(self.Arrived(p.name, result, names))
 
     def on_positions_tab_arrived(self, message: Arrived) -> None:
@@ -388,12 +367,13 @@ class PositionsTab(TabPage):
         result = message.result
         saved = (f"saved as {result.files.stem}" if result.files else
                  result.save_error or "nothing recorded")
-        if result.complete and not message.away:
+        if result.complete:
             self._state(Text(f"at {message.name} · {saved}", "green"))
             self.notify(f"at {message.name}")
-        elif result.complete:
-            self._state(Text(f"near {message.name}: {message.away} not within tolerance "
-                             f"{SETTLE_S:g} s after the move · {saved}", "bold yellow"))
+        elif result.unsettled:
+            self._state(Text(f"near {message.name}: {message.away} not in position "
+                             f"{self.machine.goal_time_s:g} s after the move ({result.status}); "
+                             f"holding {message.name} · {saved}", "bold yellow"))
             self.notify(f"go to {message.name}: {message.away} not there", severity="warning")
         else:
             self._state(Text(f"go to {message.name}: {result.status} · {saved}", "bold yellow"))

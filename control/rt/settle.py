@@ -56,7 +56,8 @@ class GoalCheck:
         if all(t - s >= GOAL_WINDOW_S for s in self.settled_s):  # NaN compares False
             self.verdict = "complete"
         elif t >= self.goal_time_s:
-            self.verdict = "unsettled: " + "; ".join(self.out_text(j) for j in self.out())
+            self.verdict = (f"unsettled: {'; '.join(self.out_text(j) for j in self.out())} "
+                            f"after {self.goal_time_s:g} s")
         return self.verdict
 
     def out(self) -> list[int]:
@@ -68,7 +69,7 @@ class GoalCheck:
         text = f"{joint.name} {abs(error):.2f}{joint.symbol} from its goal"
         if abs(error) <= self.tolerance[j]:
             text += f", moving {speed:.3g} {joint.unit}/s"
-        return text + f" after {self.goal_time_s:g} s"
+        return text
 
     def record(self) -> dict[str, object]:
         """For the run and ``MoveDone``: each joint's settle time (None: not settled) and its

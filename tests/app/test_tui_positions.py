@@ -35,7 +35,7 @@ def test_teach_list_rename_go_to_and_delete(tui, data_dir: Path) -> None:
     async def scenario() -> None:
         app = tui.app()
         path = positions_file(data_dir, app.machine)
-        tolerance = np.array([j.tolerance for j in app.machine.joints])
+        tolerance = np.array([j.goal_tolerance for j in app.machine.joints])  # "at": in position
         async with app.run_test(size=SIZE) as pilot:
             start = np.array((await tui.ready(app, pilot)).position)
             tab = app.query_one(PositionsTab)
