@@ -210,6 +210,35 @@ class Unimate2000B:
         angles = np.degrees(xyz_fixed.angles(t[..., :3, :3]))  # eq. 4.05, errata #15
         return np.concatenate([t[..., :3, 3], angles], axis=-1)
 
+    def jacobian(self, q: ArrayLike) -> np.ndarray:
+        """The geometric Jacobian of joint vectors ``q: (..., 6)`` → ``(..., 6, 6)``: the tool
+        point's velocity (mm/s, rows 0-2) and the tool's angular velocity (deg/s, rows 3-5),
+        both in the base frame, per joint velocity (mm/s or deg/s, actuator order).
+
+        Column of a revolute DH joint i about z_{i-1} through o_{i-1}: (z × (p − o)·π/180, z);
+        of the prismatic one along z_{i-1}: (z, 0) (Spong, Hutchinson & Vidyasagar eq. 4.60).
+        """
+        q = np.asarray(q, dtype=float)
+        if q.ndim == 0 or q.shape[-1] != 6:
+            raise ValueError(f"expected joint vectors of shape (..., 6), got {q.shape}")
+        qdh = q[..., list(DH_ORDER)]
+        frame = np.broadcast_to(np.eye(4), (*q.shape[:-1], 4, 4))
+        axes, origins = [], []
+        for i, link in enumerate(self.links()):
+            axes.append(frame[..., :3, 2])
+            origins.append(frame[..., :3, 3])
+            frame = frame @ link.transform(qdh[..., i])
+        tool = frame[..., :3, 3]
+        out = np.zeros((*q.shape[:-1], 6, 6))
+        for i, link in enumerate(self.links()):
+            j = DH_ORDER[i]
+            if link.prismatic:
+                out[..., :3, j] = axes[i]
+            else:
+                out[..., :3, j] = np.cross(axes[i], tool - origins[i]) * (math.pi / 180.0)
+                out[..., 3:, j] = axes[i]
+        return out
+
     def inverse(self, p: ArrayLike, near: ArrayLike | None = None) -> np.ndarray:
         """Every in-limit joint solution of one pose, nearest ``near`` first.
 

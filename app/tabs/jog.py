@@ -45,6 +45,7 @@ import time
 from dataclasses import dataclass, field
 from typing import ClassVar
 
+import numpy as np
 from rich.table import Table
 from rich.text import Text
 from textual.app import ComposeResult
@@ -58,7 +59,7 @@ from app.tabs.tab import TabPage
 from app.widgets.limit_bar import LimitBar
 from app.widgets.live_text import LiveText
 from control.client import ControlClient, MoveHandle
-from control.motion.cartesian_jog import AXES
+from control.motion.cartesian_jog import AXES, zone
 from control.rt.layout import Mode, Status
 from hw.machine import Joint
 from hw.transmission import output_min_pwm
@@ -69,6 +70,8 @@ FRAMES = ("joint", "world", "tool")  # w cycles them; world and tool are Cartesi
 CARTESIAN_MODES = ("hold-to-move", "position")
 # Hold-to-move Cartesian speed, keys 1-9: a fraction of the machine's cartesian_jog_speed.
 CARTESIAN_SPEEDS = (0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.8, 1.0)
+ZONE_WARNING = 0.9  # the pose line warns once a Cartesian jog would run below this speed
+WRIST_WARNING_DEG = 30.0  # a slowed jog with Yaw this close to 0° is the wrist's doing
 HOLD_REACH_S = 4.0  # a held Cartesian key plans this far ahead (s at the chosen speed)
 NO_CARTESIAN = ("no Cartesian jog on this machine: {name} has no closed-form kinematics "
                 "(a single axis), only joint jog")
@@ -617,11 +620,34 @@ class JogTab(TabPage):
             position, angles = (f"x {x:8.1f}  y {y:8.1f}  z {z:8.1f} mm   ",
                                 f"γ {g:7.2f}°  β {b:7.2f}°  α {a:7.2f}°")
         parts: list[str | tuple[str, str]] = [("tool  ", "dim"), position, angles]
-        if self.pad.frame != "joint":
+        warning = self._zone_warning(status)
+        if warning:
+            parts += [("   ⚠ ", "bold yellow"), (warning, "yellow")]
+        elif self.pad.frame != "joint":
             keys = "  ".join(f"{p}/{m} {axis}" for (p, m), axis in zip(JOG_KEYS, AXES,
                                                                      strict=True))
             parts += [("   keys (", "dim"), (self.pad.frame, "bold"), (" frame) ", "dim"), keys]
         return Text.assemble(*parts)
+
+    def _zone_warning(self, status: Status) -> str:
+        """What the singularity zone does to a Cartesian jog from the commanded joints, in the
+        pad's frame (world in the joint frame) at its speed: '' when every axis runs as asked.
+        """
+        q = np.array(status.desired)
+        if not np.isfinite(q).all():
+            q = np.array(status.position)
+        frame = "world" if self.pad.frame == "joint" else self.pad.frame
+        speed = self.pad.cartesian_speed if self.pad.mode == "hold-to-move" else 1.0
+        near = zone(q, self.machine, frame, speed)
+        slowed = np.flatnonzero(near.scale < ZONE_WARNING)
+        if not len(slowed):
+            return ""
+        joints = self.machine.joints
+        axes = [f"{AXES[k]} stops ({joints[near.joint[k]].name})" if near.scale[k] == 0.0
+                else f"{AXES[k]} {near.scale[k]:.0%}" for k in slowed]
+        where = (f"wrist singularity near: Yaw {near.yaw:.1f}° from 0°"
+                 if abs(near.yaw) < WRIST_WARNING_DEG else "near a singularity")
+        return f"{where}; {frame} jog {', '.join(axes)}"
 
     def _command(self, j: int) -> Text:
         """Joint ``j``'s commanded duty, marked when its valve will not open at it."""

@@ -20,9 +20,19 @@ acceleration to its Cartesian jog speed (``[kinematics] cartesian_jog_speed``,
 translation and the rotation is slower sets the pace, and brakes to a stop
 on the end; the duration is rounded up to whole samples. Each sample is
 solved by the closed-form inverse (``inverse_batch``) in the slot of the
-start joints (``cartesian.start_branch``): no branch flip, ever. If a joint
-would pass its ``max_speed`` or ``max_accel`` the whole profile is slowed
-(speed by r, acceleration by r²) until none does.
+start joints (``cartesian.start_branch``): no branch flip, ever.
+
+The singularity zone (issue 25), as MoveIt Servo's ``lower_singularity_threshold`` and
+``hard_stop_singularity_threshold``, but judged on what the operator's machine allows
+rather than on a condition number: ``need`` is the speed each joint would need to keep
+the tool on the line at the Cartesian jog speed asked. Where every joint's is within its
+``jog_speed`` the jog runs at that speed; where one needs more, the whole profile is
+slowed (speed by r, acceleration by r²) until no joint passes its ``jog_speed`` (nor its
+``max_accel``); where one would need more than its ``max_speed`` the jog stops. So a
+joint travels at most ``max_speed / cartesian_jog_speed`` per unit of the tool's motion
+(Swivel 12°, Bend 9° per degree of tool rotation on the Unimate), never the 13-30
+times a line through the wrist singularity asks of it. ``zone`` says how close a pose is,
+per axis, for the Jog tab's warning and for the servo (``control.servo``).
 
 Refusals (``Unreachable``, nothing planned), at the first sample where:
 
@@ -33,8 +43,8 @@ Refusals (``Unreachable``, nothing planned), at the first sample where:
   Bend and Swivel line up) while approaching it;
 - the wrist point comes within ``SHOULDER_MARGIN_MM`` of the Rotate axis while
   approaching it;
-- at the jog speed a joint would need more than ``MAX_SLOWDOWN`` times its
-  ``max_speed`` (the signature of a nearby singularity: the jog would crawl).
+- at the Cartesian jog speed asked a joint would need more than its ``max_speed``
+  (the hard stop of the singularity zone below).
 
 ``stop_short=True`` (the Jog tab's hold-to-move) instead plans the longest part
 of the line that has none of these, ending ``STOP_BACKOFF`` before the first
@@ -52,7 +62,7 @@ from numpy.typing import ArrayLike
 from control.motion import cartesian
 from control.motion.acceptance import check_duration
 from control.motion.robot_model import unimate_model
-from hw.machine import Machine
+from hw.machine import Joint, Machine
 from kinematics import xyz_fixed
 from kinematics.unimate import LIMIT_TOL, Unimate2000B, Unreachable
 
@@ -62,11 +72,6 @@ AXIS_UNITS = ("mm", "mm", "mm", "°", "°", "°")
 YAW = 4  # the Yaw joint: sin θ5 = 0 is the wrist singularity
 WRIST_MARGIN_DEG = 1.0  # a jog stops before Yaw comes this close to 0°
 SHOULDER_MARGIN_MM = 50.0  # or the wrist point this close to the Rotate axis
-# A jog that needs a joint this many times over its max_speed at the jog speed is at a
-# singularity in all but name (a joint swings far for a small move of the tool; slowed that
-# much the tool would crawl), so it is refused. At the default 10°/s a tool rotation needs
-# Swivel at about 10°/s / sin(Yaw): this refuses rotations within about 1.2° of Yaw 0°.
-MAX_SLOWDOWN = 4.0
 STOP_BACKOFF = 0.02  # stop_short ends this fraction of the way before the first problem
 MIN_JOG = (0.01, 0.001)  # mm, deg: a shorter jog is nothing to plan
 MAX_PASSES = 20  # slowdowns for the joints' limits; each one fits the worst ratio
@@ -128,6 +133,63 @@ def rotation_about(v: np.ndarray) -> np.ndarray:
     return np.eye(3) + s * k + (1.0 - c) * (k @ k)
 
 
+@dataclass(frozen=True)
+class Zone:
+    """How the singularity zone (module docstring) bounds a Cartesian jog from one pose.
+
+    ``need (6, J)``: the speed (mm/s, deg/s) each joint needs for a jog along each axis of
+    the frame (x, y, z, γ, β, α; either sign) at the Cartesian jog speed asked; ``scale
+    (6,)`` the fraction of that speed each axis runs at (1 full, 0 stopped: a joint past its
+    max_speed); ``joint (6,)`` the joint that sets it; ``yaw`` deg (the wrist is singular at
+    0°)."""
+
+    need: np.ndarray
+    scale: np.ndarray
+    joint: np.ndarray
+    yaw: float
+
+    @property
+    def near(self) -> bool:
+        """Some axis runs slower than asked, or stops."""
+        return bool((self.scale < 1.0).any())
+
+
+def frame_jacobian(model: Unimate2000B, q: ArrayLike, frame: str) -> np.ndarray:
+    """``(6, 6)``: the tool's velocity (mm/s) and angular velocity (deg/s) along the axes of
+    ``frame`` (world or tool) per joint velocity (mm/s, deg/s) at joints ``q (6,)``."""
+    jacobian = model.jacobian(q)
+    if frame == "world":
+        return jacobian
+    r = model.forward(q)[:3, :3]
+    return np.concatenate([r.T @ jacobian[:3], r.T @ jacobian[3:]])
+
+
+def joint_speeds(model: Unimate2000B, q: ArrayLike, frame: str, twist: np.ndarray
+                 ) -> np.ndarray:
+    """Joint velocities ``(..., 6)`` that move the tool at ``twist (..., 6)`` (mm/s, deg/s
+    along the axes of ``frame``) from ``q``; inf where the Jacobian is singular."""
+    jacobian = frame_jacobian(model, q, frame)
+    try:
+        return np.linalg.solve(jacobian, np.asarray(twist, dtype=float).T).T
+    except np.linalg.LinAlgError:  # exactly singular: no joint speed is enough
+        return np.full(np.shape(twist), np.inf)
+
+
+def zone(q: ArrayLike, machine: Machine, frame: str = "world", speed: float = 1.0) -> Zone:
+    """The singularity zone at joints ``q (6,)`` for jogs in ``frame`` at ``speed`` of the
+    machine's Cartesian jog speed (``Zone``)."""
+    model = unimate_model(machine)
+    q = np.asarray(q, dtype=float)
+    axis_speed = np.repeat(np.array(machine.cartesian_jog_speed) * speed, 3)
+    need = np.abs(joint_speeds(model, q, frame, np.diag(axis_speed)))
+    vmax = np.array([j.max_speed for j in machine.joints])
+    vjog = np.array([j.jog_speed for j in machine.joints])
+    over = need / vjog
+    scale = np.where((need > vmax).any(axis=1), 0.0,
+                     np.minimum(1.0, 1.0 / np.maximum(over.max(axis=1), 1e-300)))
+    return Zone(need, scale, over.argmax(axis=1), float(q[YAW]))
+
+
 def plan_jog(start: ArrayLike, displacement: ArrayLike, machine: Machine, *,
              frame: str = "world", dt: float | None = None, speed: float = 1.0,
              stop_short: bool = False) -> CartesianJog:
@@ -170,13 +232,14 @@ def _plan_line(line: _Line, q0: np.ndarray, machine: Machine, model: Unimate2000
                speed: float) -> CartesianJog | tuple[float, str]:
     """The jog along ``line``, or (fraction along it, reason) of its first problem."""
     vmax = np.array([j.max_speed for j in machine.joints])
+    vjog = np.array([j.jog_speed for j in machine.joints])
     amax = np.array([j.max_accel for j in machine.joints])
     length = (float(np.linalg.norm(line.d)), math.degrees(float(np.linalg.norm(line.omega))))
     speeds = np.array(machine.cartesian_jog_speed) * speed
     accels = np.array(machine.cartesian_jog_accel) * speed**2  # slower in time, as a whole
     rate = min(v / d for v, d in zip(speeds, length, strict=True) if d > 0)  # ds/dt, 1/s
     accel = min(a / d for a, d in zip(accels, length, strict=True) if d > 0)  # 1/s²
-    steepest = vmax / rate  # |dq/ds| of each joint at its max_speed at the jog speed
+    steepest = vmax / rate  # |dq/ds| of each joint at its max_speed at the jog speed: the stop
     spacing = max(length[0] / GEOMETRY_SPACING[0], length[1] / GEOMETRY_SPACING[1])
     s = np.linspace(0.0, 1.0, int(np.clip(spacing, *GEOMETRY_SAMPLES)) + 1)
     problem = _solve(line, s, q0, machine, model, steepest)[1]
@@ -193,7 +256,7 @@ def _plan_line(line: _Line, q0: np.ndarray, machine: Machine, model: Unimate2000
             return problem
         assert solved is not None
         q, poses, positions, rotations, slot = solved
-        ratio = cartesian.limit_ratio(q, dt, vmax, amax)
+        ratio = cartesian.limit_ratio(q, dt, vjog, amax)  # the zone: slowed to jog_speed
         if ratio <= 1.0 + 1e-9:
             q[0] = q0  # the start as it is, not its pose solved again (round-off)
             return CartesianJog(t, q, poses, positions, rotations, np.zeros(6), "", slot)
@@ -266,7 +329,7 @@ def _first_problem(q: np.ndarray, s: np.ndarray, valid: np.ndarray, slot: int,
                    ) -> tuple[float, str] | None:
     """(fraction, reason) of the first sample the jog must not reach (module docstring),
     or None. ``per_rate (J,)`` is each joint's max_speed divided by the jog's ds/dt: the
-    largest |dq/ds| it may have at the jog speed, MAX_SLOWDOWN times over."""
+    largest |dq/ds| it may have at the Cartesian jog speed asked (the zone's hard stop)."""
     n = len(q)
     ok = valid[:, slot]
     bad = np.zeros(n, dtype=bool)
@@ -286,7 +349,8 @@ def _first_problem(q: np.ndarray, s: np.ndarray, valid: np.ndarray, slot: int,
     slope = np.zeros_like(q)
     moving = ds > 1e-12
     slope[1:][moving] = np.abs(np.diff(q, axis=0)[moving]) / ds[moving, None]
-    over = slope / (per_rate * MAX_SLOWDOWN)
+    slope[0] = slope[1] if n > 1 else 0.0  # the first step's slope is the start's: a stop there
+    over = slope / per_rate
     reasons["rate"] = ok & (over > 1.0).any(axis=1)
     for mask in reasons.values():
         bad |= mask
@@ -310,9 +374,11 @@ def _first_problem(q: np.ndarray, s: np.ndarray, valid: np.ndarray, slot: int,
         joint = machine.joints[j]
         near = (f"near the wrist singularity (Yaw {q[k, YAW]:.2f}°, singular at 0°)"
                 if abs(q[k, YAW]) < 10 * WRIST_MARGIN_DEG else "near a singularity")
-        why = (f"{joint.name} would need {over[k, j] * MAX_SLOWDOWN:.0f} times its max_speed "
-               f"({joint.max_speed:g} {joint.symbol}/s) at the jog speed, {near}: jog another way "
-               "or move the arm away from it in joint mode")
+        need = over[k, j] * joint.max_speed
+        why = (f"{joint.name} would need {need:.0f}{_unit(joint)}/s, over its max_speed "
+               f"{joint.max_speed:g}{_unit(joint)}/s, to keep the tool on the line at the "
+               f"Cartesian jog speed, {near}: jog another way or move the arm away from it in "
+               "joint mode")
     return float(s[k]), why
 
 
@@ -344,6 +410,11 @@ def _jump_reason(q: np.ndarray, k: int, machine: Machine) -> str:
     return (f"joint limit: {joint.name} would pass its limit {limit:g}{joint.symbol} (from "
             f"{q[k - 1, j]:.2f}{joint.symbol} it would have to wrap to {q[k, j]:.2f}"
             f"{joint.symbol})")
+
+
+def _unit(joint: Joint) -> str:
+    """What follows a number of the joint's unit: ' mm' or '°'."""
+    return " mm" if joint.unit == "mm" else "°"
 
 
 def _line(t0: np.ndarray, displacement: np.ndarray, tool: bool) -> _Line:

@@ -51,7 +51,9 @@ def test_world_frame_keys_step_the_tool_along_x_and_the_pose_is_shown(tui) -> No
             pose = app.query_one("#jog-pose", LiveText).text
             shown = float(re.search(r"tool  x +(-?\d+\.\d)  y", pose).group(1))
             assert abs(shown - reached[0]) < 1.0  # the measured pose, live
-            assert "keys (world frame) a/z x  s/x y  d/c z  f/v γ  g/b β  h/n α" in pose
+            # the keys, or in their place the warning of the singularity zone (Yaw 2.5°)
+            keys = "keys (world frame) a/z x  s/x y  d/c z  f/v γ  g/b β  h/n α" in pose
+            assert keys != ("⚠ wrist singularity near" in pose), pose
             await pilot.press("w")
             assert pad.frame == "tool" and "frame tool" in tui.text(pad)
             await pilot.press("w")
@@ -109,6 +111,34 @@ def test_a_step_into_the_wrist_singularity_is_refused_and_says_why(tui) -> None:
             assert "jog refused" in note and "wrist singularity" in note
             status = client.status()
             assert status.mode == Mode.HOLD and status.desired == before.desired
+
+    asyncio.run(scenario())
+
+
+def test_the_pose_line_warns_near_the_wrist_singularity(tui) -> None:
+    """Issue 25 item 2: the simulator starts at Yaw 2.5°, where a world-frame α turn (and a
+    tool-frame γ turn) cannot run; the pose line says so, and stops saying it once Yaw is
+    jogged away from 0°."""
+    async def scenario() -> None:
+        app = tui.app()
+        async with app.run_test(size=SIZE) as pilot:
+            before = await tui.ready(app, pilot)
+            client = app.client
+            assert 0.0 < before.position[4] < 5.0
+            await pilot.press("w")  # world frame
+            tab = app.query_one(JogTab)
+
+            def pose() -> str:
+                tab.refresh_live()
+                return app.query_one("#jog-pose", LiveText).text
+
+            assert "wrist singularity near: Yaw 2.5° from 0°; world jog α stops (Bend)" in pose()
+            await pilot.press("w")  # tool frame
+            assert "tool jog γ stops (Bend)" in pose()
+            client.go_to([*before.desired[:4], 45.0, before.desired[5]], speed=1.0)
+            await tui.until(lambda: "⚠" not in pose() and client.status().mode == Mode.HOLD,
+                            timeout=30, what=lambda: f"no warning at Yaw 45°: {pose()}")
+            assert "keys (tool frame)" in pose()
 
     asyncio.run(scenario())
 

@@ -104,10 +104,38 @@ def test_an_unreachable_jog_raises_and_sends_nothing(robot: ControlClient) -> No
     before = robot.status()
     with pytest.raises(Unreachable, match=r"In/Out would be 204\d\.\d mm, past its limits"):
         robot.jog_cartesian([5000.0, 0, 0, 0, 0, 0])
-    with pytest.raises(Unreachable, match=r"Bend would be -110\.\d°, past its limits"):
-        robot.jog_cartesian([0, 0, 0, 0, 40.0, 0], frame="tool")
+    with pytest.raises(Unreachable, match=r"Bend would be 110\.\d°, past its limits"):
+        robot.jog_cartesian([0, 0, 0, -40.0, 0, 0])
     status = robot.status()
     assert status.mode == Mode.HOLD
     assert status.desired == before.desired  # the hold target never moved
     result = robot.wait(robot.jog_cartesian([5.0, 0, 0, 0, 0, 0]), timeout=60)
     assert result.complete  # and the next jog runs as usual
+
+
+def test_a_small_tool_turn_by_the_wrist_singularity_stops_naming_the_joint(
+        robot: ControlClient) -> None:
+    """Issue 25 item 2: at the simulator's start pose (Yaw 2.5°) γ +5° in the tool frame moved
+    In/Out 70 mm, Bend 70° and Swivel 64°; now it stops before it starts, and says why."""
+    home = np.array(MODEL.mid_range)
+    assert robot.wait(robot.go_to(home, speed=1.0), timeout=60).complete
+    before = robot.status()
+    with pytest.raises(Unreachable, match=r"at the start: Bend would need \d+°/s, over its "
+                                          r"max_speed 90°/s.*near the wrist singularity"):
+        robot.jog_cartesian([0, 0, 0, 5.0, 0, 0], frame="tool")
+    assert robot.status().desired == before.desired  # nothing sent
+
+
+def test_in_the_singularity_zone_a_jog_runs_with_every_joint_within_its_jog_speed(
+        robot: ControlClient) -> None:
+    """At Yaw 15° a world α turn at 10°/s would need Bend at 44°/s: it runs slower, with no
+    joint's commanded speed above its jog speed."""
+    near = np.array([1508.5, 0.0, 1.5, 0.0, 15.0, 0.0])
+    assert robot.wait(robot.go_to(near, speed=1.0), timeout=60).complete
+    result = robot.wait(robot.jog_cartesian([0, 0, 0, 0, 0, 5.0]), timeout=60)
+    assert result.complete, result.status
+    desired = result.run.desired
+    speed = np.abs(np.diff(desired, axis=0)).max(axis=0) / robot.dt
+    jog_speed = np.array([j.jog_speed for j in UNIMATE.joints])
+    assert (speed <= jog_speed * 1.001).all(), speed
+    assert speed[3] > 0.9 * jog_speed[3]  # Bend sets the pace

@@ -11,7 +11,7 @@ from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from control.motion import cartesian
-from control.motion.cartesian_jog import WRIST_MARGIN_DEG, plan_jog, rotation_about
+from control.motion.cartesian_jog import WRIST_MARGIN_DEG, plan_jog, rotation_about, zone
 from control.motion.robot_model import unimate_model
 from hw.machine import load_machine
 from kinematics.unimate import JOINTS, Unreachable
@@ -19,6 +19,7 @@ from kinematics.unimate import JOINTS, Unreachable
 UNIMATE = load_machine("unimate2000b")
 MODEL = unimate_model(UNIMATE)
 VMAX = np.array([j.max_speed for j in UNIMATE.joints])
+VJOG = np.array([j.jog_speed for j in UNIMATE.joints])
 AMAX = np.array([j.max_accel for j in UNIMATE.joints])
 DT = 0.005  # coarser than the machine's 1 ms: the line and the branch do not depend on it
 START = np.array([1500.0, 10.0, 5.0, 20.0, 30.0, 10.0])
@@ -96,6 +97,7 @@ def jogs(draw: st.DrawFn) -> tuple[np.ndarray, np.ndarray, str]:
 @given(jogs())
 @example((np.array([977.0, 34.0, 0.0, -1.0, 1e-6, 158.0]), np.array([1.0, 0, 0, 0, 0, 0]),
           "tool"))  # a start at the wrist singularity: round-off in the branch check
+@example((np.array(MODEL.mid_range), np.array([0, 0, 0, 5.0, 0, 0]), "tool"))  # issue 25
 def test_random_jogs_keep_the_branch_and_the_line_or_are_refused_with_a_reason(
         jog: tuple[np.ndarray, np.ndarray, str]) -> None:
     q0, d, frame = jog
@@ -111,7 +113,60 @@ def test_random_jogs_keep_the_branch_and_the_line_or_are_refused_with_a_reason(
     check_on_line(q0, d, frame, plan.q)
     np.testing.assert_array_equal(plan.q[0], q0)
     assert (plan.q >= UNIMATE.lower).all() and (plan.q <= UNIMATE.upper).all()
-    assert cartesian.limit_ratio(plan.q, DT, VMAX, AMAX) <= 1.0 + 1e-6
+    # the singularity zone: no joint faster than its jog speed, and none travelling farther
+    # than its max_speed covers in the time the jog takes at the Cartesian jog speed
+    assert cartesian.limit_ratio(plan.q, DT, VJOG, AMAX) <= 1.0 + 1e-6
+    assert (np.ptp(plan.q, axis=0) <= VMAX * nominal_time(d) * 1.05 + 1e-9).all()
+
+
+def nominal_time(d: np.ndarray) -> float:
+    """How long the jog ``d`` takes at the Cartesian jog speed, ramps aside (s)."""
+    mm, deg = UNIMATE.cartesian_jog_speed
+    return max(np.linalg.norm(d[:3]) / mm, np.linalg.norm(d[3:]) / deg)
+
+
+def test_a_small_tool_turn_by_the_wrist_singularity_never_swings_a_joint() -> None:
+    """Issue 25: at the simulator's start (Yaw 2.5°) γ +5° in the tool frame moved In/Out
+    70 mm, Bend 70° and Swivel 64°. Now it stops at once, naming the joint and why."""
+    with pytest.raises(Unreachable, match=r"γ \+5° \(tool frame\): at the start: Bend would "
+                                          r"need \d+°/s, over its max_speed 90°/s, .*near the "
+                                          r"wrist singularity \(Yaw 2\.50°"):
+        plan_jog(MODEL.mid_range, [0, 0, 0, 5.0, 0, 0], UNIMATE, frame="tool")
+
+
+def test_in_the_zone_a_jog_slows_so_that_no_joint_passes_its_jog_speed() -> None:
+    """At Yaw 15° a world α turn needs Bend at twice its jog speed at 10°/s: the jog runs
+    at about half the Cartesian jog speed, Bend at its jog speed (it ran at 44°/s before)."""
+    q0 = np.array([1508.5, 0.0, 1.5, 0.0, 15.0, 0.0])
+    plan = plan_jog(q0, [0, 0, 0, 0, 0, 5.0], UNIMATE)
+    speed = np.abs(np.diff(plan.q, axis=0)).max(axis=0) / UNIMATE.sample_time_s
+    assert speed[3] == pytest.approx(VJOG[3], rel=0.02)
+    assert (speed <= VJOG * (1 + 1e-6)).all()
+    assert plan.duration > 2 * 5.0 / UNIMATE.cartesian_jog_speed[1]
+
+
+def test_the_zone_says_which_axes_slow_or_stop_and_why() -> None:
+    start = zone(MODEL.mid_range, UNIMATE, "tool")  # Yaw 2.5°
+    assert start.near and start.yaw == 2.5
+    assert start.scale[3] == 0.0 and JOINTS[start.joint[3]] == "Bend"  # γ stops
+    assert (start.scale[:3] == 1.0).all()  # translations run at full speed
+    middle = zone([1508.5, 0.0, 1.5, 0.0, 15.0, 0.0], UNIMATE, "world")
+    assert 0.4 < middle.scale[5] < 0.6 and JOINTS[middle.joint[5]] == "Bend"
+    assert not zone(START, UNIMATE, "world").near
+
+
+def test_the_jacobian_is_the_derivative_of_the_pose() -> None:
+    rng = np.random.default_rng(25)
+    for _ in range(20):
+        q = np.array([rng.uniform(j.lower, j.upper) for j in UNIMATE.joints])
+        jacobian = MODEL.jacobian(q)
+        for j in range(6):
+            h = np.eye(6)[j] * 1e-5
+            plus, minus = MODEL.forward(q + h), MODEL.forward(q - h)
+            np.testing.assert_allclose((plus[:3, 3] - minus[:3, 3]) / 2e-5, jacobian[:3, j],
+                                       atol=1e-6)
+            turn = rotation_vector((plus[:3, :3] @ minus[:3, :3].T)[None])[0]
+            np.testing.assert_allclose(np.degrees(turn) / 2e-5, jacobian[3:, j], atol=1e-6)
 
 
 def test_most_jogs_from_ordinary_configurations_are_planned() -> None:
@@ -179,11 +234,11 @@ def near_wrist() -> np.ndarray:
 
 
 def test_a_jog_into_the_wrist_singularity_is_refused_naming_it() -> None:
-    # it stops where Yaw comes within 1° of 0°, or before, where the wrist joints would have
-    # to swing faster than MAX_SLOWDOWN times their max_speed: either way it says so
+    # it stops where Yaw comes within 1° of 0°, or before, where a wrist joint would have
+    # to swing faster than its max_speed (the zone's hard stop): either way it says so
     with pytest.raises(Unreachable, match=r"β \+10° \(tool frame\): at \d+% of the way.*"
                                           r"(Yaw would come within 1° of 0°|near the wrist "
-                                          r"singularity \(Yaw 1\.\d+°)"):
+                                          r"singularity \(Yaw \d\.\d+°)"):
         plan_jog(near_wrist(), [0, 0, 0, 0, 10.0, 0], UNIMATE, frame="tool")
 
 
@@ -197,15 +252,15 @@ def test_stop_short_stops_before_the_singularity_and_says_why() -> None:
                     stop_short=True)
     assert "wrist singularity" in plan.stopped
     assert np.abs(plan.q[:, 4]).min() >= WRIST_MARGIN_DEG
-    assert plan.q[-1, 4] < 2.0  # it went most of the way there
+    assert plan.q[-1, 4] < 3.0  # it went most of the way there (Bend's max_speed stops it)
     assert 0.0 < plan.displacement[4] < 10.0
     check_on_line(near_wrist(), plan.displacement, "tool", plan.q)
 
 
 def test_a_jog_past_a_joint_limit_is_refused_naming_the_joint() -> None:
-    with pytest.raises(Unreachable, match=r"joint limit: Bend would be -110\.\d°, past its "
+    with pytest.raises(Unreachable, match=r"joint limit: Bend would be 110\.\d°, past its "
                                           r"limits -110…110°"):
-        plan_jog(START, [0, 0, 0, 0, 40.0, 0], UNIMATE, frame="tool")
+        plan_jog(START, [0, 0, 0, -40.0, 0, 0], UNIMATE)
 
 
 def test_a_jog_that_would_wrap_swivel_past_its_limit_names_it() -> None:
@@ -215,9 +270,9 @@ def test_a_jog_that_would_wrap_swivel_past_its_limit_names_it() -> None:
 
 
 def test_stop_short_stops_before_the_limit() -> None:
-    plan = plan_jog(START, [0, 0, 0, 0, 40.0, 0], UNIMATE, frame="tool", stop_short=True)
-    assert "Bend" in plan.stopped
-    assert plan.q[:, 3].min() > -110.0
+    plan = plan_jog(START, [0, 0, 0, -40.0, 0, 0], UNIMATE, stop_short=True)
+    assert "joint limit: Bend" in plan.stopped
+    assert plan.q[:, 3].max() < 110.0
 
 
 def test_a_jog_out_of_the_workspace_is_refused_naming_the_joint() -> None:
@@ -228,8 +283,8 @@ def test_a_jog_out_of_the_workspace_is_refused_naming_the_joint() -> None:
 
 def test_a_jog_that_makes_a_joint_crawl_near_the_singularity_is_refused() -> None:
     almost = np.array([1500.0, 10.0, 5.0, 20.0, 1.2, 10.0])
-    with pytest.raises(Unreachable, match=r"(Swivel|Bend) would need \d+ times its max_speed "
-                                          r".*near the wrist singularity"):
+    with pytest.raises(Unreachable, match=r"at the start: (Swivel|Bend) would need \d+°/s, over "
+                                          r"its max_speed .*near the wrist singularity"):
         plan_jog(almost, [0, 0, 0, 5.0, 0, 0], UNIMATE, frame="tool")
 
 
