@@ -31,6 +31,7 @@ import matplotlib.pyplot as plt
 from control import ControlClient
 from control.motion import moves
 from control.recorder import Run
+from control.rt.law import start_sets
 from control.timing import Timing
 from hw.machine import load_machine
 from hw.sim.valve import quantise_duty
@@ -62,8 +63,18 @@ class Section:
 
 
 def client(machine: str, timing: Timing, data: Path, lockstep: bool = True) -> ControlClient:
-    return ControlClient(machine, lockstep=lockstep, timing=timing, heartbeat_timeout_s=5.0,
-                         data_dir=data)
+    return thesis_gains(ControlClient(machine, lockstep=lockstep, timing=timing,
+                                      heartbeat_timeout_s=5.0, data_dir=data))
+
+
+def thesis_gains(robot: ControlClient) -> ControlClient:
+    """``robot`` holding and tracking with the sets the thesis ran (option.c's, the rig's
+    function.c hold and eq. 3.3 PID), in servodesk's timing too: presets of the machine files
+    since issue 24 made other sets the defaults (``control.rt.law.start_sets``)."""
+    for which, c in zip(("hold", "track"), start_sets(robot.machine, thesis_timing=True),
+                        strict=True):
+        robot.set_coefficients(which, c)
+    return robot
 
 
 def initialised(robot: ControlClient) -> None:
@@ -267,8 +278,8 @@ SEEDS_6_1 = range(4)  # photocell spreads: the wrong readings of a run are a Poi
 
 def _wrong_readings(timing: Timing, data: Path, seed: int) -> tuple[int, ...]:
     """Readings the glitch filter rejected in one 12 s stepping run of every joint."""
-    with ControlClient("unimate2000b", lockstep=True, timing=timing, heartbeat_timeout_s=5.0,
-                       data_dir=data, seed=seed) as robot:
+    with thesis_gains(ControlClient("unimate2000b", lockstep=True, timing=timing,
+                                    heartbeat_timeout_s=5.0, data_dir=data, seed=seed)) as robot:
         start = np.array(robot.status().position)
         target = start + np.array(list(STEPS.values()))
         path = moves.multi_step(start, target, duration=12.0, machine=UNIMATE, dt=robot.dt)

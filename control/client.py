@@ -67,6 +67,7 @@ from control.rt.events import (
     MoveStarted,
     Notice,
 )
+from control.rt.law import start_sets
 from control.rt.layout import ESTOP_WORD, HEARTBEAT_WORD, LatencyHistogram, Mode, MoveLayout, Status
 from control.rt.seqlock import SeqlockReader
 from control.rt.wire import Broken, Message, Unreadable
@@ -200,7 +201,7 @@ class ControlClient:
             lockstep=lockstep)
         early: list[ControllerEvent] = []
         link, notices = EmbeddedLink.launch(
-            setting, (machine.hold, machine.track), seed=seed, realtime=realtime,
+            setting, start_sets(machine, timing.name == "thesis"), seed=seed, realtime=realtime,
             spin_us=spin_us, heartbeat_timeout_s=heartbeat_timeout_s,
             orphan_timeout_s=orphan_timeout_s, start_timeout_s=start_timeout_s,
             sim_options=sim_options or {}, early=early.append)
@@ -241,8 +242,9 @@ class ControlClient:
         self._stopping = False
         self._manual = [0.0] * self.machine.n_joints  # the duties jog_joint keeps for the others
         self._latched = False  # an E-stop sent or reported, until the controller releases it
+        started = start_sets(self.machine, setting.timing.name == "thesis")
         self.coefficients = {which: self._coefficients_in_use(which, c) for which, c in
-                             (("hold", self.machine.hold), ("track", self.machine.track))}
+                             zip(("hold", "track"), started, strict=True)}
         # what the gain check said of each set in use, saved with every run (control.identify.gains)
         self.coefficient_checks: dict[str, dict[str, object]] = {
             which: {"passed": None, "summary": "the machine file's set, applied at start"}

@@ -7,6 +7,14 @@ and the coefficient set's duty limit. The integral is clamped at ``integral_limi
 and, to prevent windup as section 3.6.1 intends, does not grow while the output is
 saturated the way its error pushes (conditional integration, errata #31): the
 listing's clamp alone lets a 400 mm rig step wind it to 13 % (slip ``windup``).
+The set's ``deadband`` (per joint, joint units; LinuxCNC pid's, issue 24) stops the
+limit cycle a P.I. with minimum-PWM compensation keeps at rest (the output crossing zero
+steps the valve from one minimum PWM to the other, 2-11 times a second): with no desired
+velocity a rest begins once |e| is within half the deadband and lasts until |e| is past it
+on two samples running (hysteresis: a reading flickering a count at the edge, or one wrong
+reading of section 6.2, neither starts nor ends one); while
+resting the law sees no error, the integral holds, and the output goes out without the
+compensation, clipped to the minimum PWM, so the valve stays inside its overlap.
 Taps are newest first (errata #21). With ``w`` empty, ``kp = [Kp]`` and the
 filter (11, −18, 9, −2)/6 it is the PID of eq. 3.3; with ``w`` non-empty, the
 observer controller of section 3.6.2.
@@ -60,18 +68,21 @@ class _JointGains:
     nmin: float
     duty_limit: float
     kv: float  # velocity feed-forward, % per joint unit/s
-    deadband: float  # |e| (gain units) at rest the law ignores; 0: none
+    deadband: float  # |e| (gain units) at which a rest ends; 0: none
+    rest_band: float  # |e| within which a rest begins: half the deadband (hysteresis)
 
 
 class _JointState:
     """Histories (newest first) and integrator of one joint; mutated in place every tick."""
 
-    __slots__ = ("e", "integral", "u")
+    __slots__ = ("e", "integral", "outside", "resting", "u")
 
     def __init__(self, n_errors: int, n_outputs: int) -> None:
         self.e = [0.0] * n_errors
         self.u = [0.0] * n_outputs
         self.integral = 0.0
+        self.resting = False  # inside the deadband at rest (``DifferenceLaw.update``)
+        self.outside = False  # resting, the last error was past the deadband
 
 
 @dataclass(frozen=True)
@@ -124,6 +135,7 @@ class DifferenceLaw:
             s.e[:] = [0.0] * len(s.e)
             s.u[:] = [0.0] * len(s.u)
             s.integral = 0.0
+            s.resting = s.outside = False
 
     def state(self, j: int) -> LawState:
         """A copy of joint ``j``'s histories and integrator (for display and tests)."""
@@ -140,7 +152,14 @@ class DifferenceLaw:
         e = error / g.gain_unit  # error in gain units, errata #18
         if not -_INF < e < _INF:  # a NaN would poison the integrator for good
             raise ValueError(f"{self.machine.joints[j].name}: error {error} is not a number")
-        rest = g.deadband and velocity == 0.0 and -g.deadband <= e <= g.deadband
+        if not (g.deadband and velocity == 0.0):
+            rest = s.resting = False
+        elif s.resting:  # it ends past the deadband two samples running, not on one wrong reading
+            outside = not -g.deadband <= e <= g.deadband
+            rest = s.resting = not (outside and s.outside)
+            s.outside = outside and rest
+        else:  # it begins within half the deadband
+            rest = s.resting = -g.rest_band <= e <= g.rest_band
         if rest:
             e = 0.0  # inside the deadband at rest: no error (LinuxCNC pid's deadband)
         errors = s.e
@@ -228,6 +247,18 @@ def preset(name: str, machine: Machine) -> Coefficients:
                        f"(it has: {have})") from None
 
 
+def start_sets(machine: Machine, thesis_timing: bool = False
+               ) -> tuple[Coefficients, Coefficients]:
+    """The hold and track sets a controller starts with: the machine file's ``hold`` and
+    ``track``, or in the thesis's timing (control/timing.py: a sample of 6-36 ms, where gains
+    designed at 1 ms go unstable) the sets the thesis ran, ``thesis_hold`` and
+    ``thesis_track``, when the file has them."""
+    c = machine.coefficients
+    if not thesis_timing:
+        return machine.hold, machine.track
+    return c.get("thesis_hold", machine.hold), c.get("thesis_track", machine.track)
+
+
 def _prepare(joint: Joint, c: Coefficients, j: int, dt: float,
              slips: frozenset[str]) -> _JointGains:
     up, down = output_min_pwm(joint)
@@ -248,6 +279,7 @@ def _prepare(joint: Joint, c: Coefficients, j: int, dt: float,
         duty_limit=c.duty_limit,
         kv=c.kv[j] if c.kv else 0.0,
         deadband=c.deadband[j] / joint.gain_unit if c.deadband else 0.0,
+        rest_band=c.deadband[j] / joint.gain_unit / 2 if c.deadband else 0.0,
     )
 
 

@@ -28,7 +28,7 @@ from control.rt.events import Fault, Initialised, Notice, Refused
 from control.rt.feed import FeedRate
 from control.rt.guards import Guards
 from control.rt.jog import PositionJog
-from control.rt.law import DifferenceLaw
+from control.rt.law import DifferenceLaw, start_sets
 from control.rt.layout import Mode, MoveLayout
 from control.rt.outbox import Outbox
 from control.rt.settle import GoalCheck
@@ -125,8 +125,9 @@ class ModeMachine:
 
     def __post_init__(self) -> None:
         n = self.n = self.machine.n_joints
-        self.coefficients = {"hold": self.machine.hold, "track": self.machine.track}
-        self.law = DifferenceLaw(self.machine, self.machine.hold, self.dt, self.slips)
+        hold, track = start_sets(self.machine, thesis_timing=self.slots > 1)
+        self.coefficients = {"hold": hold, "track": track}
+        self.law = DifferenceLaw(self.machine, hold, self.dt, self.slips)
         self.serviced: range = range(n)  # the joints this tick runs eq. 5.1 for
         self.slot_joints = [range(j, j + 1) for j in range(n)]
         self.sample_start = self.sample_end = True  # this tick begins / ends a sample

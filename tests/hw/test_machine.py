@@ -43,7 +43,7 @@ def test_unimate_carries_the_thesis_numbers() -> None:
     pi = m.coefficients["thesis_pi"]
     assert [k[0] for k in pi.kp] == [20, 25, 30, 3, 4, 20]
     assert pi.ki == (200, 20, 90, 3, 20, 80)
-    hold, track = m.coefficients["option_hold"], m.coefficients["option_track"]
+    hold, track = m.coefficients["thesis_hold"], m.coefficients["thesis_track"]
     assert [k[0] for k in hold.kp] == [10, 10, 11, 0.5, 1, 2]
     assert [k[0] for k in track.kp] == [20, 20, 31, 3, 2, 4]
     assert hold.ki == track.ki == (200, 29, 100, 3, 14, 80)
@@ -107,7 +107,7 @@ BAD = [
     (('coupled_to = "bend"', 'coupled_to = "elbow"'),
      r"joints\[4\]\.encoder\.coupled_to: 'elbow' is not a joint key"),
     (("ki = [200.0, 29.0, 100.0, 3.0, 14.0, 80.0]", "ki = [200.0, 29.0]"),
-     r"coefficients\.option_hold\.ki: must have 6 entries, got 2"),
+     r"coefficients\.thesis_hold\.ki: must have 6 entries, got 2"),
     (("tolerance = 0.3", 'tolerance = "tight"'), r"joints\[2\]\.tolerance: must be a number"),
     (("tolerance = 0.3", "tolerance = nan"), r"joints\[2\]\.tolerance: must be finite"),
     (("tolerance = 0.3", "tolerence = 0.3"), r"joints\[2\]: unknown key\(s\) tolerence"),
@@ -145,15 +145,15 @@ BAD = [
     (("coupling = 1.0", "coupling = 1e9"), r"joints\[4\]\.encoder\.coupling: 1000000000 out of"),
     (("d = 1066.8", "d = 1e12"), r"kinematics\.dh\[0\]\.d: 1e\+12 out of range"),
     (("kp = [[10.0], [10.0]", "kp = [[10.0, 1, 2, 3, 4, 5, 6, 7, 8], [10.0]"),
-     r"coefficients\.option_hold\.kp\[0\]: 9 taps; the controller takes at most 8$"),
+     r"coefficients\.thesis_hold\.kp\[0\]: 9 taps; the controller takes at most 8$"),
     (("ki = [200.0, 29.0, 100.0", "ki = [2e300, 29.0, 100.0"),
-     r"coefficients\.option_hold\.ki\[0\]: 2e\+300 out of range \(must be in -1e\+06…1e\+06\)$"),
+     r"coefficients\.thesis_hold\.ki\[0\]: 2e\+300 out of range \(must be in -1e\+06…1e\+06\)$"),
     (("filter_divisor = 6.0", "filter_divisor = 1e-300"),
      r"coefficients\.hold\.filter_divisor: 1e-300 out of range"),
     (('name = "Up/Down"', 'name = "Up\\nDown"'),
      r"joints\[2\]\.name: 'Up\\nDown': character 2 is '\\n', which does not print"),
     (('note = "option.c hold_coeff"', 'note = "option.c \\u202ehold_coeff"'),
-     r"coefficients\.option_hold\.note: .*character 9 is '\\u202e', which does not print"),
+     r"coefficients\.thesis_hold\.note: .*character 9 is '\\u202e', which does not print"),
     (("cartesian_jog_speed = [25.0, 10.0]", "cartesian_jog_speed = [25.0]"),
      r"kinematics\.cartesian_jog_speed: must have 2 entries, got 1$"),
     (("cartesian_jog_accel = [100.0, 40.0]", "cartesian_jog_accel = [100.0, 0.0]"),
@@ -287,25 +287,26 @@ def test_an_unreadable_file_is_refused_naming_it(tmp_path: Path,
 
 
 def test_feed_forward_gains_are_optional_and_checked() -> None:
-    assert load_machine("unimate2000b").coefficients["option_track"].kv == ()
+    assert load_machine("unimate2000b").coefficients["thesis_track"].kv == ()
     text = UNIMATE_TEXT.replace('note = "option.c track_coeff"',
                                 'note = "option.c track_coeff"\nkv = [0.2, 1, 2, 0.5, 0.5, 0.4]')
-    track = parse_machine(text, Path("ff.toml")).coefficients["option_track"]
+    track = parse_machine(text, Path("ff.toml")).coefficients["thesis_track"]
     assert track.kv == (0.2, 1, 2, 0.5, 0.5, 0.4)
-    with pytest.raises(MachineError, match=r"coefficients\.option_track\.kv: must have 6 "):
+    with pytest.raises(MachineError, match=r"coefficients\.thesis_track\.kv: must have 6 "):
         parse_machine(text.replace("kv = [0.2, 1, 2,", "kv = [0.2,"), Path("ff.toml"))
 
 
 def test_a_deadband_is_optional_one_per_joint_and_not_negative() -> None:
-    """Issue 24: the default sets ignore one encoder count at rest; the thesis's have none."""
+    """Issue 24: the default sets rest within two encoder counts; the thesis's have none."""
     unimate = load_machine("unimate2000b")
-    assert unimate.hold.deadband == tuple(abs(j.encoder.gradient) for j in unimate.joints)
+    assert unimate.hold.deadband == pytest.approx([2 * abs(j.encoder.gradient)
+                                                   for j in unimate.joints])
     assert unimate.coefficients["thesis_pi"].deadband == ()
     with pytest.raises(MachineError, match=r"coefficients\.hold\.deadband: must have 6 "):
-        parse_machine(UNIMATE_TEXT.replace("deadband = [0.2617, ", "deadband = [", 1),
+        parse_machine(UNIMATE_TEXT.replace("deadband = [0.5234, ", "deadband = [", 1),
                       Path("db.toml"))
     with pytest.raises(MachineError, match=r"coefficients\.hold\.deadband\[0\]: -1 out of "):
-        parse_machine(UNIMATE_TEXT.replace("deadband = [0.2617, ", "deadband = [-1, ", 1),
+        parse_machine(UNIMATE_TEXT.replace("deadband = [0.5234, ", "deadband = [-1, ", 1),
                       Path("db.toml"))
 
 

@@ -17,7 +17,7 @@ from hw.machine import Coefficients, Machine, load_machine
 
 UNIMATE = load_machine("unimate2000b")
 RIG = load_machine("rig")
-OPTION_TRACK = UNIMATE.coefficients["option_track"]  # option.c's, the thesis's track set
+THESIS_TRACK = UNIMATE.coefficients["thesis_track"]  # option.c's, the thesis's track set
 BEND = 3
 # Bend as identified on the simulator (docs/identification.md): a 35 Hz oil column where the
 # nominal model guesses 20 Hz
@@ -33,7 +33,7 @@ def with_kp(c: Coefficients, kp: float, joints: tuple[int, ...] | None = None) -
 
 @pytest.mark.parametrize(("machine", "name", "worst"), [
     (UNIMATE, "hold", ("Swivel", 2.14)), (UNIMATE, "track", ("Swivel", 2.14)),
-    (UNIMATE, "option_hold", ("Swivel", 6.49)), (UNIMATE, "option_track", ("In/Out", 6.21)),
+    (UNIMATE, "thesis_hold", ("Swivel", 6.49)), (UNIMATE, "thesis_track", ("In/Out", 6.21)),
     (UNIMATE, "thesis_pi", ("In/Out", 6.21)), (RIG, "hold", ("Ram", 1.49)),
     (RIG, "track", ("Ram", 1.49)), (RIG, "thesis_hold", ("Ram", 1.74)),
     (RIG, "thesis_track", ("Ram", 2.12)),
@@ -59,15 +59,15 @@ def test_a_negative_gain_is_refused_naming_the_joint() -> None:
     with pytest.raises(GainError, match=r"Up/Down: unstable on the nominal model: negative gain "
                                         r"\(kp -20, ki 100\): the loop pushes away from its "
                                         r"target\. .*fix their sign"):
-        gains.check(with_kp(OPTION_TRACK, -20.0, (2,)), UNIMATE)
-    refused = gains.assess(with_kp(OPTION_TRACK, -20.0), UNIMATE)
+        gains.check(with_kp(THESIS_TRACK, -20.0, (2,)), UNIMATE)
+    refused = gains.assess(with_kp(THESIS_TRACK, -20.0), UNIMATE)
     assert [p.split(":")[0] for p in refused.problems] == [j.name for j in UNIMATE.joints]
 
 
 def test_a_gain_far_too_large_is_refused() -> None:
     with pytest.raises(GainError, match=r"In/Out: unstable on the nominal model: a closed-loop "
                                         r"pole at \|z\| = 101\.1"):
-        gains.check(with_kp(OPTION_TRACK, 1e9), UNIMATE)
+        gains.check(with_kp(THESIS_TRACK, 1e9), UNIMATE)
 
 
 def test_no_feedback_at_all_is_refused() -> None:
@@ -82,20 +82,20 @@ def test_a_stable_loop_with_too_little_margin_is_refused_with_its_figures() -> N
     with pytest.raises(GainError, match=r"Bend: too little margin on the nominal model: peak "
                                         r"sensitivity Ms 10\.4 > 8 \(phase margin 10°, crossover "
                                         r"16\.8 Hz\)"):
-        gains.check(with_kp(OPTION_TRACK, 105.0, (BEND,)), UNIMATE)
+        gains.check(with_kp(THESIS_TRACK, 105.0, (BEND,)), UNIMATE)
 
 
 def test_an_identified_model_judges_its_joint_with_its_own_bound() -> None:
     """The same Bend gain on the identified 35 Hz Bend: Ms 2.46, under the identified bound;
     the proposal for it (Ms 2 by design) passes there too."""
-    c = with_kp(OPTION_TRACK, 105.0, (BEND,))
+    c = with_kp(THESIS_TRACK, 105.0, (BEND,))
     models = [None, None, None, IDENTIFIED_BEND, None, None]
     result = gains.check(c, UNIMATE, models)
     bend = result.joints[BEND]
     assert bend.model == "identified" and bend.bound == MAX_MS_IDENTIFIED
     assert bend.margins.ms == pytest.approx(2.46, abs=0.01)
     assert result.joints[0].model == "nominal"
-    proposal = tuning.propose(models, UNIMATE, OPTION_TRACK).coefficients
+    proposal = tuning.propose(models, UNIMATE, THESIS_TRACK).coefficients
     assert gains.check(proposal, UNIMATE, models).joints[BEND].margins.ms <= 2.0 + 1e-6
     with pytest.raises(ValueError, match="one model"):
         gains.check(c, UNIMATE, models[:3])

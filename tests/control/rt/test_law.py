@@ -165,7 +165,7 @@ def test_the_w_taps_weigh_the_final_output() -> None:
 
 
 def test_unimate_hold_acts_per_joint() -> None:
-    law = DifferenceLaw(UNIMATE, UNIMATE.coefficients["option_hold"], UNIMATE.sample_time_s)
+    law = DifferenceLaw(UNIMATE, UNIMATE.coefficients["thesis_hold"], UNIMATE.sample_time_s)
     # Up/Down hold: Kp 11, Ki 100; 1° error: 11 + 100·1·0.001 = 11.1; polarity −1, so the
     # valve's negative side (26 %, section 5.4.1) starts it: (1 − 26/100)·11.1 + 26
     assert law.update(2, 1.0) == pytest.approx(0.74 * 11.1 + 26)
@@ -199,14 +199,14 @@ def test_pid_pi_and_preset_build_coefficient_sets() -> None:
     with pytest.raises(ValueError, match="kp: expected one gain or 6, got 2"):
         pid(UNIMATE, kp=[1, 2], ki=0, kd=0)
     with pytest.raises(KeyError, match=r"no coefficient set 'observer'.*hold, track, "
-                                       r"option_hold, option_track, thesis_pi"):
+                                       r"thesis_hold, thesis_track, thesis_pi"):
         preset("observer", UNIMATE)
 
 
 @given(st.lists(st.floats(-1e4, 1e4), min_size=1, max_size=50),
        st.integers(0, UNIMATE.n_joints - 1))
 def test_output_is_zero_or_between_min_pwm_and_the_limit(errors: list[float], j: int) -> None:
-    law = DifferenceLaw(UNIMATE, UNIMATE.coefficients["option_track"], UNIMATE.sample_time_s)
+    law = DifferenceLaw(UNIMATE, UNIMATE.coefficients["thesis_track"], UNIMATE.sample_time_s)
     joint = UNIMATE.joints[j]
     up, down = output_min_pwm(joint)
     for e in errors:
@@ -228,25 +228,29 @@ def test_velocity_feed_forward_adds_kv_times_the_desired_velocity() -> None:
 def test_inside_the_deadband_at_rest_the_valve_stays_inside_its_overlap() -> None:
     """Issue 24: the P.I. of the hold integrates a one-count error, so without a deadband the
     output crosses zero and min-PWM compensation steps the valve from +25 % to −28 % and back
-    (Bend). Inside the deadband at rest the law sees no error: the integral stops and what it
-    holds goes out uncompensated, clipped to the minimum PWM, inside the spool's overlap."""
+    (Bend). At rest, once within half the deadband, the law sees no error: the integral stops
+    and what it holds goes out uncompensated, clipped to the minimum PWM, inside the spool's
+    overlap, until the error is past the deadband two samples running."""
     bend = 3
     count = UNIMATE.joints[bend].encoder.gradient
     up, down = output_min_pwm(UNIMATE.joints[bend])
-    c = replace(UNIMATE.hold, deadband=(0.0,) * 3 + (count,) + (0.0,) * 2)
+    c = replace(UNIMATE.hold, deadband=(0.0,) * 3 + (2 * count,) + (0.0,) * 2)
     law = DifferenceLaw(UNIMATE, c, UNIMATE.sample_time_s)
-    outside = law.update(bend, 1.5 * count)  # P and I act, compensated past the minimum PWM
-    assert outside > up
+    assert law.update(bend, 3 * count) > up  # P and I act, compensated past the minimum PWM
+    assert law.update(bend, 1.5 * count) > up  # inside the deadband, not yet within half
     held = law.state(bend).integral
-    inside = [law.update(bend, e) for e in (0.9 * count, -0.9 * count, 0.0, 0.5 * count)]
-    assert inside == pytest.approx([held] * 4)  # the integral alone, no step to ±min PWM
+    inside = [law.update(bend, e * count) for e in (0.9, 1.8, -1.8, 2.5, 0.0, 2.5)]
+    assert inside == pytest.approx([held] * 6)  # one sample past the band is not enough
     assert law.state(bend).integral == held
+    assert law.update(bend, 2.5 * count) > up  # the second sample running past it is
     law = DifferenceLaw(UNIMATE, replace(c, kp=((0.0,),) * 6, ki=(5e4,) * 6),
                         UNIMATE.sample_time_s)
     law.update(bend, -1.0)  # the integral to −50 %
     assert law.update(bend, 0.5 * count) == -down  # a large integral: at the overlap's edge
-    none = DifferenceLaw(UNIMATE, UNIMATE.coefficients["option_hold"], UNIMATE.sample_time_s)
+    none = DifferenceLaw(UNIMATE, UNIMATE.coefficients["thesis_hold"], UNIMATE.sample_time_s)
     assert none.update(bend, 0.5 * count) > up and none.update(bend, -0.5 * count) < -down
+    law.reset()
+    assert law.update(bend, 0.5 * count) == 0.0  # reset: no integral, resting at once
 
 
 def test_a_move_ignores_the_deadband() -> None:
