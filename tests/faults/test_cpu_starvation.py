@@ -10,12 +10,14 @@ keeps tracking and an E-stop still closes every valve at once.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import subprocess
 import sys
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
+from dataclasses import replace
 
 import numpy as np
 
@@ -27,14 +29,15 @@ from hw.machine import load_machine
 
 UNIMATE = load_machine("unimate2000b")
 ROTATE, BEND = UNIMATE.joint_index("rotate"), UNIMATE.joint_index("bend")
+INOUT = UNIMATE.joint_index("inout")
 BURN = "import os, sys\nos.sched_setaffinity(0, {int(sys.argv[1])})\nwhile True:\n    pass\n"
 
 
 @contextmanager
-def burning_every_core() -> Iterator[int]:
-    """``os.cpu_count()`` busy loops, one pinned to each core; killed on the way out."""
+def burning_every_core(per_core: int = 1) -> Iterator[int]:
+    """``per_core`` busy loops pinned to each core; killed on the way out."""
     burners = [subprocess.Popen([sys.executable, "-c", BURN, str(cpu)])
-               for cpu in sorted(os.sched_getaffinity(0))]
+               for cpu in sorted(os.sched_getaffinity(0)) for _ in range(per_core)]
     try:
         yield len(burners)
     finally:
@@ -94,3 +97,44 @@ def test_a_starved_machine_counts_its_overruns_and_the_controller_stays_safe(
     run = load_run(result.files.json)
     error = np.abs(run.desired - run.actual).max(axis=0)
     assert np.all(error < [j.following_error for j in UNIMATE.joints]), error
+
+
+def test_overrun_holds_under_starvation_keep_the_commanded_target(controller, until,
+                                                                   measured) -> None:
+    """Issue 24 item 4: starved (the controller at normal priority, three burners a core),
+    the loop overruns and holds, again and again; each hold is where the arm was commanded
+    (the move's desired when the first came, then the hold target), never where it had got
+    to, so starvation never moves the target (the operator's In/Out crept 1309.9 → 1330.2 mm
+    over ten holds). The hold gains are zeroed, so the arm stays where a hold leaves it
+    (coasting on from the move): a hold taken where the arm is would move the target."""
+    client: ControlClient = controller(realtime=False, heartbeat_timeout_s=60.0)
+    zero = replace(UNIMATE.hold, name="zero", kp=((0.0,),) * 6, ki=(0.0,) * 6,
+                   kd=(0.0,) * 6, w=((),) * 6)
+    client.set_coefficients("hold", zero, override="test: the arm stays where it is left")
+    start = np.array(client.status().position)
+    end = start.copy()
+    end[INOUT] += 200.0
+    handle = client.move(moves.sine(start, end, period=2.0, duration=60.0, machine=UNIMATE),
+                         kind="sine")
+    until(lambda: client.status().move_id == handle.move_id, 10.0, "the move under way")
+    client.poll_events()  # a fault from before the move (a loaded start) is not one of these
+    targets, lag = [], 0.0
+    with burning_every_core(per_core=3):
+        deadline = time.monotonic() + 30.0
+        while len(targets) < 3 and time.monotonic() < deadline:
+            with contextlib.suppress(TimeoutError):
+                client.wait_event("fault", 1.0, lambda e: e.payload["kind"] == "overrun")
+                time.sleep(0.2)  # the arm comes to rest
+                status = client.status()
+                targets.append(np.array(status.desired))
+                lag = max(lag, abs(status.position[INOUT] - status.desired[INOUT]))
+    measured("overrun_holds", len(targets))
+    measured("inout_from_target_at_rest_mm", lag, "mm")
+    assert len(targets) >= 2, "starved, the loop never overran a fifth of a second's ticks"
+    result = client.wait(handle, timeout=30.0)
+    assert result.status.startswith("fault: overrun"), result.status
+    count = np.array([abs(j.encoder.gradient) for j in UNIMATE.joints])
+    commanded = result.run.desired[-1]  # the move's desired when the first hold came
+    for target in targets:
+        assert np.all(np.abs(target - commanded) <= count + 1e-9), target - commanded
+    assert np.all(np.abs(np.array(client.status().desired) - commanded) <= count + 1e-9)
