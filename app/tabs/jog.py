@@ -59,7 +59,7 @@ from app.tabs.tab import TabPage
 from app.widgets.limit_bar import LimitBar
 from app.widgets.live_text import LiveText
 from control.client import ControlClient, MoveHandle
-from control.motion.cartesian_jog import AXES, zone
+from control.motion.cartesian_jog import AXES, Step, StepQueue, zone
 from control.rt.layout import Mode, Status
 from hw.machine import Joint
 from hw.transmission import output_min_pwm
@@ -459,7 +459,8 @@ class JogTab(TabPage):
     _was_manual = False
     cartesian_note = Text("")  # why the last Cartesian jog was refused or ends early
     _jog: MoveHandle | None = None  # the last Cartesian jog sent
-    _queued: JogPad.CartesianJogged | None = None  # steps pressed while it ran, summed
+    _steps: StepQueue | None = None  # steps pressed while it ran (made with the client)
+    _refused = 0  # queued steps refused since the queue began: the reason is told once
     _stopping = False  # a let-go held jog is decelerating (feed hold) before the hold
 
     def compose(self) -> ComposeResult:
@@ -491,13 +492,13 @@ class JogTab(TabPage):
         self.pad.armed = False
         moving_tool = self.pad.moving_tool or self._stopping
         self.pad.let_go()  # leaving the tab must not leave a joint moving: decided now
-        self._queued = None
+        self._forget_steps()
         self._stopping = False
         self._leave_manual(hold=moving_tool)
 
     def estop(self, latched: bool) -> None:
         self.pad.estop(latched)
-        self._queued = None
+        self._forget_steps()
         self._stopping = False
         self.refresh_live()
 
@@ -523,21 +524,48 @@ class JogTab(TabPage):
         if running and not message.held:
             self._queue(message)  # a new move now would start from rest while the arm moves
         else:
-            self._queued = None
+            self._forget_steps()
             self._send_jog(message)
         self.refresh_live()
 
     def _queue(self, message: JogPad.CartesianJogged) -> None:
-        """Add a step pressed while a step runs to the ones waiting for it to end."""
-        queued = self._queued
-        if queued is not None and queued.frame == message.frame and not queued.held:
-            total = tuple(a + b for a, b in zip(queued.displacement, message.displacement,
-                                                strict=True))
-            message = JogPad.CartesianJogged(total, message.frame, message.speed, False)
-        self._queued = message
-        self.cartesian_note = Text.assemble(("next: ", "dim"), _shown(message.displacement),
-                                            (f" ({message.frame} frame), when this step ends",
-                                             "dim"))
+        """Queue a step pressed while a step runs, if the arm can make it after the ones
+        before it; the first one refused says why, the ones after only count."""
+        client, running = self.client, self._jog
+        if client is None or running is None or running.plan.path is None:
+            return
+        if self._steps is None:
+            self._steps = StepQueue(self.machine, client.dt)
+        steps = self._steps
+        reason = steps.add(running.plan.path[-1], Step(message.displacement, message.frame,
+                                                       message.speed))
+        if reason:
+            self._refused += 1
+            if self._refused == 1:
+                self._first_refusal = reason
+                self.notify(reason, severity="warning")
+        self.cartesian_note = self._queue_note()
+
+    _first_refusal = ""  # why the first queued step was refused, shown while the queue runs
+
+    def _queue_note(self) -> Text:
+        """The steps waiting for the running one, and how many were refused and why."""
+        parts: list[str | tuple[str, str]] = []
+        steps = self._steps
+        if steps is not None and steps.steps:
+            parts += [("next: ", "dim"), _shown(steps.total),
+                      (f" ({steps.steps[0].frame} frame), when this step ends", "dim")]
+        if self._refused:
+            many = f"{self._refused} steps" if self._refused > 1 else "a step"
+            parts += [("; " if parts else "", "dim"), (f"{many} refused: ", "bold yellow"),
+                      self._first_refusal]
+        return Text.assemble(*parts)
+
+    def _forget_steps(self) -> None:
+        if self._steps is not None:
+            self._steps.clear()
+        self._refused = 0
+        self._first_refusal = ""
 
     def _send_jog(self, message: JogPad.CartesianJogged) -> None:
         self.cartesian_note = Text("")
@@ -545,13 +573,15 @@ class JogTab(TabPage):
 
     def _jog_tool(self, client: ControlClient, message: JogPad.CartesianJogged) -> None:
         """Send the jog; a jog the arm cannot make (or a held one that ends early) says why
-        under the pad, as well as in the notification ``command`` shows for a refusal."""
+        under the pad and in a notification (its message names the jog: no prefix)."""
         try:
             handle = client.jog_cartesian(message.displacement, message.frame, message.speed,
                                           stop_short=message.held)
         except ValueError as exc:
             self.cartesian_note = Text.assemble(("jog refused: ", "bold yellow"), str(exc))
-            raise
+            self.notify(str(exc), severity="error")
+            self._forget_steps()  # they were to follow it
+            return
         self._jog = handle
         stopped = handle.meta.get("stopped", "")
         if stopped:
@@ -586,11 +616,14 @@ class JogTab(TabPage):
 
     def refresh_live(self) -> None:
         self._hold_when_stopped()
-        queued = self._queued
-        if queued is not None and (self._jog is None or self._jog.done.is_set()):
-            self._queued = None
-            if self.visible_now and not self.pad.latched:
-                self._send_jog(queued)
+        steps = self._steps
+        if steps is not None and steps.steps and (self._jog is None or self._jog.done.is_set()):
+            step = steps.next()
+            if step is not None and self.visible_now and not self.pad.latched:
+                self._send_jog(JogPad.CartesianJogged(step.displacement, step.frame, step.speed,
+                                                      False))
+                if not self.cartesian_note.plain:  # sent: what is still to come, or refused
+                    self.cartesian_note = self._queue_note()
         status = self.status()
         if status is not None:
             if status.estop and not self.pad.latched:  # latched before its event arrived

@@ -451,3 +451,73 @@ def _displacement(displacement: ArrayLike) -> np.ndarray:
         raise ValueError(f"a Cartesian jog of {d.tolist()} moves nothing: give at least "
                          f"{MIN_JOG[0]:g} mm or {MIN_JOG[1]:g}°")
     return d
+
+
+@dataclass(frozen=True)
+class Step:
+    """One Cartesian step asked for: ``displacement (6,)`` mm and deg in ``frame``, at
+    ``speed`` of the Cartesian jog speed."""
+
+    displacement: tuple[float, ...]
+    frame: str
+    speed: float = 1.0
+
+    def follows(self, other: Step) -> bool:
+        """The same frame, speed and direction as ``other``: the two make one straight line,
+        one step's end the other's start (a world axis or a tool axis, turned or moved along,
+        stays the same axis), so they run as one jog."""
+        a, b = np.array(self.displacement), np.array(other.displacement)
+        along = float(a @ b)  # parallel and the same way: Cauchy-Schwarz with equality
+        return (self.frame == other.frame and self.speed == other.speed and along > 0.0
+                and math.isclose(along * along, float(a @ a) * float(b @ b), rel_tol=1e-12))
+
+
+class StepQueue:
+    """Cartesian steps asked for while one runs (issue 25 item 4): each is planned from where
+    the ones before it end, and queued if the arm can make it; one it cannot make is refused
+    with its reason, and the ones after it are planned from the same end. ``next`` hands out
+    the steps in order, the ones along the same line as one jog (``Step.follows``), so held-
+    down step keys run as one smooth move rather than a stop after each step."""
+
+    def __init__(self, machine: Machine, dt: float) -> None:
+        self.machine = machine
+        self.dt = dt
+        self.steps: list[Step] = []
+        self.end: np.ndarray | None = None  # joints where the queued steps end
+
+    def add(self, after: ArrayLike, step: Step) -> str:
+        """Queue ``step`` to run after the running jog ending at joints ``after (6,)`` and the
+        steps queued; '' if queued, else why the arm cannot make it (nothing queued)."""
+        start = np.asarray(after, dtype=float) if self.end is None else self.end
+        try:
+            plan = plan_jog(start, step.displacement, self.machine, frame=step.frame,
+                            dt=self.dt, speed=step.speed)
+        except ValueError as exc:
+            return str(exc)
+        self.steps.append(step)
+        self.end = plan.q[-1]
+        return ""
+
+    def next(self) -> Step | None:
+        """The next jog to send: the first step and the ones along its line after it, added."""
+        if not self.steps:
+            return None
+        first, n = self.steps[0], 1
+        while n < len(self.steps) and self.steps[n].follows(first):
+            n += 1
+        total = np.sum([s.displacement for s in self.steps[:n]], axis=0)
+        del self.steps[:n]
+        if not self.steps:
+            self.end = None
+        return Step(tuple(float(v) for v in total), first.frame, first.speed)
+
+    def clear(self) -> None:
+        self.steps.clear()
+        self.end = None
+
+    @property
+    def total(self) -> tuple[float, ...]:
+        """Every queued step added up (mm, deg), for the operator."""
+        if not self.steps:
+            return (0.0,) * 6
+        return tuple(float(v) for v in np.sum([s.displacement for s in self.steps], axis=0))

@@ -94,6 +94,38 @@ def test_steps_pressed_while_a_step_runs_are_added_and_run_after_it(tui) -> None
     asyncio.run(scenario())
 
 
+def test_steps_pressed_while_a_step_runs_are_queued_as_far_as_they_fit(tui) -> None:
+    """Issue 25 item 4: about 144 mm from In/Out's limit along x, ten presses of 20 mm: the first
+    runs, the six that fit after it run, the last three are refused with the reason once (the
+    whole nine were refused before, in a message that doubled its prefix)."""
+    async def scenario() -> None:
+        app = tui.app(lockstep=False)
+        async with app.run_test(size=SIZE) as pilot:
+            await tui.ready(app, pilot)
+            client = app.client
+            seen = tui.notifications(app)
+            near_limit = [1897.0, 0.0, 1.5, 0.0, 30.0, 0.0]
+            client.go_to(near_limit, speed=1.0)
+            await tui.until(lambda: client.status().mode == Mode.HOLD and np.allclose(
+                client.status().desired, near_limit), timeout=30, what="the arm near the limit")
+            start = MODEL.pose(np.array(client.status().desired))
+            await pilot.press("w", "9", *["a"] * 10)  # world frame, x +20 mm a press
+
+            def moved() -> float:
+                return float(MODEL.pose(np.array(client.status().desired))[0] - start[0])
+
+            await tui.until(lambda: abs(moved() - 140.0) < 1e-6
+                            and client.status().mode == Mode.HOLD, timeout=60,
+                            what=lambda: f"the tool 140 mm along x, moved {moved():.2f} mm")
+            refusals = [m for m in seen if "In/Out would be" in m]
+            assert len(refusals) == 1, seen
+            assert not any("Cartesian jog: Cartesian jog" in m for m in seen), seen
+            note = app.query_one("#jog-cartesian-note", LiveText).text
+            assert "3 steps refused" in note and "In/Out" in note, note
+
+    asyncio.run(scenario())
+
+
 def test_a_step_into_the_wrist_singularity_is_refused_and_says_why(tui) -> None:
     async def scenario() -> None:
         app = tui.app()

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from control import ControlClient, Mode
+from control.motion.cartesian_jog import Step, StepQueue
 from control.motion.robot_model import unimate_model
 from hw.machine import load_machine
 from kinematics.unimate import Unreachable
@@ -139,3 +140,25 @@ def test_in_the_singularity_zone_a_jog_runs_with_every_joint_within_its_jog_spee
     jog_speed = np.array([j.jog_speed for j in UNIMATE.joints])
     assert (speed <= jog_speed * 1.001).all(), speed
     assert speed[3] > 0.9 * jog_speed[3]  # Bend sets the pace
+
+
+def test_steps_asked_while_one_runs_are_queued_as_far_as_they_fit(robot: ControlClient) -> None:
+    """Issue 25 item 4: about 144 mm from In/Out's limit along x, ten 20 mm steps: the first runs,
+    six more are queued (planned one after the other from its end), three are refused naming
+    In/Out; the six run as one jog after it."""
+    near_limit = np.array([1897.0, 0.0, 1.5, 0.0, 30.0, 0.0])
+    assert robot.wait(robot.go_to(near_limit, speed=1.0), timeout=60).complete
+    start = MODEL.pose(np.array(robot.status().desired))
+    first = robot.jog_cartesian([20.0, 0, 0, 0, 0, 0])
+    queue = StepQueue(UNIMATE, robot.dt)
+    reasons = [queue.add(first.plan.path[-1], Step((20.0, 0, 0, 0, 0, 0), "world"))
+               for _ in range(9)]
+    assert [bool(r) for r in reasons] == [False] * 6 + [True] * 3, reasons
+    assert all("In/Out would be" in r for r in reasons[6:]), reasons
+    assert robot.wait(first, timeout=60).complete
+    step = queue.next()
+    assert step is not None and step.displacement == (120.0, 0, 0, 0, 0, 0)
+    assert queue.next() is None
+    assert robot.wait(robot.jog_cartesian(step.displacement), timeout=60).complete
+    moved = MODEL.pose(np.array(robot.status().desired)) - start
+    np.testing.assert_allclose(moved, [140.0, 0, 0, 0, 0, 0], atol=1e-6)
