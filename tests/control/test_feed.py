@@ -5,14 +5,15 @@ resumes with no step."""
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from control import ControlClient, Mode
-from control.motion import moves
+from control.motion import form_plans, moves
+from control.motion.plan import path_rows
 from control.recorder import Run, load_run
 from control.rt.feed import MAX_ENTRIES, SPACING_S
 from hw.machine import load_machine
@@ -197,3 +198,84 @@ def test_an_override_outside_0_to_1_is_refused_and_nothing_sent(
     with pytest.raises(ValueError, match="feed override"):
         lockstep.feed_override(value)
     assert lockstep.status().feed_override == 1.0
+
+
+# -- every kind of move: the override changed mid-move changes its speed (issue 25 item 1) ------
+
+START = np.array([1500.0, 0.0, 5.0, 20.0, 30.0, 10.0])
+TOLERANCE = np.array([j.tolerance for j in UNIMATE.joints])
+MAX_ACCEL = np.array([j.max_accel for j in UNIMATE.joints])
+
+
+def _moved(here: np.ndarray, joint: int, change: float) -> np.ndarray:
+    q = here.copy()
+    q[joint] += change
+    return q
+
+
+def _tool(q: np.ndarray) -> np.ndarray:
+    from control.motion.robot_model import unimate_model
+
+    return unimate_model(UNIMATE).forward(q)[:3, 3]
+
+
+KINDS = {  # each starts at rest at START and runs 3 s or more
+    "path": lambda c, q: c.move(moves.ramp(q, _moved(q, ROTATE, 40.0), 3.0, machine=UNIMATE)),
+    "ramp": lambda c, q: c.run(form_plans.ramp(UNIMATE, q, ROTATE, q[ROTATE] - 40.0, 3.0,
+                                               dt=DT)),
+    "sine": lambda c, q: c.run(form_plans.sine(UNIMATE, q, ROTATE, q[ROTATE] + 30.0, 3.0, 4.0,
+                                               dt=DT)),
+    "go_to": lambda c, q: c.go_to(_moved(_moved(q, ROTATE, -60.0), 2, 5.0), 0.5),
+    "positions go at 0.1": lambda c, q: c.go_to(_moved(q, 0, 150.0), 0.1),
+    "approach": lambda c, q: c.run(form_plans.ramp(UNIMATE, q, ROTATE, q[ROTATE] + 20.0, 2.0,
+                                                   start=q[ROTATE] - 60.0, dt=DT)),
+    "via_points": lambda c, q: c.run(form_plans.via_points(
+        UNIMATE, q, np.array([_moved(q, ROTATE, 40.0), _moved(q, ROTATE, -20.0)]), 0.5, False,
+        dt=DT)),
+    "cartesian": lambda c, q: c.run(form_plans.via_points(
+        UNIMATE, q, _tool(q) + np.array([[0.0, 60.0, -60.0], [0.0, 0.0, -120.0]]), 0.25, True,
+        dt=DT)),
+    "cartesian_jog": lambda c, q: c.jog_cartesian([0.0, 0.0, -100.0, 0.0, 0.0, 0.0],
+                                                  speed=0.25),
+}
+
+
+@pytest.fixture(scope="module")
+def shared(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ControlClient]:
+    """One lockstep controller for the kinds: each test starts from rest at ``START``."""
+    client = ControlClient("unimate2000b", lockstep=True, heartbeat_timeout_s=3.0,
+                           data_dir=tmp_path_factory.mktemp("feed-kinds"))
+    yield client
+    client.close()
+
+
+@pytest.mark.parametrize("kind", list(KINDS))
+def test_an_override_changed_mid_move_changes_the_speed_of_every_kind(
+        shared: ControlClient, kind: str) -> None:
+    """50 % set a quarter of the way into a move of each kind, the issue's list (a Positions
+    go at speed 0.1 kept its speed): the path's rows come a tick apart before, two ticks apart
+    from the end of the rate's ramp (within 0.3 s) to the path's end, and the desired
+    velocity changes by no more than each joint's max_accel all along."""
+    client = shared
+    client.feed_override(1.0)
+    assert client.wait(client.go_to(START, 0.5), timeout=60).status
+    wait_until(lambda: np.all(np.abs(np.array(client.status().position) - START) < TOLERANCE),
+               "the arm at rest at the start")
+    handle = KINDS[kind](client, np.array(client.status().position))
+    wait_until(lambda: client.status().move_done > handle.samples // 4 or handle.done.is_set(),
+               "a quarter of the move")
+    client.feed_override(0.5)
+    result = client.wait(handle, timeout=120)
+    client.feed_override(1.0)
+    run = result.run
+    (set_at, value), = run.meta["feed"]
+    rows = path_rows(run)
+    t = run.t[:rows]
+    interval = np.round(np.diff(t) / DT, 6)
+    before, after = t[1:] <= set_at, t[:-1] >= set_at + 0.3
+    assert value == 0.5 and after.sum() > 0.5 / DT / 2, (set_at, t[-1])
+    assert np.all(interval[before] == 1.0)
+    assert np.all(interval[after] == 2.0), np.unique(interval[after])
+    velocity = np.diff(run.desired[:rows], axis=0) / np.diff(t)[:, None]
+    accel = np.abs(np.diff(velocity, axis=0)) / np.diff(t)[1:, None]
+    assert np.all(accel <= MAX_ACCEL * 1.05), (accel / MAX_ACCEL).max(axis=0)
