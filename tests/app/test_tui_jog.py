@@ -133,6 +133,40 @@ def test_position_jog_moves_the_hold_target(tui) -> None:
     asyncio.run(scenario())
 
 
+def test_position_jog_up_to_the_limit_with_keys_rests_inside_it_with_no_estop(tui) -> None:
+    """Issue 25: Up/Down in 1° position-jog steps from 27° to 30° latched "feedback fault …
+    frozen encoder" (the target on 30.00°, the arm on its stop at 29.99°). Now the target
+    stops a goal tolerance inside the limit and the arm rests there, nothing latched."""
+    async def scenario() -> None:
+        app = tui.app()
+        async with app.run_test(size=SIZE) as pilot:
+            await tui.ready(app, pilot)
+            client = app.client
+            updown = client.machine.joints[2]
+            client.jog_position(2, 27.0 - client.status().desired[2])
+            await tui.until(lambda: abs(client.status().position[2] - 27.0) < updown.tolerance,
+                            timeout=30, what="Up/Down at 27°")
+            await pilot.press("m", "m", "7")  # position mode, 1 mm or 1° a press
+            for goal in (28.0, 29.0, updown.upper - updown.goal_tolerance):
+                await pilot.press("d")
+                await tui.until(lambda g=goal: abs(client.status().position[2] - g)
+                                < updown.tolerance or client.status().estop, timeout=30,
+                                what=f"Up/Down at {goal}°")
+                assert not client.status().estop, client.status().fault
+            await pilot.press("d")  # at the edge already: the target stays
+            start = client.status().tick
+            await tui.until(lambda: client.status().tick > start + 3_000, timeout=30,
+                            what="three seconds of holding")
+            status = client.status()
+            assert not status.estop, status.fault
+            assert status.desired[2] == updown.upper - updown.goal_tolerance
+            assert abs(status.position[2] - status.desired[2]) < updown.goal_tolerance
+            await pilot.pause()
+            assert "E-STOP LATCHED" not in tui.text(app.screen)
+
+    asyncio.run(scenario())
+
+
 def test_rig_arrows_step_the_duty_by_ten_percent(tui) -> None:
     async def scenario() -> None:
         app = tui.app("rig")
