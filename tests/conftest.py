@@ -55,6 +55,7 @@ SLOW_PATHS = (
     "tests/control/test_client.py",    # the control subprocess, for real
     "tests/control/test_timing.py",    # the thesis's timing on the control subprocess
     "tests/control/test_settle_and_rest.py",  # fast moves and rest on both machines
+    "tests/control/identify/test_proposal_settles.py",  # identify, apply, move: both machines
     "tests/control/test_feed.py",      # feed override and hold on the control subprocess
     "tests/control/test_client_cartesian_jog.py",  # Cartesian jogs on it
     "tests/control/rt/test_process.py",   # the control subprocess's imports

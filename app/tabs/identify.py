@@ -5,14 +5,19 @@ sized from where the joint is now and refused, with the excitation module's
 message, if it could reach an end stop. Run plays it open loop, fits the
 joint's models to the recorded run (``control.identify.sysid``), proposes P.I. gains
 (``control.identify.tuning.propose`` on the current track and hold sets) and predicts
-the step response of the current and the proposed track set on the identified
-models (``tuning.simulate``). Then a fresh PRBS the fit never saw is played from
+issue 24's check of the current and the proposed track set on the identified models
+(``tuning.predict_move``): a minimum-jerk move of the joint at full speed, plotted, with
+its overshoot and the time after the path arrives until the joint stays within its
+goal_tolerance. Then a fresh PRBS the fit never saw is played from
 where the joint stopped, and both models' fit on it is shown: the held-out
 figure to judge a model by (the fit on its own run flatters it). "Apply to
 track" / "Apply to hold" send the proposal to the controller, with velocity
-feed-forward (``with_feed_forward``) when the switch is on, and only from a TUI
-that commands (``Desk.refusal``). Joints identified earlier in the session keep
-their models, so the proposal covers every joint identified so far.
+feed-forward (``with_feed_forward``) while the switch is on (the default: without it
+the rig's P.I. overshoots a fast move by 11 mm), and only from a TUI
+that commands (``Desk.refusal``); "Check move" then runs the predicted move on the
+robot with the track set in use and shows the measured figures beside the predicted.
+Joints identified earlier in the session keep their models, so the proposal covers every
+joint identified so far.
 """
 
 from __future__ import annotations
@@ -37,7 +42,7 @@ from app.widgets.figure_plot import FigurePlot
 from app.widgets.live_text import LiveText
 from control.client import ControlClient, MoveHandle
 from control.recorder import Run
-from hw.machine import Coefficients, Machine
+from hw.machine import Coefficients, Joint, Machine
 
 if TYPE_CHECKING:  # the numerics pull in scipy (≈0.9 s): imported when first used
     from control.identify import excitation, tuning
@@ -45,17 +50,15 @@ if TYPE_CHECKING:  # the numerics pull in scipy (≈0.9 s): imported when first 
 
 PROFILES = (("Steps (Figure 3.2 staircase)", "steps"), ("PRBS", "prbs"), ("Chirp", "chirp"))
 STEP_LEVELS = 6  # excitation.steps' default
-STEP_FRACTION = 0.05  # predicted step: this share of the joint's range, towards its middle
-STEP_AT_S = 0.1
-PREDICT_S = 1.0
 HELD_OUT_S = 2.0
 HELD_OUT_SEED = 97  # a PRBS none of the tab's excitations uses (prbs' default seed is 1)
 
 
 @dataclass(frozen=True)
 class Outcome:
-    """What one identification produced: the fit, both proposals and the predicted steps
-    (``desired``, ``current``, ``proposed``, ``proposed_ff`` position ``(N,)`` of the joint)."""
+    """What one identification produced: the fit, both proposals and the predicted moves
+    (``desired``, ``current``, ``proposed``, ``proposed_ff`` position ``(N,)`` of the joint;
+    ``figures`` their overshoot and settle, by the same three names)."""
 
     identification: Identification
     models: tuple[DeadbandModel | None, ...]
@@ -68,6 +71,7 @@ class Outcome:
     current: np.ndarray
     proposed: np.ndarray
     proposed_ff: np.ndarray
+    figures: dict[str, tuning.MoveFigures]
 
 
 def build(machine: Machine, kind: str, joint: int, start: np.ndarray,
@@ -85,16 +89,10 @@ def build(machine: Machine, kind: str, joint: int, start: np.ndarray,
     return profile(machine, joint, start, amplitude=amplitude, **options)
 
 
-def step_desired(machine: Machine, joint: int, start: np.ndarray) -> np.ndarray:
-    """``(N, J)``: hold at ``start``, then a step of ``STEP_FRACTION`` of the joint's range
-    towards its middle, for the predicted responses."""
-    spec = machine.joints[joint]
-    dt = machine.sample_time_s
-    size = STEP_FRACTION * (spec.upper - spec.lower)
-    sign = 1.0 if start[joint] <= (spec.upper + spec.lower) / 2 else -1.0
-    desired = np.tile(np.asarray(start, dtype=float), (round(PREDICT_S / dt), 1))
-    desired[round(STEP_AT_S / dt):, joint] += sign * size
-    return desired
+def figures_text(figures: tuning.MoveFigures, joint: Joint) -> str:
+    """``over 0.12°, settled 0.00 s``: a move's overshoot and settle after arrival."""
+    settle = "not settled" if np.isinf(figures.settle_s) else f"settled {figures.settle_s:.2f} s"
+    return f"over {figures.overshoot:.2f}{joint.symbol}, {settle}"
 
 
 def with_kv(coefficients: Coefficients, base: Coefficients,
@@ -143,6 +141,16 @@ class IdentifyTab(TabPage):
 
         reason: str
 
+    @dataclass
+    class Moved(Message, bubble=False):
+        """The check move ran: its measured and predicted figures, or why not (from the
+        worker)."""
+
+        joint: int
+        measured: tuning.MoveFigures | None
+        predicted: tuning.MoveFigures | None
+        reason: str = ""
+
     def __init__(self, desk: Desk, *, id: str | None = None) -> None:
         super().__init__(desk, id=id)
         self.models: list[DeadbandModel | None] = []
@@ -173,14 +181,16 @@ class IdentifyTab(TabPage):
                 yield Static(id="identify-error")
                 with Horizontal(classes="field", id="identify-ff-row"):
                     yield Label("feed-forward", classes="field-label")
-                    yield Switch(value=False, id="identify-ff")
+                    yield Switch(value=True, id="identify-ff")
                 with Horizontal(id="identify-apply"):
                     yield Button("Apply to track", id="identify-apply-track", variant="warning",
                                  disabled=True)
                     yield Button("Apply to hold", id="identify-apply-hold", variant="warning",
                                  disabled=True)
+                yield Button("Check move", id="identify-check", disabled=True)
             with VerticalScroll(id="identify-right"):
                 yield LiveText(id="identify-state")
+                yield LiveText(id="identify-settle")
                 yield DataTable(id="identify-model", cursor_type="none", zebra_stripes=True)
                 yield Static("fit %: own = on the run it was fitted to, new = on a fresh PRBS "
                              "it never saw; v velocity, q position. Kp / Ki, Ms, PM: the "
@@ -206,11 +216,14 @@ class IdentifyTab(TabPage):
             self.apply("track")
         elif event.button.id == "identify-apply-hold":
             self.apply("hold")
+        elif event.button.id == "identify-check":
+            self.check_move()
 
     def on_switch_changed(self, event: Switch.Changed) -> None:
         event.stop()
         if self.outcome is not None:
             self._plot(self.outcome)
+            self._settle(self.outcome)
 
     def joint(self) -> int:
         return self.query_one(JointField).index
@@ -276,14 +289,16 @@ class IdentifyTab(TabPage):
         hold_proposal = tuning.propose(models, m, hold)
         ffs = tuple(None if model is None else tuning.feed_forward(model, spec)
                     for model, spec in zip(models, m.joints, strict=True))
-        desired = step_desired(m, j, np.asarray(run.actual[-1]))
-        predicted = [tuning.simulate(models, m, c, desired).position[:, j]
-                     for c in (track, proposal.coefficients,
-                               with_kv(proposal.coefficients, track, ffs))]
-        t = np.arange(len(desired)) * m.sample_time_s
+        sets = {"current": track, "proposed": proposal.coefficients,
+                "proposed_ff": with_kv(proposal.coefficients, track, ffs)}
+        moves = {name: tuning.predict_move(models, m, c, j, run.actual[-1])
+                 for name, c in sets.items()}
+        first = moves["current"]
         return Outcome(identification, tuple(models), proposal.coefficients,
-                       hold_proposal.coefficients, proposal.designs, ffs, t, desired[:, j],
-                       *predicted)
+                       hold_proposal.coefficients, proposal.designs, ffs, first.loop.t,
+                       first.desired[:, j],
+                       *(moves[name].loop.position[:, j] for name in sets),
+                       {name: move.figures for name, move in moves.items()})
 
     def on_identify_tab_failed(self, message: Failed) -> None:
         self.handle = None
@@ -299,6 +314,7 @@ class IdentifyTab(TabPage):
         self.held_out.pop(outcome.identification.joint, None)
         self._table()
         self._plot(outcome)
+        self._settle(outcome)
         for which in ("track", "hold"):
             self.query_one(f"#identify-apply-{which}", Button).disabled = False
         self.post_message(RunsChanged())
@@ -395,9 +411,23 @@ class IdentifyTab(TabPage):
                  Line(outcome.t, outcome.current, ACTUAL, "current track set"),
                  Line(outcome.t, proposed, PROPOSED,
                       "proposed" + (" + feed-forward" if ff else "")))
-        panel = Panel(f"predicted step response · {spec.name}", lines, spec.symbol)
-        self.query_one("#identify-plot", FigurePlot).show(
-            Figure(f"predicted step response · {spec.name}", (panel,)))
+        title = f"predicted full-speed move · {spec.name}"
+        panel = Panel(title, lines, spec.symbol)
+        self.query_one("#identify-plot", FigurePlot).show(Figure(title, (panel,)))
+
+    def _settle(self, outcome: Outcome, measured: tuning.MoveFigures | None = None) -> None:
+        """The predicted figures of the current and the proposed track set (and, after a
+        check move, the measured ones)."""
+        spec = self.machine.joints[outcome.identification.joint]
+        ff = self.query_one("#identify-ff", Switch).value
+        proposed = outcome.figures["proposed_ff" if ff else "proposed"]
+        parts: list[str | tuple[str, str]] = [
+            ("fast move predicted: ", "bold"),
+            f"current {figures_text(outcome.figures['current'], spec)}; ",
+            (f"proposed {figures_text(proposed, spec)}", "bold green")]
+        if measured is not None:
+            parts += [("; measured ", "bold"), figures_text(measured, spec)]
+        self.query_one("#identify-settle", LiveText).show(Text.assemble(*parts))
 
     def apply(self, which: str) -> None:
         refusal = self.desk.refusal(f"apply to {which}")
@@ -420,6 +450,62 @@ class IdentifyTab(TabPage):
                         lambda client: client.set_coefficients(which, proposed, outcome.models)):
             self.notify(f"proposed gains applied to the {which} set")
             self._state(Text(f"applied to the {which} set: {proposed.note}", "green"))
+            self.query_one("#identify-check", Button).disabled = False
+
+    def check_move(self) -> None:
+        """Run the predicted move from where the joint is now with the track set in use, and
+        show what it measured beside what the models predict for that set."""
+        from control.identify import tuning
+
+        refusal = self.desk.refusal("check move")
+        outcome, client, status = self.outcome, self.client, self.status()
+        if refusal or outcome is None or self.handle is not None:
+            self._state(Text(refusal or "wait for the identification to finish", "bold red"))
+            return
+        if client is None or status is None:
+            self.command("check move", ControlClient.check)
+            return
+        j = outcome.identification.joint
+        try:
+            prediction = tuning.predict_move(list(self.models), self.machine,
+                                             client.coefficients["track"], j, status.position)
+            handle = client.move(prediction.desired)
+        except Exception as exc:  # the acceptance rules or the controller refused it
+            self._state(Text(f"check move not run: {exc}", "bold red"))
+            return
+        self.handle = handle
+        self._state(Text(f"check move: {self.machine.joints[j].name} at full speed…", "cyan"))
+        self._measure(client, handle, prediction)
+
+    @work(thread=True, group="identify")
+    def _measure(self, client: ControlClient, handle: MoveHandle,
+                 prediction: tuning.MovePrediction) -> None:
+        from control.identify import tuning
+
+        j = prediction.joint
+        try:
+            run = client.wait(handle).run
+            if run is None or len(run.t) <= prediction.arrives:
+                raise ValueError("the move ended before its path did")
+            measured = tuning.move_figures(run.t, run.desired[:, j], run.actual[:, j],
+                                           prediction.arrives, self.machine.joints[j])
+        except Exception as exc:  # a stopped move or a closed controller
+            self.post_message(self.Moved(j, None, None, f"check move: {exc}"))
+            return
+        self.post_message(self.Moved(j, measured, prediction.figures))
+
+    def on_identify_tab_moved(self, message: Moved) -> None:
+        self.handle = None
+        if message.measured is None or self.outcome is None:
+            self._state(Text(message.reason or "check move not measured", "yellow"))
+            return
+        spec = self.machine.joints[message.joint]
+        self._settle(self.outcome, message.measured)
+        self._state(Text(f"check move of {spec.name}: measured "
+                         f"{figures_text(message.measured, spec)}, predicted "
+                         f"{figures_text(message.predicted, spec)} for the track set in use",
+                         "green"))
+        self.post_message(RunsChanged())
 
     def _state(self, text: Text) -> None:
         self.query_one("#identify-state", LiveText).show(text)

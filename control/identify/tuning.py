@@ -30,9 +30,17 @@ integrator alone holds the duty that speed needs, and a clamp at 50 % leaves
 a following error wherever the path asks for more (the Unimate's In/Out at
 200 mm/s needs about 60 %).
 
+A proposal also stops the hold's limit cycle (issue 24): a P.I. whose output crosses
+zero at rest steps the valve between its minimum PWMs, so each identified joint with a
+minimum PWM gets a ``REST_COUNTS``-count ``deadband`` (``control.rt.law``).
+
 Prediction (``simulate``): the law itself (``DifferenceLaw``, so saturation,
-the integrator clamp and min-PWM compensation are all there) closed around
-the identified models, with the valve's duty quantisation.
+the integrator clamp, min-PWM compensation, the deadband and the velocity
+feed-forward of the desired path are all there) closed around the identified
+models, with the valve's duty quantisation. ``predict_move`` runs issue 24's
+check on it: a minimum-jerk move of one joint at full speed, its overshoot and
+the time after the path arrives until the joint stays within its
+``goal_tolerance`` (``move_figures``, which judges a recorded move the same way).
 
 Feed-forward (``feed_forward``): the duty that gives the desired velocity on
 the identified line, expressed as an addition to the law's output u *before*
@@ -68,6 +76,9 @@ FREQUENCIES = 1500  # log-spaced points from 0.01 Hz to Nyquist for the sensitiv
 KP_GRID = 150  # loop gains K·kp tried, log-spaced from 0.5 rad/s to a quarter of Nyquist
 BISECTIONS = 40
 REST_SPEED = 1e-9  # units/s below which a desired velocity counts as standing still
+REST_COUNTS = 2.0  # a proposal's deadband, encoder counts (the default sets', measured)
+MOVE_FRACTION = 0.05  # predict_move: this share of the joint's range, towards its middle
+MOVE_DWELL_S = 1.0  # and the end held this long after the path arrives
 
 
 @dataclass(frozen=True)
@@ -138,6 +149,28 @@ class ClosedLoop:
     def rms_error(self) -> np.ndarray:
         """RMS of desired − position per joint ``(J,)``."""
         return np.sqrt(np.mean((self.desired - self.position) ** 2, axis=0))
+
+
+@dataclass(frozen=True)
+class MoveFigures:
+    """How one joint ended a move: ``overshoot`` past the path's end (units, ≥ 0) and
+    ``settle_s`` from the path's arrival until it stays within its ``goal_tolerance``
+    (``math.inf``: still outside when the record ends)."""
+
+    overshoot: float
+    settle_s: float
+
+
+@dataclass(frozen=True)
+class MovePrediction:
+    """``predict_move``: the move's ``desired (N, J)`` path (its end held), the row its
+    path ``arrives`` at, and the predicted ``loop`` and ``figures`` of the joint."""
+
+    joint: int
+    desired: np.ndarray
+    arrives: int
+    loop: ClosedLoop
+    figures: MoveFigures
 
 
 def slopes(model: DeadbandModel, joint: Joint) -> tuple[float, float]:
@@ -238,11 +271,24 @@ def propose(models: Sequence[DeadbandModel | None], machine: Machine, base: Coef
     ki = tuple(base.ki[j] if d is None else d.ki for j, d in enumerate(designs))
     kd = tuple(base.kd[j] if d is None else 0.0 for j, d in enumerate(designs))
     w = tuple(base.w[j] if d is None else () for j, d in enumerate(designs))
+    deadband = tuple((rest_band(joint) if d is not None else
+                      (base.deadband[j] if base.deadband else 0.0))
+                     for j, (d, joint) in enumerate(zip(designs, machine.joints, strict=True)))
     shown = ", ".join(f"{d.joint} {d.kp:.3g}/{d.ki:.3g}" for d in designs if d is not None)
     note = f"P.I. (Kp/Ki) by max ki with Ms ≤ {ms:g} on identified models: {shown}"
     coefficients = replace(base, name=name, note=note, kp=kp, ki=ki, kd=kd, w=w,
-                           integral_limit=base.duty_limit)
+                           integral_limit=base.duty_limit,
+                           deadband=deadband if any(deadband) else ())
     return Proposal(coefficients, designs)
+
+
+def rest_band(joint: Joint) -> float:
+    """A proposal's deadband for ``joint``: ``REST_COUNTS`` encoder counts where min-PWM
+    compensation makes a P.I. chatter at rest, none on a valve without (the rig's servo
+    valve holds on its pressure gain only with the integrator live, docs/identification.md)."""
+    if not any(output_min_pwm(joint)):
+        return 0.0
+    return REST_COUNTS * abs(joint.encoder.gradient)
 
 
 def feed_forward(model: DeadbandModel, joint: Joint) -> FeedForward:
@@ -273,13 +319,15 @@ def simulate(models: Sequence[DeadbandModel | None], machine: Machine,
     ``desired (N, J)`` from rest at the readings ``initial (J,)`` (default: its first row);
     joints without a model follow exactly. The models move actuators; the law sees
     readings, a coupled one including its partner (the Yaw reading includes Bend, rtshare.h
-    ``joint_dep``)."""
+    ``joint_dep``), and the desired velocity of each actuator for ``kv``, the path's central
+    difference as the controller's follow_track takes it."""
     d = np.asarray(desired, dtype=float)
     q0 = d[0] if initial is None else np.asarray(initial, dtype=float)
     step = machine.sample_time_s if dt is None else dt
     law = DifferenceLaw(machine, coefficients, step)
     transmission = Transmission(machine)
     follows = transmission.actuators_of(d)  # joints without a model: their actuators follow
+    velocity = np.gradient(follows, step, axis=0) if len(d) > 1 else np.zeros_like(d)
     start = transmission.actuators_of(q0)
     plants = [None if m is None else _Plant(m, joint, step, machine.valve_resolution_pct, a)
               for m, joint, a in zip(models, machine.joints, start, strict=True)]
@@ -294,9 +342,52 @@ def simulate(models: Sequence[DeadbandModel | None], machine: Machine,
         position[k] = reading
         for j, plant in enumerate(plants):
             if plant is not None:
-                duty[k, j] = law.update(j, d[k, j] - reading[j])
+                duty[k, j] = law.update(j, d[k, j] - reading[j], float(velocity[k, j]))
                 plant.step(duty[k, j])
     return ClosedLoop(np.arange(len(d)) * step, d, position, duty)
+
+
+def move_figures(t: np.ndarray, desired: np.ndarray, actual: np.ndarray, arrives: int,
+                 joint: Joint) -> MoveFigures:
+    """Overshoot and settle of one joint's move: ``t``, ``desired``, ``actual`` ``(N,)``,
+    the path's end reached at row ``arrives`` and held after it."""
+    target, travel = desired[-1], desired[-1] - desired[0]
+    overshoot = max(0.0, float(np.max(np.sign(travel) * (actual - target))))
+    outside = np.flatnonzero(np.abs(actual[arrives:] - target) > joint.goal_tolerance)
+    if len(outside) == 0:
+        return MoveFigures(overshoot, 0.0)
+    last = arrives + int(outside[-1]) + 1
+    return MoveFigures(overshoot, float(t[last] - t[arrives]) if last < len(t) else math.inf)
+
+
+def move_path(machine: Machine, joint: int, start: ArrayLike, speed: float = 1.0, *,
+              dt: float | None = None) -> tuple[np.ndarray, int]:
+    """``predict_move``'s path from ``start (J,)``: joint ``joint`` by ``MOVE_FRACTION`` of
+    its range towards its middle, a minimum-jerk go_to at ``speed`` of its max_speed and
+    max_accel, its end held ``MOVE_DWELL_S``; and the row the path arrives at."""
+    from control.motion.trajectory import via_path
+
+    step = machine.sample_time_s if dt is None else dt
+    q0 = np.asarray(start, dtype=float)
+    spec = machine.joints[joint]
+    goal = q0.copy()
+    sign = 1.0 if q0[joint] <= (spec.upper + spec.lower) / 2 else -1.0
+    goal[joint] += sign * MOVE_FRACTION * (spec.upper - spec.lower)
+    path = via_path(np.vstack([q0, goal]), machine, dt=step, speed_fraction=speed).q
+    held = np.repeat(path[-1:], round(MOVE_DWELL_S / step), axis=0)
+    return np.vstack([path, held]), len(path) - 1
+
+
+def predict_move(models: Sequence[DeadbandModel | None], machine: Machine,
+                 coefficients: Coefficients, joint: int, start: ArrayLike,
+                 speed: float = 1.0) -> MovePrediction:
+    """Issue 24's check of ``coefficients`` on the identified ``models``: ``move_path``'s
+    move of ``joint`` simulated (``simulate``), its overshoot and settle time."""
+    desired, arrives = move_path(machine, joint, start, speed)
+    loop = simulate(models, machine, coefficients, desired)
+    figures = move_figures(loop.t, desired[:, joint], loop.position[:, joint], arrives,
+                           machine.joints[joint])
+    return MovePrediction(joint, desired, arrives, loop, figures)
 
 
 class _Plant:

@@ -1,5 +1,7 @@
 """Identify tab: a short PRBS on one Unimate joint is played, fitted, checked above 80 % on
-a fresh held-out PRBS, and its proposed gains applied to the track set; a profile that
+a fresh held-out PRBS, and its proposed gains applied to the track set, their predicted
+full-speed move shown and then measured (issue 24: Bend 5 % of its range, overshoot within
+1°, settled in 0.5 s); a profile that
 cannot fit the joint's range is refused with the excitation module's message and runs
 nothing."""
 
@@ -61,8 +63,17 @@ def test_prbs_on_one_joint_fits_and_applies_to_track(tui, data_dir: Path) -> Non
             assert after != before
             assert after.kp[BEND] == (tab.outcome.designs[BEND].kp,)
             assert after.kp[0] == before.kp[0]  # joints not identified keep their gains
-            assert after.kv[BEND] > 0 and after.kv[0] == 0
+            assert after.kv[BEND] > 0 and after.kv[0] == before.kv[0]
             assert app.client.coefficients["hold"] == app.machine.hold
+            settle = app.query_one("#identify-settle")
+            assert re.search(r"fast move predicted: current over [\d.]+°, settled [\d.]+ s; "
+                             r"proposed over [\d.]+°, settled [\d.]+ s", settle.text), settle.text
+            await pilot.click("#identify-check")  # issue 24: the prediction, then measured
+            await tui.until(lambda: "measured" in settle.text, timeout=60,
+                            what=lambda: f"the check move ({state.text})")
+            measured = re.search(r"measured over ([\d.]+)°, settled ([\d.]+) s", settle.text)
+            assert measured is not None, settle.text
+            assert float(measured.group(1)) <= 1.0 and float(measured.group(2)) <= 0.5
 
     asyncio.run(scenario())
 

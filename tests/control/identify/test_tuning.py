@@ -163,7 +163,8 @@ def follow(robot: ControlClient, start: np.ndarray, track: Coefficients, path: n
            settle: Coefficients, kind: str, models: list[DeadbandModel]) -> np.ndarray:
     """Return to ``start`` with ``settle`` as the track and hold set (so every run starts on
     target from the same stiff hold: the thesis's Bend gains need seconds), then follow
-    ``path``, a move of ``kind``, with ``track``; the actual path. The gain check judges the
+    ``path``, a move of ``kind``, with ``track``; the actual path (the rows a move records
+    while it settles after its path are left out). The gain check judges the
     sets on the identified ``models`` (a proposal is not stable on every nominal one)."""
     robot.set_coefficients("hold", settle, models)
     robot.set_coefficients("track", settle, models)
@@ -174,7 +175,7 @@ def follow(robot: ControlClient, start: np.ndarray, track: Coefficients, path: n
     result = robot.wait(robot.move(path, kind=kind), timeout=120)
     robot.set_coefficients("hold", UNIMATE.hold)
     assert result.complete, result.status
-    return result.run.actual
+    return result.run.actual[:len(path)]  # the path's rows, not the settle after it
 
 
 def test_the_proposed_gains_track_a_ramp_better_than_the_thesis_pi_gains(
