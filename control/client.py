@@ -678,7 +678,8 @@ class ControlClient:
     def go_to(self, q: Sequence[float], speed: float = 0.5, meta: dict | None = None
               ) -> MoveHandle:
         """A joint-space move from where the joints are to ``q`` (mm, deg): a quintic
-        trajectory at ``speed`` of each joint's max_speed and max_accel (0 < speed ≤ 1).
+        trajectory at ``speed`` of each joint's max_speed and max_accel (0 < speed ≤ 1); like
+        every closed-loop move it is complete only once in position (``wait``).
         ValueError (nothing sent) for a target outside the limits or a bad speed."""
         plan = form_plans.go_to(self.machine, np.array(self.status().position), q, speed,
                                 dt=self.dt)

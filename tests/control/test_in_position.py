@@ -16,6 +16,7 @@ import pytest
 from control import ControlClient, Mode
 from control.motion.plan import path_rows
 from control.motion.robot_model import unimate_model
+from control.recorder import load_run
 from hw.machine import GOAL_WINDOW_S, load_machine
 
 UNIMATE = load_machine("unimate2000b")
@@ -66,6 +67,7 @@ def test_a_go_to_is_complete_only_in_position_and_settling_is_seen_after_its_pat
     run = result.run
     assert path_rows(run) == handle.samples < run.samples  # the settle is in the run
     settle = result.settle
+    assert load_run(result.files.json).meta["settle"] == settle  # the run's JSON has it
     if result.complete:
         in_position_at_the_end(run, target)
         assert all(t is not None and t <= settle["goal_time_s"] for t in settle["settle_s"])
