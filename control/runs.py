@@ -69,6 +69,7 @@ def run_from_segment(buf: memoryview, layout: MoveLayout, meta: dict[str, Any], 
     n = len(joints)
     record = layout.record(buf)[:layout.recorded(buf)].reshape(-1, 1 + 3 * n).copy()
     extra = {k: v for k, v in meta.items() if k not in STANDARD or k == "run_id"}
+    extra["path_samples"] = layout.samples  # the rows of the path; the settle's follow them
     for key, entries in (timeline or {}).items():
         if key == "settle" and entries:  # a record of its own (control/rt/settle.py)
             extra[key] = {k: list(v) if isinstance(v, list | tuple) else v

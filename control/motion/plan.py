@@ -125,12 +125,10 @@ def summaries(plan: MovePlan, run: Run, machine: Machine) -> list[tuple[str, Sum
 
 
 def path_rows(run: Run) -> int:
-    """The rows of ``run`` that followed its path: those up to its settle's start (the
-    run's ``settle.path_end_s``), all of them for a run without one."""
-    end = (run.meta.get("settle") or {}).get("path_end_s")
-    if not isinstance(end, int | float):
-        return run.samples
-    return int(np.searchsorted(run.t, end, side="right"))
+    """The rows of ``run`` that followed its path (its ``path_samples``, as its move
+    segment said), the settle's after them; all of them for a run saved without it."""
+    rows = run.meta.get("path_samples")
+    return min(rows, run.samples) if isinstance(rows, int) else run.samples
 
 
 def moved(plan: MovePlan, desired: np.ndarray, machine: Machine) -> list[int]:
