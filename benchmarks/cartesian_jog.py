@@ -1,8 +1,23 @@
-"""Cartesian jog: the inverse kinematics per jog step, and key → first motion.
+"""Cartesian jog: the inverse kinematics per jog step, key → first motion, and the
+figures of issue 25 (a tool turn by the wrist singularity, a held jog).
 
 Prints figures and asserts nothing; ``measure()`` returns them::
 
     python -m benchmarks.cartesian_jog [--jogs 40] [--steps 2000]
+    python -m benchmarks.cartesian_jog --issue25 [--before REV]
+
+``--issue25`` measures, on a real control process (real time, the simulator):
+
+4. a 5° tool turn at the start pose: ``jog_cartesian([0, 0, 0, 5, 0, 0], frame="tool")``
+   from the simulator's start (Yaw 2.5°): each joint's travel, commanded and measured, or
+   the refusal;
+5. a held Cartesian jog: the Jog tab in the world frame, hold-to-move at 100 % (25 mm/s),
+   ``a`` (x +) posted every 33 ms for 5 s as a terminal's auto-repeat does, then silence:
+   how far the commanded tool went along x, its largest sideways drift (y, z), how far it
+   went after the last key, and the runs it left.
+
+``--before REV`` runs the same figures on the tree of git revision ``REV`` (extracted
+with ``git archive`` into a temporary folder, this script copied in) and prints both.
 
 1. IK per jog step: the closed-form inverse of one point of a jog on the arm's
    branch (``Unimate2000B.inverse``, one pose, as a jog that solved each step
@@ -23,7 +38,10 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import json
+import shutil
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
@@ -39,6 +57,7 @@ from app.tui import ServodeskApp
 from control import ControlClient, Mode
 from control.motion.cartesian_jog import plan_jog
 from control.motion.robot_model import unimate_model
+from control.recorder import list_runs
 from hw.machine import load_machine
 
 START = np.array([1500.0, 10.0, 5.0, 20.0, 30.0, 10.0])  # away from limits and singularities
@@ -138,6 +157,111 @@ def key_first_motion(jogs: int) -> dict[str, float]:
         return spread(asyncio.run(scenario(data_dir)))
 
 
+def tool_turn() -> dict[str, object]:
+    """Figure 4: the 5° tool turn at the simulator's start pose."""
+    with tempfile.TemporaryDirectory() as runs, ControlClient(
+            "unimate2000b", data_dir=runs, heartbeat_timeout_s=2.0) as robot:
+        home = np.array(unimate_model(robot.machine).mid_range)
+        robot.wait(robot.go_to(home, speed=1.0), timeout=60)
+        try:
+            result = robot.wait(robot.jog_cartesian([0, 0, 0, 5.0, 0, 0], frame="tool"), 60)
+        except ValueError as exc:
+            return {"refused": str(exc), "desired": [0.0] * 6, "actual": [0.0] * 6}
+        run = result.run
+        return {"refused": "", "desired": np.ptp(run.desired, axis=0).tolist(),
+                "actual": np.ptp(run.actual, axis=0).tolist()}
+
+
+HELD_S = 5.0
+REPEAT_S = 0.033  # a terminal's auto-repeat, about 30 Hz
+
+
+def held_jog(seconds: float = HELD_S) -> dict[str, object]:
+    """Figure 5: ``a`` held ``seconds`` in the Jog tab's world frame at 100 %."""
+    model = unimate_model(load_machine("unimate2000b"))
+
+    async def scenario(data_dir: str) -> dict[str, object]:
+        app = ServodeskApp("unimate2000b", "sim", None, Path(data_dir), lockstep=False,
+                           client_options={"heartbeat_timeout_s": 2.0})
+        async with app.run_test(size=SIZE) as pilot:
+            while app.client is None or app.focused is None:
+                await pilot.pause(0.05)
+            robot = app.client
+            await asyncio.to_thread(lambda: robot.wait(robot.go_to(START, speed=1.0), 60))
+            await asyncio.sleep(0.5)
+            await pilot.press("w", "m", "9")  # world frame, hold-to-move, 100 %
+            start = model.pose(np.array(robot.status().desired))
+            drift = 0.0
+
+            def moved() -> np.ndarray:
+                nonlocal drift
+                d = model.pose(np.array(robot.status().desired)) - start
+                drift = max(drift, float(np.hypot(d[1], d[2])))
+                return d
+
+            assert app._driver is not None
+            end = time.monotonic() + seconds
+            while time.monotonic() < end:
+                app._driver.send_message(events.Key("a", "a"))
+                moved()
+                await asyncio.sleep(REPEAT_S)
+            at_release = float(moved()[0])
+            still = time.monotonic()
+            last = moved()
+            while time.monotonic() - still < 1.0:  # until the commanded tool stands for 1 s
+                await asyncio.sleep(0.02)
+                now = moved()
+                if np.abs(now - last).max() > 1e-6:
+                    still, last = time.monotonic(), now
+            await asyncio.sleep(1.0)  # the runs of the moves it made are saved meanwhile
+            runs = [info.kind for info in list_runs(Path(data_dir))]
+            holds = [e for e in app.desk.events.entries if e.kind == "jog"]
+            return {"distance": float(last[0]), "drift": drift,
+                    "after_release": float(last[0]) - at_release,
+                    "runs": len([k for k in runs if k == "cartesian_jog"]),
+                    "holds": [e.what for e in holds]}
+
+    with tempfile.TemporaryDirectory() as data_dir:
+        return asyncio.run(scenario(data_dir))
+
+
+def issue25() -> dict[str, object]:
+    return {"tool_turn": tool_turn(), "held": held_jog()}
+
+
+def issue25_before(rev: str) -> dict[str, object]:
+    """``issue25()`` on the tree of git revision ``rev``, in a process of its own."""
+    root = Path(__file__).resolve().parents[1]
+    with tempfile.TemporaryDirectory() as tree:
+        archive = subprocess.run(["git", "-C", str(root), "archive", rev], check=True,
+                                 capture_output=True).stdout
+        subprocess.run(["tar", "-x", "-C", tree], input=archive, check=True)
+        shutil.copy(__file__, Path(tree) / "benchmarks" / "cartesian_jog.py")
+        out = subprocess.run([sys.executable, "-m", "benchmarks.cartesian_jog", "--issue25",
+                              "--json"], cwd=tree, check=True, capture_output=True, text=True)
+    return json.loads(out.stdout)
+
+
+def print_issue25(label: str, m: dict) -> None:
+    turn, held = m["tool_turn"], m["held"]
+    names = [j.name for j in load_machine("unimate2000b").joints]
+    units = [" mm" if j.unit == "mm" else "°" for j in load_machine("unimate2000b").joints]
+    print(f"{label}:")
+    if turn["refused"]:
+        print(f"  5° tool turn at the start pose: refused: {turn['refused']}")
+    else:
+        for what in ("desired", "actual"):
+            travel = ", ".join(f"{n} {v:.1f}{u}" for n, v, u in zip(names, turn[what], units,
+                                                                   strict=True))
+            print(f"  5° tool turn at the start pose, joint travel ({what}): {travel}")
+    print(f"  held a {HELD_S:g} s at 25 mm/s: x {held['distance']:.1f} mm (asked "
+          f"{25 * HELD_S:g}), sideways drift {held['drift']:.2f} mm, "
+          f"{held['after_release']:.1f} mm after the last key, {held['runs']} cartesian_jog "
+          "runs")
+    for what in held.get("holds", []):
+        print(f"  logged: {what}")
+
+
 def measure(jogs: int = 40, steps: int = 2000, seed: int = 0) -> dict[str, object]:
     return {"ik": ik_per_step(steps, seed), "api": api_first_motion(jogs),
             "key": key_first_motion(jogs)}
@@ -153,7 +277,21 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--jogs", type=int, default=40, help="jogs timed on the controller")
     parser.add_argument("--steps", type=int, default=2000, help="jog points solved one by one")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--issue25", action="store_true",
+                        help="the figures of issue 25 only (a tool turn, a held jog)")
+    parser.add_argument("--before", metavar="REV",
+                        help="with --issue25: the same figures on git revision REV too")
+    parser.add_argument("--json", action="store_true", help="with --issue25: print JSON")
     args = parser.parse_args(argv)
+    if args.issue25:
+        now = issue25()
+        if args.json:
+            print(json.dumps(now))
+            return 0
+        if args.before:
+            print_issue25(f"before ({args.before})", issue25_before(args.before))
+        print_issue25("now", now)
+        return 0
     m = measure(args.jogs, args.steps, args.seed)
     ik = m["ik"]
     assert isinstance(ik, dict)

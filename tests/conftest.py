@@ -58,6 +58,7 @@ SLOW_PATHS = (
     "tests/control/identify/test_proposal_settles.py",  # identify, apply, move: both machines
     "tests/control/test_feed.py",      # feed override and hold on the control subprocess
     "tests/control/test_client_cartesian_jog.py",  # Cartesian jogs on it
+    "tests/control/test_servo.py",     # the Cartesian servo on a real-time one
     "tests/control/rt/test_process.py",   # the control subprocess's imports
     "tests/control/test_service.py",   # servodesk controller and clients attached to it
     "tests/control/test_service_trust.py",  # the same, tried as an attacker would

@@ -25,10 +25,15 @@ line, on the branch the arm is on (``control.motion.cartesian_jog``).
   the machine's Cartesian jog speed; a step the arm cannot make (a joint
   limit, out of reach, the wrist singularity) moves nothing and says why.
 - **hold-to-move** — while a key is held the tool moves along the axis at the
-  chosen fraction of the Cartesian jog speed (``CARTESIAN_SPEEDS``, keys 1–9);
-  on release a feed hold stops it along its line within the joints'
-  acceleration, then the arm holds there. The jog is planned ``HOLD_REACH_S``
-  ahead and ends before a joint limit or a singularity, saying which.
+  chosen fraction of the Cartesian jog speed (``CARTESIAN_SPEEDS``, keys 1–9),
+  one continuous motion streamed by a client-side servo (``control.servo``:
+  joint velocities through the inverse Jacobian, drift pulled back onto the
+  line); on release (no repeat within ``KeyRepeat``'s gap) it brakes along its
+  line at the Cartesian jog acceleration and the arm holds there. It slows in
+  the singularity zone and stops before a joint limit or where a joint would
+  need more than its max_speed, saying which. A held jog leaves no run: each
+  press-and-hold is one entry in the event log (Log tab), how far and why it
+  stopped.
 
 Duty mode has no Cartesian meaning: the Cartesian frames cycle position and
 hold-to-move. The live pose (x, y, z, γ, β, α) is shown under the pad.
@@ -55,12 +60,14 @@ from textual.reactive import reactive
 from textual.widget import Widget
 from textual.widgets import Static
 
+from app.event_log import LogEntry
 from app.tabs.tab import TabPage
 from app.widgets.limit_bar import LimitBar
 from app.widgets.live_text import LiveText
 from control.client import ControlClient, MoveHandle
 from control.motion.cartesian_jog import AXES, Step, StepQueue, zone
 from control.rt.layout import Mode, Status
+from control.servo import CartesianServo
 from hw.machine import Joint
 from hw.transmission import output_min_pwm
 
@@ -72,7 +79,11 @@ CARTESIAN_MODES = ("hold-to-move", "position")
 CARTESIAN_SPEEDS = (0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.8, 1.0)
 ZONE_WARNING = 0.9  # the pose line warns once a Cartesian jog would run below this speed
 WRIST_WARNING_DEG = 30.0  # a slowed jog with Yaw this close to 0° is the wrist's doing
-HOLD_REACH_S = 4.0  # a held Cartesian key plans this far ahead (s at the chosen speed)
+# A held Cartesian jog's servo stops by itself this long after the last key event it saw: a
+# UI that stopped delivering keys (the terminal's first repeat comes within 0.25-0.6 s).
+SERVO_KEEPALIVE_S = 1.0
+QUIET_STOPS = ("released", "the key stopped repeating", "another key", "the Jog tab was left",
+               "E-stop")  # the operator's doing, or said elsewhere: no warning
 NO_CARTESIAN = ("no Cartesian jog on this machine: {name} has no closed-form kinematics "
                 "(a single axis), only joint jog")
 RIG_ARROW_STEP = 10.0  # function.c Manual(): each arrow press changes the duty by 10 %
@@ -92,6 +103,9 @@ POSITION_STEPS = {
 }
 SYMBOLS = {"mm": " mm", "deg": "°"}  # after a number
 RELEASE_CHECK_S = 0.01
+JOINT_RELEASE = (0.11, 2.5)  # KeyRepeat's most (s) and factor in the joint frame
+TOOL_RELEASE = (0.15, 4.0)  # and in a Cartesian frame: 4 repeats of 33 ms missed is a release
+STALL_S = 0.05  # a release check this late follows a stall of the UI: it judges nothing
 LATCHED_NOTICE_S = 3.0  # while latched, a jog key says why at most this often
 LATCHED = ("E-stop latched: the jog keys do nothing until you release it (^R); the joints "
            "then hold where they are")
@@ -131,12 +145,16 @@ class KeyRepeat:
     typically), the next ones every 30–50 ms. A key is taken as released when
     no repeat arrived within ``first_timeout`` of the first press or
     ``repeat_timeout`` of the last repeat; both adapt to the delays observed,
-    so a release after a hold is seen within ``repeat_timeout`` (≤ 110 ms).
+    so a release after a hold is seen within ``repeat_timeout`` (≤ ``most``: 110 ms
+    for a joint, ``TOOL_RELEASE``'s 150 ms for a Cartesian hold, whose false release
+    would brake and restart the tool mid-line, while a late one costs it 1 mm).
     A short tap moves for up to the initial delay: use position mode to nudge.
     """
 
     first_timeout: float = 0.55
     repeat_timeout: float = 0.11
+    most: float = 0.11  # the longest repeat_timeout learned (s)
+    factor: float = 2.5  # repeat_timeout is this many repeat intervals (within 0.06-most s)
     _pressed_at: dict[int, float] = field(default_factory=dict)
     _last: dict[int, float] = field(default_factory=dict)
     _repeats: dict[int, int] = field(default_factory=dict)
@@ -154,7 +172,7 @@ class KeyRepeat:
             self.first_timeout = min(0.8, max(0.15, gap + 0.08))  # learn the initial delay
         else:
             self.interval = 0.8 * self.interval + 0.2 * gap
-            self.repeat_timeout = min(0.11, max(0.06, 2.5 * self.interval))
+            self.repeat_timeout = min(self.most, max(0.06, self.factor * self.interval))
         self._repeats[key] += 1
         self._last[key] = now
         return False
@@ -232,13 +250,21 @@ class JogPad(Widget, can_focus=True):
     @dataclass
     class CartesianJogged(Message):
         """Jog the tool by ``displacement`` [dx, dy, dz (mm), dγ, dβ, dα (°)] in ``frame``
-        at ``speed`` of the Cartesian jog speed; ``held``: a hold-to-move jog, planned as
-        far as the line allows (it ends on release)."""
+        at ``speed`` of the Cartesian jog speed: a step."""
 
         displacement: tuple[float, ...]
         frame: str
         speed: float
-        held: bool
+
+    @dataclass
+    class CartesianHeld(Message):
+        """A Cartesian hold-to-move key: move the tool at ``velocity`` [vx, vy, vz (mm/s),
+        ωγ, ωβ, ωα (°/s)] in ``frame`` while held; ``repeat``: the key's auto-repeat (still
+        held), not a new hold."""
+
+        velocity: tuple[float, ...]
+        frame: str
+        repeat: bool
 
     @dataclass
     class Stopped(Message):
@@ -264,6 +290,7 @@ class JogPad(Widget, can_focus=True):
         self.armed = False
         self.latched = False
         self._told_latched = -math.inf
+        self._checked = -math.inf  # when the release was last checked
 
     def on_mount(self) -> None:
         self._release_timer = self.set_interval(RELEASE_CHECK_S, self._check_release,
@@ -317,6 +344,9 @@ class JogPad(Widget, can_focus=True):
         modes = MODES if self.frame == "joint" else CARTESIAN_MODES
         self.mode = modes[(modes.index(self.mode) + 1) % len(modes)]
 
+    def watch_frame(self, frame: str) -> None:
+        self.repeat.most, self.repeat.factor = JOINT_RELEASE if frame == "joint" else TOOL_RELEASE
+
     def action_frame(self) -> None:
         """Cycle joint → world → tool jog; a machine without kinematics says it has none."""
         if self.cartesian_speeds is None:
@@ -359,16 +389,16 @@ class JogPad(Widget, can_focus=True):
         d = [0.0] * 6
         if self.mode == "position":
             d[axis] = sign * self.step(unit)
-            self.post_message(self.CartesianJogged(tuple(d), self.frame, 1.0, held=False))
+            self.post_message(self.CartesianJogged(tuple(d), self.frame, 1.0))
             return
-        if self.repeat.press(axis, time.monotonic()):  # a new hold, not a repeat of one
+        key = axis * 2 + (sign < 0)  # the other key of the pair is another hold
+        new = self.repeat.press(key, time.monotonic())
+        if new:  # one Cartesian axis at a time: a new key ends the hold before it
             self.repeat.forget()
-            self.repeat.press(axis, time.monotonic())
-            assert self.cartesian_speeds is not None  # the frame is joint without them
-            full = self.cartesian_speeds[0 if unit == "mm" else 1]
-            d[axis] = sign * HOLD_REACH_S * self.cartesian_speed * full
-            self.post_message(self.CartesianJogged(tuple(d), self.frame, self.cartesian_speed,
-                                                   held=True))
+            self.repeat.press(key, time.monotonic())
+        assert self.cartesian_speeds is not None  # the frame is joint without them
+        d[axis] = sign * self.cartesian_speed * self.cartesian_speeds[0 if unit == "mm" else 1]
+        self.post_message(self.CartesianHeld(tuple(d), self.frame, repeat=not new))
         self._release_timer.resume()
 
     def action_arrow(self, sign: int) -> None:
@@ -401,7 +431,11 @@ class JogPad(Widget, can_focus=True):
     def _check_release(self) -> None:
         """Every RELEASE_CHECK_S while a key is held: stop the joints let go; when the last
         is let go, hold every joint where it stopped (at zero duty a joint would sag)."""
-        gone = self.repeat.released(time.monotonic())
+        now = time.monotonic()
+        stalled, self._checked = now - self._checked > STALL_S, now
+        if stalled:  # the UI was not listening: a repeat may be waiting behind this check
+            return
+        gone = self.repeat.released(now)
         if self.frame != "joint":  # one Cartesian axis at a time: its release stops the jog
             if gone and not self.repeat.held:
                 self.let_go()
@@ -461,7 +495,8 @@ class JogTab(TabPage):
     _jog: MoveHandle | None = None  # the last Cartesian jog sent
     _steps: StepQueue | None = None  # steps pressed while it ran (made with the client)
     _refused = 0  # queued steps refused since the queue began: the reason is told once
-    _stopping = False  # a let-go held jog is decelerating (feed hold) before the hold
+    _servo: CartesianServo | None = None  # the held Cartesian jog, while it runs or brakes
+    _servo_logged = True  # its end is in the event log
 
     def compose(self) -> ComposeResult:
         speed = self.machine.cartesian_jog_speed if self.model is not None else None
@@ -490,16 +525,15 @@ class JogTab(TabPage):
     def hidden(self) -> None:
         super().hidden()
         self.pad.armed = False
-        moving_tool = self.pad.moving_tool or self._stopping
         self.pad.let_go()  # leaving the tab must not leave a joint moving: decided now
         self._forget_steps()
-        self._stopping = False
-        self._leave_manual(hold=moving_tool)
+        self._release_servo("the Jog tab was left")
+        self._leave_manual(hold=False)
 
     def estop(self, latched: bool) -> None:
         self.pad.estop(latched)
         self._forget_steps()
-        self._stopping = False
+        self._release_servo("E-stop")
         self.refresh_live()
 
     def on_jog_pad_duty_changed(self, message: JogPad.DutyChanged) -> None:
@@ -521,7 +555,7 @@ class JogTab(TabPage):
         if not self.visible_now or self.pad.latched:
             return
         running = self._jog is not None and not self._jog.done.is_set()
-        if running and not message.held:
+        if running or (self._steps is not None and self._steps.steps):
             self._queue(message)  # a new move now would start from rest while the arm moves
         else:
             self._forget_steps()
@@ -567,6 +601,60 @@ class JogTab(TabPage):
         self._refused = 0
         self._first_refusal = ""
 
+    def on_jog_pad_cartesian_held(self, message: JogPad.CartesianHeld) -> None:
+        """A held Cartesian key: start its servo, or keep it going on a repeat."""
+        servo = self._servo
+        if servo is not None and servo.running and message.repeat:
+            servo.renew()
+            return
+        if not self.visible_now or self.pad.latched:
+            return
+        self._release_servo("another key")
+        if self._jog is not None and not self._jog.done.is_set():
+            self.cartesian_note = Text.assemble(("hold-to-move waits: ", "bold yellow"),
+                                                "a step is running; press again when it ends")
+            return
+        self._forget_steps()
+        self.cartesian_note = Text("")
+        self.command("Cartesian jog", lambda client: self._start_servo(client, message))
+        self.refresh_live()
+
+    def _start_servo(self, client: ControlClient, message: JogPad.CartesianHeld) -> None:
+        servo = CartesianServo(client, message.velocity, message.frame,
+                               keepalive_s=SERVO_KEEPALIVE_S)
+        servo.start()
+        self._servo, self._servo_logged = servo, False
+        self._servo_asked = message
+
+    _servo_asked: JogPad.CartesianHeld | None = None  # what the servo was started with
+
+    def _release_servo(self, why: str = "released") -> None:
+        if self._servo is not None:
+            self._servo.release(why)
+
+    def _servo_ended(self) -> None:
+        """A held jog has stopped: one log entry for the press-and-hold, and a note and a
+        notification when something other than the release stopped it."""
+        servo, asked = self._servo, self._servo_asked
+        if servo is None or asked is None or self._servo_logged or not servo.done.is_set():
+            return
+        self._servo_logged = True
+        report = servo.wait(0)
+        axis = int(np.flatnonzero(asked.velocity)[0])
+        unit = " mm" if axis < 3 else "°"
+        moved = math.copysign(report.distance, asked.velocity[axis])  # along the axis's sign
+        what = (f"held Cartesian jog {AXES[axis]} {moved:+.1f}{unit} ({asked.frame} "
+                f"frame) in {report.duration:.1f} s, {report.drift:.2f} mm off its line: "
+                f"{report.stopped}")
+        self.desk.events.add(LogEntry(time.time(), "jog", what, data={
+            "velocity": list(asked.velocity), "frame": asked.frame,
+            "distance": report.distance, "drift_mm": report.drift,
+            "duration_s": report.duration, "stopped": report.stopped}))
+        if report.stopped not in QUIET_STOPS:
+            self.cartesian_note = Text.assemble(("the jog stopped: ", "bold yellow"),
+                                                report.stopped)
+            self.notify(f"Cartesian jog stopped: {report.stopped}", severity="warning")
+
     def _send_jog(self, message: JogPad.CartesianJogged) -> None:
         self.cartesian_note = Text("")
         self.command("Cartesian jog", lambda client: self._jog_tool(client, message))
@@ -575,38 +663,19 @@ class JogTab(TabPage):
         """Send the jog; a jog the arm cannot make (or a held one that ends early) says why
         under the pad and in a notification (its message names the jog: no prefix)."""
         try:
-            handle = client.jog_cartesian(message.displacement, message.frame, message.speed,
-                                          stop_short=message.held)
+            handle = client.jog_cartesian(message.displacement, message.frame, message.speed)
         except ValueError as exc:
             self.cartesian_note = Text.assemble(("jog refused: ", "bold yellow"), str(exc))
             self.notify(str(exc), severity="error")
             self._forget_steps()  # they were to follow it
             return
         self._jog = handle
-        stopped = handle.meta.get("stopped", "")
-        if stopped:
-            self.cartesian_note = Text.assemble(("the jog stops early: ", "bold yellow"),
-                                                str(stopped))
-            self.notify(f"Cartesian jog stops early: {stopped}", severity="warning")
 
     def on_jog_pad_stopped(self, message: JogPad.Stopped) -> None:
-        if message.tool and self.visible_now:
-            # feed hold: the jog decelerates along its line within the joints' limits; the
-            # hold follows once it stands (refresh_live), rather than stopping it dead
-            self._stopping = self.command("stop the jog", ControlClient.pause)
-            if self._stopping:
-                return
-        self._leave_manual(message.hold)
-
-    def _hold_when_stopped(self) -> None:
-        """A let-go Cartesian jog has stopped along its line (or ended): hold there."""
-        status = self.status()
-        if not self._stopping or status is None:
+        if message.tool:  # the servo brakes along its line; the arm then holds there
+            self._release_servo()
             return
-        if status.mode != Mode.FOLLOW_TRACK or (status.paused and status.feed_rate == 0.0):
-            self._stopping = False
-            if status.mode == Mode.FOLLOW_TRACK:
-                self.command("hold", ControlClient.hold)
+        self._leave_manual(message.hold)
 
     def _leave_manual(self, hold: bool) -> None:
         """Hold, the thesis's default mode, if asked to or if the controller is in manual."""
@@ -615,13 +684,12 @@ class JogTab(TabPage):
             self.command("hold", ControlClient.hold)
 
     def refresh_live(self) -> None:
-        self._hold_when_stopped()
+        self._servo_ended()
         steps = self._steps
         if steps is not None and steps.steps and (self._jog is None or self._jog.done.is_set()):
             step = steps.next()
             if step is not None and self.visible_now and not self.pad.latched:
-                self._send_jog(JogPad.CartesianJogged(step.displacement, step.frame, step.speed,
-                                                      False))
+                self._send_jog(JogPad.CartesianJogged(step.displacement, step.frame, step.speed))
                 if not self.cartesian_note.plain:  # sent: what is still to come, or refused
                     self.cartesian_note = self._queue_note()
         status = self.status()

@@ -104,7 +104,7 @@ class CartesianJog:
 
 
 @dataclass(frozen=True)
-class _Line:
+class Line:
     """The straight line of a jog (module docstring): start frame, translation and rotation
     vector in the base frame (mm, rad), and the rotation's side (world: left, tool: right)."""
 
@@ -212,7 +212,7 @@ def plan_jog(start: ArrayLike, displacement: ArrayLike, machine: Machine, *,
     t0 = model.forward(q0)
     fraction, stopped = 1.0, ""
     while True:
-        line = _line(t0, wanted * fraction, frame == "tool")
+        line = line_of(t0, wanted * fraction, frame == "tool")
         plan = _plan_line(line, q0, machine, model, step, speed)
         if isinstance(plan, CartesianJog):
             planned = wanted * fraction
@@ -228,7 +228,7 @@ def plan_jog(start: ArrayLike, displacement: ArrayLike, machine: Machine, *,
         fraction = shorter
 
 
-def _plan_line(line: _Line, q0: np.ndarray, machine: Machine, model: Unimate2000B, dt: float,
+def _plan_line(line: Line, q0: np.ndarray, machine: Machine, model: Unimate2000B, dt: float,
                speed: float) -> CartesianJog | tuple[float, str]:
     """The jog along ``line``, or (fraction along it, reason) of its first problem."""
     vmax = np.array([j.max_speed for j in machine.joints])
@@ -269,7 +269,7 @@ def _plan_line(line: _Line, q0: np.ndarray, machine: Machine, model: Unimate2000
 _Solved = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]
 
 
-def _solve(line: _Line, s: np.ndarray, q0: np.ndarray, machine: Machine, model: Unimate2000B,
+def _solve(line: Line, s: np.ndarray, q0: np.ndarray, machine: Machine, model: Unimate2000B,
            per_rate: np.ndarray) -> tuple[_Solved | None, tuple[float, str] | None]:
     """Joints, poses, positions, rotations and slot of the line at fractions ``s (N,)``;
     or the first problem (fraction, reason) on it."""
@@ -417,13 +417,15 @@ def _unit(joint: Joint) -> str:
     return " mm" if joint.unit == "mm" else "°"
 
 
-def _line(t0: np.ndarray, displacement: np.ndarray, tool: bool) -> _Line:
+def line_of(t0: np.ndarray, displacement: np.ndarray, tool: bool) -> Line:
+    """The line from the pose ``t0 (4, 4)`` by ``displacement (6,)`` (mm, deg) in the tool
+    frame or the world's (module docstring)."""
     r0, p0 = t0[:3, :3], t0[:3, 3]
     d, omega = displacement[:3], np.radians(displacement[3:])
-    return _Line(p0=p0, r0=r0, d=r0 @ d if tool else d, omega=omega, tool=tool)
+    return Line(p0=p0, r0=r0, d=r0 @ d if tool else d, omega=omega, tool=tool)
 
 
-def _where(line: _Line, at: float) -> str:
+def _where(line: Line, at: float) -> str:
     """Where along the line a problem is, for the message."""
     if at <= 0.0:
         return "at the start: "

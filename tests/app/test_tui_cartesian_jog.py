@@ -6,17 +6,20 @@ from __future__ import annotations
 
 import asyncio
 import re
+import time
 
 import numpy as np
 
 from app.tabs.jog import JogPad, JogTab
 from app.widgets.live_text import LiveText
 from control.motion.robot_model import unimate_model
+from control.recorder import list_runs
 from control.rt.layout import Mode
 from hw.machine import load_machine
 
 SIZE = (160, 48)
 MODEL = unimate_model(load_machine("unimate2000b"))
+START = np.array([1500.0, 10.0, 5.0, 20.0, 30.0, 10.0])  # away from limits and singularities
 
 
 
@@ -175,27 +178,64 @@ def test_the_pose_line_warns_near_the_wrist_singularity(tui) -> None:
     asyncio.run(scenario())
 
 
-def test_hold_to_move_moves_the_tool_while_held_and_holds_on_release(tui) -> None:
+def hold(tui, app, key: str, seconds: float, gap: float = 0.03) -> asyncio.Task:
+    """Hold ``key`` as a terminal does: the key again every ``gap`` s (its auto-repeat; no
+    key-up ever comes) for ``seconds``, then nothing: the release is the silence."""
+    async def repeat() -> None:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            tui.post_key(app, key)
+            await asyncio.sleep(gap)
+
+    return asyncio.ensure_future(repeat())
+
+
+def test_holding_a_key_moves_the_tool_along_its_axis_in_one_continuous_motion(tui) -> None:
+    """Issue 25 item 3: held 5 s at 25 mm/s the tool goes 125 mm ± 10 % up z with under 1 mm
+    sideways (the commanded tool), stops on release within its braking distance, and leaves
+    one entry in the event log and no run (it moved 1.8 mm and left 141 runs before)."""
     async def scenario() -> None:
         app = tui.app(lockstep=False)
         async with app.run_test(size=SIZE) as pilot:
-            before = await tui.ready(app, pilot)
+            await tui.ready(app, pilot)
             client = app.client
-            start = MODEL.pose(np.array(before.desired))
+            client.go_to(START, speed=1.0)  # away from the wrist singularity
+            await tui.until(lambda: client.status().mode == Mode.HOLD and np.allclose(
+                client.status().desired, START), timeout=30, what="the arm at START")
+            start = MODEL.pose(START)
             await pilot.press("w", "m", "9")  # world frame, hold-to-move at 100 %
             assert app.query_one(JogPad).mode == "hold-to-move"
-            tui.post_key(app, "d")  # z up, held
-            await tui.until(lambda: client.status().mode == Mode.FOLLOW_TRACK, timeout=5,
-                            what="the tool moving while held")
-            # let go: a feed hold stops the jog along its line, then the arm holds there
-            await tui.until(lambda: client.status().paused, timeout=5,
-                            what="the jog decelerating in a feed hold after the release")
-            await tui.until(lambda: client.status().mode == Mode.HOLD, timeout=5,
-                            what="hold after the release")
-            status = client.status()
-            moved = MODEL.pose(np.array(status.desired)) - start
-            assert 0.5 < moved[2] < 30.0  # up along z for the tap's fraction of a second
-            assert np.abs(moved[:2]).max() < 2.0  # along z only (start and hold: settle bands)
+            drift = [0.0]
+
+            def sideways() -> float:
+                moved = MODEL.pose(np.array(client.status().desired)) - start
+                drift[0] = max(drift[0], float(np.hypot(moved[0], moved[1])))
+                return float(moved[2])
+
+            held = hold(tui, app, "d", 5.0)  # z up
+            while not held.done():
+                sideways()
+                await asyncio.sleep(0.02)
+            released = sideways()
+            tab = app.query_one(JogTab)
+            await tui.until(lambda: tab._servo is not None and tab._servo.done.is_set(),
+                            timeout=5, what="the servo stopped after the release")
+            moved = sideways()
+            tab.refresh_live()
+            jogs = [e.what for e in app.desk.events.entries if e.kind == "jog"]
+            assert 112.5 <= moved <= 137.5, (moved, jogs)
+            assert drift[0] < 1.0, drift[0]
+            # once seen, the release brakes it at 100 mm/s² from 25 mm/s: 3.1 mm (and the
+            # commanded tool's lag); seeing it takes up to 0.15 s after the last repeat, more
+            # on a loaded machine (the wall clock's figure, loosely held)
+            assert tab._servo.report is not None and tab._servo.report.braked < 5.2
+            assert moved - released < 3.2 + 25.0 * 0.5, (moved, released)
+            assert client.status().mode == Mode.HOLD
+            tab.refresh_live()
+            jogs = [e for e in app.desk.events.entries if e.kind == "jog"]
+            assert jogs and all("held Cartesian jog z +" in e.what for e in jogs), jogs
+            kinds = [info.kind for info in list_runs(tui.data_dir)]
+            assert kinds in ([], ["go_to"]), f"a held jog leaves no run: {kinds}"
 
     asyncio.run(scenario())
 
