@@ -8,7 +8,8 @@ simulator powers up) to home (Yaw turns 87.5°), then to park (``ControlClient.g
 Positions tab's move); for each move the script prints the path's duration, the largest
 |actual − desired| while it is followed, the largest distance from the target when the path
 ends, and the controller time from the path's end until every joint has stayed within its
-``tolerance`` of the target for 0.5 s (what the Positions tab waits for before it says "at"),
+``tolerance`` of the target for 0.5 s (the Positions tab's "at" is now the controller's
+settle, ``MoveResult.complete``: ``benchmarks/in_position.py``),
 and the largest distance from the target 1 to 4 s after the path (the hold's slow swing).
 """
 
@@ -28,7 +29,7 @@ from control import ControlClient
 from hw.machine import load_machine
 
 SPEEDS = (0.25, 0.5, 1.0)
-SETTLED_S = 0.5  # within tolerance this long is settled (app/tabs/positions.py)
+SETTLED_S = 0.5  # within tolerance this long is settled (the Positions tab's rule before issue 24)
 GIVE_UP_S = 10.0  # controller seconds
 SWING_S = (1.0, 4.0)  # after the path, controller seconds
 
