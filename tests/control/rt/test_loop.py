@@ -389,19 +389,20 @@ def test_a_move_not_in_position_by_goal_time_ends_unsettled_naming_the_joint_and
         rig) -> None:
     controller, backend, client = rig
     controller.modes.set_coefficients("hold", pi(UNIMATE, 0.0, 0.0))  # hold gains zeroed
-    segment = start_move(controller, settle_path(5.0), "step", settle_rows=10)
+    segment = start_move(controller, settle_path(2.0), "step", settle_rows=10)
     try:
-        ticks(controller, backend, 3)  # the scripted arm never moves: 5° off
+        ticks(controller, backend, 3)  # the scripted arm never moves: 2° off, inside 2.5° FERROR
         flags = []
         while controller.modes.move is not None and len(flags) < 3000:
             ticks(controller, backend, 1)
             flags.append(controller.modes.settling)
         done = next(p for name, p in events(client) if name == "move_done")
-        assert re.fullmatch(r"unsettled: Rotate 4\.99° from its goal after 2 s", done["status"])
+        assert re.fullmatch(r"unsettled: Rotate (1\.99|2\.00)° from its goal after 2 s",
+                            done["status"]), done["status"]
         assert 1990 <= len(flags) <= 2010 and all(flags[:-1])
         assert done["settle"]["settle_s"][1] is None and done["settle"]["settle_s"][0] > 0
         assert done["recorded"] == 3 + 10  # the segment's room, no more
-        assert controller.modes.mode == Mode.HOLD and controller.modes.hold_target[1] == 5.0
+        assert controller.modes.mode == Mode.HOLD and controller.modes.hold_target[1] == 2.0
     finally:
         shm.release(segment, unlink=True)
 
