@@ -73,6 +73,8 @@ def dump_coefficients(sets: Mapping[str, Coefficients], machine: Machine) -> str
             f"duty_limit = {_number(c.duty_limit)}",
             *([f"kv = {_numbers(c.kv)}"] if c.kv else []),
             *([f"deadband = {_numbers(c.deadband)}"] if c.deadband else []),
+            *([f"integral_separation = {_number(c.integral_separation)}"]
+              if c.integral_separation else []),
             "",
         ]
     return "\n".join(lines)
@@ -111,7 +113,8 @@ def coefficient_changes(before: Coefficients, after: Coefficients, machine: Mach
             old, new = _entry(before, key, j), _entry(after, key, j)
             if old != new:
                 rows.append((joint.name, key, old, new))
-    for key in ("filter", "filter_divisor", "integral_limit", "duty_limit"):
+    for key in ("filter", "filter_divisor", "integral_limit", "duty_limit",
+                "integral_separation"):
         old, new = _shown(getattr(before, key)), _shown(getattr(after, key))
         if old != new:
             rows.append(("all joints", key, old, new))

@@ -69,11 +69,13 @@ def client(machine: str, timing: Timing, data: Path, lockstep: bool = True) -> C
 
 def thesis_gains(robot: ControlClient) -> ControlClient:
     """``robot`` holding and tracking with the sets the thesis ran (option.c's, the rig's
-    function.c hold and eq. 3.3 PID), in servodesk's timing too: presets of the machine files
-    since issue 24 made other sets the defaults (``control.rt.law.start_sets``)."""
-    for which, c in zip(("hold", "track"), start_sets(robot.machine, thesis_timing=True),
-                        strict=True):
-        robot.set_coefficients(which, c)
+    function.c hold and eq. 3.3 PID): a controller in the thesis's timing starts with them,
+    one in servodesk's is given them (presets of the machine files since issue 24 made
+    other sets the defaults, ``control.rt.law.start_sets``)."""
+    if robot.timing.name != "thesis":
+        for which, c in zip(("hold", "track"), start_sets(robot.machine, thesis_timing=True),
+                            strict=True):
+            robot.set_coefficients(which, c)
     return robot
 
 

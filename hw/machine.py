@@ -177,6 +177,7 @@ class Coefficients:
     duty_limit: float = 100.0
     kv: tuple[float, ...] = ()
     deadband: tuple[float, ...] = ()
+    integral_separation: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -728,7 +729,8 @@ class _Reader:
         if not isinstance(doc, dict):
             raise self.fail(key, "must be a table")
         self.only(doc, key, {"note", "kp", "ki", "kd", "w", "filter", "filter_divisor",
-                             "integral_limit", "duty_limit", "kv", "deadband"})
+                             "integral_limit", "duty_limit", "kv", "deadband",
+                             "integral_separation"})
         return Coefficients(
             name=name,
             note=self.string(doc, key, "note", default=name),
@@ -744,6 +746,7 @@ class _Reader:
             kv=self.coefficient_list(doc["kv"], f"{key}.kv", n) if "kv" in doc else (),
             deadband=(self.numbers(doc["deadband"], f"{key}.deadband", n, 0.0, COEFFICIENT)
                       if "deadband" in doc else ()),
+            integral_separation=self.number(doc, key, "integral_separation", 0.0, 0.0, 100.0),
         )
 
     def taps(self, value: Any, full: str, n: int) -> tuple[tuple[float, ...], ...]:

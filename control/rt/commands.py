@@ -302,7 +302,7 @@ def check_coefficients(coefficients: Coefficients, n_joints: int) -> None:
                            "finite and not negative (joint units)")
     numbers = {"ki": c.ki, "kd": c.kd, "kv": c.kv, "filter": c.filter,
                "filter_divisor": (c.filter_divisor,), "integral_limit": (c.integral_limit,),
-               "duty_limit": (c.duty_limit,)}
+               "duty_limit": (c.duty_limit,), "integral_separation": (c.integral_separation,)}
     numbers.update({f"kp[{j}]": taps for j, taps in enumerate(c.kp)})
     numbers.update({f"w[{j}]": taps for j, taps in enumerate(c.w)})
     for name, values in numbers.items():

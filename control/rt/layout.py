@@ -181,7 +181,7 @@ class CoefficientLayout:
     def __init__(self, n: int) -> None:
         self.n = n
         joint = f"{MAX_TAPS}di{MAX_TAPS}didddd"
-        self.struct = struct.Struct("<" + joint * n + f"{MAX_TAPS}diddd")
+        self.struct = struct.Struct("<" + joint * n + f"{MAX_TAPS}didddd")
 
     def encode(self, c: Coefficients) -> tuple:
         values: list = []
@@ -191,7 +191,7 @@ class CoefficientLayout:
             values += [c.ki[j], c.kd[j], c.kv[j] if c.kv else 0.0,
                        c.deadband[j] if c.deadband else 0.0]
         values += [*_padded(c.filter, "filter"), len(c.filter)]
-        values += [c.filter_divisor, c.integral_limit, c.duty_limit]
+        values += [c.filter_divisor, c.integral_limit, c.duty_limit, c.integral_separation]
         return tuple(values)
 
     def decode(self, values: tuple, name: str) -> Coefficients:
@@ -210,6 +210,7 @@ class CoefficientLayout:
             name=name, note=name, kp=tuple(kp), ki=tuple(ki), kd=tuple(kd), w=tuple(w),
             filter=tuple(tail[:tail[MAX_TAPS]]), filter_divisor=tail[MAX_TAPS + 1],
             integral_limit=tail[MAX_TAPS + 2], duty_limit=tail[MAX_TAPS + 3],
+            integral_separation=tail[MAX_TAPS + 4],
             kv=tuple(kv) if any(kv) else (),
             deadband=tuple(deadband) if any(deadband) else (),
         )

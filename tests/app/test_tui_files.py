@@ -66,7 +66,7 @@ def test_a_bad_coefficient_file_names_file_and_key(text: str, message: str) -> N
 
 
 def test_too_many_taps_for_the_controller_are_refused() -> None:
-    text = dump_coefficients({"hold": UNIMATE.hold}, UNIMATE).replace(
+    text = dump_coefficients({"hold": UNIMATE.coefficients["thesis_hold"]}, UNIMATE).replace(
         "kp = [[10.0]", "kp = [[1, 2, 3, 4, 5, 6, 7, 8, 9]")
     with pytest.raises(CoefficientFileError, match=r"coefficients.hold.kp\[0\]: 9 taps"):
         parse_coefficients(text, UNIMATE, "f.toml")

@@ -297,7 +297,8 @@ def test_feed_forward_gains_are_optional_and_checked() -> None:
 
 
 def test_a_deadband_is_optional_one_per_joint_and_not_negative() -> None:
-    """Issue 24: the default sets rest within two encoder counts; the thesis's have none."""
+    """Issue 24: the default sets rest within two encoder counts and separate the integral
+    at 20 %; the thesis's sets do neither."""
     unimate = load_machine("unimate2000b")
     assert unimate.hold.deadband == pytest.approx([2 * abs(j.encoder.gradient)
                                                    for j in unimate.joints])
@@ -308,6 +309,11 @@ def test_a_deadband_is_optional_one_per_joint_and_not_negative() -> None:
     with pytest.raises(MachineError, match=r"coefficients\.hold\.deadband\[0\]: -1 out of "):
         parse_machine(UNIMATE_TEXT.replace("deadband = [0.5234, ", "deadband = [-1, ", 1),
                       Path("db.toml"))
+    assert unimate.hold.integral_separation == 20.0
+    assert unimate.coefficients["thesis_pi"].integral_separation == 0.0
+    with pytest.raises(MachineError, match=r"coefficients\.hold\.integral_separation: 120 out"):
+        parse_machine(UNIMATE_TEXT.replace("integral_separation = 20.0",
+                                           "integral_separation = 120", 1), Path("db.toml"))
 
 
 def test_the_cartesian_jog_speed_is_the_file_s_or_the_default() -> None:

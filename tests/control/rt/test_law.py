@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from control.rt.law import DifferenceLaw, pi, pid, preset
+from control.rt.law import REST_EXIT_SAMPLES, DifferenceLaw, pi, pid, preset
 from hw.machine import Coefficients, Machine, load_machine
 from hw.transmission import output_min_pwm
 
@@ -230,7 +230,7 @@ def test_inside_the_deadband_at_rest_the_valve_stays_inside_its_overlap() -> Non
     output crosses zero and min-PWM compensation steps the valve from +25 % to −28 % and back
     (Bend). At rest, once within half the deadband, the law sees no error: the integral stops
     and what it holds goes out uncompensated, clipped to the minimum PWM, inside the spool's
-    overlap, until the error is past the deadband two samples running."""
+    overlap, until the error is past the deadband REST_EXIT_SAMPLES samples running."""
     bend = 3
     count = UNIMATE.joints[bend].encoder.gradient
     up, down = output_min_pwm(UNIMATE.joints[bend])
@@ -239,10 +239,11 @@ def test_inside_the_deadband_at_rest_the_valve_stays_inside_its_overlap() -> Non
     assert law.update(bend, 3 * count) > up  # P and I act, compensated past the minimum PWM
     assert law.update(bend, 1.5 * count) > up  # inside the deadband, not yet within half
     held = law.state(bend).integral
-    inside = [law.update(bend, e * count) for e in (0.9, 1.8, -1.8, 2.5, 0.0, 2.5)]
-    assert inside == pytest.approx([held] * 6)  # one sample past the band is not enough
+    glitch = [2.5] * (REST_EXIT_SAMPLES - 1)  # a wrong reading of a few samples
+    inside = [law.update(bend, e * count) for e in (0.9, 1.8, -1.8, *glitch, 0.0, *glitch)]
+    assert inside == pytest.approx([held] * len(inside))
     assert law.state(bend).integral == held
-    assert law.update(bend, 2.5 * count) > up  # the second sample running past it is
+    assert law.update(bend, 2.5 * count) > up  # the last sample running past it ends the rest
     law = DifferenceLaw(UNIMATE, replace(c, kp=((0.0,),) * 6, ki=(5e4,) * 6),
                         UNIMATE.sample_time_s)
     law.update(bend, -1.0)  # the integral to −50 %
@@ -252,6 +253,19 @@ def test_inside_the_deadband_at_rest_the_valve_stays_inside_its_overlap() -> Non
     law.reset()
     assert law.update(bend, 0.5 * count) == 0.0  # reset: no integral, resting at once
 
+
+def test_integral_separation_holds_the_integral_while_the_other_terms_ask_for_much() -> None:
+    """Issue 24: conditional integration beyond saturation: at 0.75 % a count a 30-count error
+    asks for 22.5 %, over a separation of 20 %: the integral holds; at 20 counts it grows."""
+    c = replace(one_joint(kp=(0.75,), ki=1.0), integral_separation=20.0)
+    law = DifferenceLaw(plain_machine(), c, 0.001)
+    law.update(0, 30.0)
+    assert law.state(0).integral == 0.0
+    law.update(0, 20.0)
+    assert law.state(0).integral == pytest.approx(20.0 * 0.001)
+    none = DifferenceLaw(plain_machine(), one_joint(kp=(0.75,), ki=1.0), 0.001)
+    none.update(0, 30.0)
+    assert none.state(0).integral == pytest.approx(30.0 * 0.001)
 
 def test_a_move_ignores_the_deadband() -> None:
     """While the path moves (a desired velocity) a one-count error is acted on, compensated."""
