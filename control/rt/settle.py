@@ -18,6 +18,8 @@ from collections import deque
 
 from hw.machine import GOAL_WINDOW_S, Machine
 
+WINDOW_EDGE_S = GOAL_WINDOW_S - 1e-9  # a window's worth of samples, whatever the rounding
+
 
 class GoalCheck:
     """The settle of one move, from its path's end ``goal`` at ``start_ns``."""
@@ -33,6 +35,7 @@ class GoalCheck:
         self.settled_s = [math.nan] * len(goal)  # since when each joint is in position
         self.error = [0.0] * len(goal)  # position − goal, the last sample
         self.speed = [math.nan] * len(goal)  # over the window, the last sample
+        self.t = 0.0  # s since the path's end, the last sample
         self.verdict = ""
 
     def elapsed_s(self, now: int) -> float:
@@ -40,7 +43,7 @@ class GoalCheck:
 
     def sample(self, now: int, position: list[float]) -> str:
         """Judge one sample; the move's status once settled or out of time, else ""."""
-        t = self.elapsed_s(now)
+        t = self.t = self.elapsed_s(now)
         window = self.window
         window.append((t, tuple(position)))
         t0, old = window[0]
@@ -53,7 +56,7 @@ class GoalCheck:
                 self.settled_s[j] = math.nan
             elif self.settled_s[j] != self.settled_s[j]:
                 self.settled_s[j] = t
-        if all(t - s >= GOAL_WINDOW_S for s in self.settled_s):  # NaN compares False
+        if all(t - s >= WINDOW_EDGE_S for s in self.settled_s):  # NaN compares False
             self.verdict = "complete"
         elif t >= self.goal_time_s:
             self.verdict = (f"unsettled: {'; '.join(self.out_text(j) for j in self.out())} "
@@ -61,12 +64,15 @@ class GoalCheck:
         return self.verdict
 
     def out(self) -> list[int]:
-        """The joints not (yet) in position."""
-        return [j for j, s in enumerate(self.settled_s) if s != s]
+        """The joints not (yet) in position for a whole window."""
+        return [j for j, s in enumerate(self.settled_s) if not self.t - s >= WINDOW_EDGE_S]
 
     def out_text(self, j: int) -> str:
-        joint, error, speed = self.joints[j], self.error[j], self.speed[j]
+        joint, error, speed, since = self.joints[j], self.error[j], self.speed[j], \
+            self.settled_s[j]
         text = f"{joint.name} {abs(error):.2f}{joint.symbol} from its goal"
+        if since == since:
+            return text + f", in position only for its last {self.t - since:.3f} s"
         if abs(error) <= self.tolerance[j]:
             text += f", moving {speed:.3g} {joint.unit}/s"
         return text
