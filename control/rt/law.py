@@ -15,8 +15,9 @@ on ``REST_EXIT_SAMPLES`` samples running (hysteresis: a reading flickering a cou
 edge, or a wrong reading of section 6.2, neither starts nor ends one); while
 resting the law sees no error, the integral holds, and the output goes out without the
 compensation, clipped to the minimum PWM, so the valve stays inside its overlap.
-The set's ``integral_separation`` (%) stops the integral too while the other terms
-together ask for more than it (conditional integration, Åström and Hägglund): a P.I.
+The set's ``integral_separation`` (%) stops the integral too while the feedback terms
+(all but the integral and the feed-forward) ask for more than it (conditional integration,
+Åström and Hägglund): a P.I.
 designed for the small errors of a followed path otherwise winds up on the way to a step
 (the rig's 100 mm step overshot 13.6 mm, 2.7 with 20 %).
 Taps are newest first (errata #21). With ``w`` empty, ``kp = [Kp]`` and the
@@ -178,10 +179,10 @@ class DifferenceLaw:
         errors.insert(0, e)  # e(k), e(k−1), … newest first
         u = sum(map(mul, g.w, s.u))  # Σ w[i]·u(k−i)
         u += sum(map(mul, g.b, errors))  # Σ kp[i]·e(k−i) + kd·Σ f[i]·e(k−i) / (p·Δt)
-        u += g.kv * velocity  # velocity feed-forward (chapter 6)
         step = g.ki_dt * (errors[-1] if g.oldest else e)  # errata #2, #3
         if g.separation and not -g.separation <= u <= g.separation:
-            step = 0.0  # conditional integration: the other terms alone ask for much
+            step = 0.0  # conditional integration: the feedback alone asks for much
+        u += g.kv * velocity  # velocity feed-forward (chapter 6)
         integral = s.integral + step
         if integral > g.integral_limit:
             integral = g.integral_limit
