@@ -140,7 +140,7 @@ def test_a_set_the_gain_check_refuses_is_shown_and_applies_nothing(tui) -> None:
             in_tab = str(app.query_one("#tuning-outcome").render())  # not only in a toast
             assert "In/Out: unstable on the nominal model: negative gain" in in_tab, in_tab
             assert app.client.coefficients["track"] == before
-            assert table.get_row_at(0)[1] == "20"
+            assert table.get_row_at(0)[1] == f"{before.kp[0][0]:g}"
 
     asyncio.run(scenario())
 
@@ -161,9 +161,10 @@ def test_the_rigs_observer_preset_is_refused_with_the_reason(tui) -> None:
             assert any("Ram: unstable on the nominal model: a closed-loop pole at |z| = 94.98"
                        in m for m in seen), seen
             assert app.client.coefficients["track"] == app.machine.track
-            app.query_one("#tuning-preset").value = "hold"
+            app.query_one("#tuning-preset").value = "thesis_track"
             await pilot.click("#tuning-apply-preset")
-            await tui.until(lambda: app.client.coefficients["track"] == app.machine.hold,
+            thesis = app.machine.coefficients["thesis_track"]
+            await tui.until(lambda: app.client.coefficients["track"] == thesis,
                             what="the preset applied")
 
     asyncio.run(scenario())

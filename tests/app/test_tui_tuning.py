@@ -51,14 +51,14 @@ def test_load_shows_the_differences_and_applies_only_on_confirm_then_undo(tui,
             table = await open_tuning(tui, app, pilot)
             client = app.client
             live = client.coefficients["track"]
-            tuned = replace(live, kp=((18.0,), *live.kp[1:]))  # In/Out's kp 20 → 18
+            tuned = replace(live, kp=((18.0,), *live.kp[1:]))  # In/Out's kp → 18
             path = save_coefficients(tmp_path / "tuned", {"track": tuned}, app.machine)
             app.query_one("#tuning-path", Input).value = str(path)
             await pilot.click("#tuning-load")
             await tui.until(lambda: isinstance(app.screen, ReviewScreen), what="the review")
             review = "\n".join(str(s.render()) for s in app.screen.query(Static))
             assert "track set ← 'track' from tuned.toml" in review
-            assert "In/Out" in review and "kp" in review and "20 → 18" in review
+            assert "In/Out" in review and "kp" in review and f"{live.kp[0][0]:g} → 18" in review
             assert client.coefficients["track"] == live  # nothing yet
             await pilot.press("n")
             await tui.until(lambda: not isinstance(app.screen, ReviewScreen))
