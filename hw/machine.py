@@ -63,7 +63,7 @@ CARTESIAN_JOG_ACCEL_RANGE = (1.0, 10_000.0)
 # in-position): a joint's speed is judged over this window, so a one-count step of the
 # encoder is count / window; goal_time is the longest a move may take to settle.
 GOAL_WINDOW_S = 0.1
-GOAL_TIME_S = (0.2, 600.0)
+GOAL_TIME_S = (0.5, 600.0)  # at least two windows and the samples the path ends on
 GOAL_TIME_DEFAULT_S = 2.0
 STOPPED_SPEED_FRACTION = 0.02  # stopped_speed defaults to 2 % of max_speed
 

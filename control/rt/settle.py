@@ -64,8 +64,9 @@ class GoalCheck:
         return self.verdict
 
     def out(self) -> list[int]:
-        """The joints not (yet) in position for a whole window."""
-        return [j for j, s in enumerate(self.settled_s) if not self.t - s >= WINDOW_EDGE_S]
+        """The joints not in position; if every one is, those in it for less than a window."""
+        out = [j for j, s in enumerate(self.settled_s) if s != s]
+        return out or [j for j, s in enumerate(self.settled_s) if self.t - s < WINDOW_EDGE_S]
 
     def out_text(self, j: int) -> str:
         joint, error, speed, since = self.joints[j], self.error[j], self.speed[j], \

@@ -179,14 +179,14 @@ BAD = [
      r"joints\[2\]\.goal_tolerance: 0\.01 deg is less than one encoder count \(0\.01432 deg\)"),
     (("12.0\ngoal_tolerance = 0.5", "12.0\ngoal_tolerance = -1"),
      r"joints\[2\]\.goal_tolerance: -1 out of range \(must be in 0…57\)$"),
-    (("goal_tolerance = 0.5\nstopped_speed = 2.0\nencoder = { gradient = 0.06057",
+    (("goal_tolerance = 0.5\nstopped_speed = 5.0\nencoder = { gradient = 0.06057",
       "goal_tolerance = 0.5\nstopped_speed = 0.1\nencoder = { gradient = 0.06057"),
      r"joints\[3\]\.stopped_speed: 0\.1 deg/s is less than one encoder count in 100 ms "
      r"\(0\.606 deg/s\)"),
     (("stopped_speed = 10.0", "stopped_speed = 500.0"),
      r"joints\[0\]\.stopped_speed: 500 out of range \(must be in 0…400\)$"),
     (("goal_time = 2.0", "goal_time = 0.05"),
-     r"machine\.goal_time: 0\.05 out of range \(must be in 0\.2…600\)$"),
+     r"machine\.goal_time: 0\.05 out of range \(must be in 0\.5…600\)$"),
     (("goal_time = 2.0", "goal_time = \"2 s\""), r"machine\.goal_time: must be a number"),
 ]
 
@@ -331,7 +331,7 @@ def test_goal_tolerances_are_the_file_s_or_the_defaults() -> None:
     left out, the settle band, 2 % of max_speed (at least a count in 100 ms) and 2 s."""
     unimate, rig = load_machine("unimate2000b"), load_machine("rig")
     assert [(j.goal_tolerance, j.stopped_speed) for j in unimate.joints] == [
-        (1.0, 10.0), *[(0.5, 2.0)] * 5]
+        (1.0, 10.0), (0.5, 2.0), (0.5, 2.0), *[(0.5, 5.0)] * 3]
     assert [(j.goal_tolerance, j.stopped_speed) for j in rig.joints] == [(0.5, 5.0)]
     assert unimate.goal_time_s == rig.goal_time_s == 2.0
     bare = UNIMATE_TEXT.replace("goal_time = 2.0\n", "")
