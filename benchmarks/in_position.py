@@ -81,10 +81,10 @@ def main() -> None:
           f"{'last in':>8} {'at s':>8} {'end error/goal':>12}")
     with tempfile.TemporaryDirectory() as data, \
             ControlClient(machine, "sim", lockstep=True, seed=args.seed, data_dir=data) as client:
-        for which, name in zip(("hold", "track"), args.sets.split(",") if args.sets else (),
-                               strict=True):
-            client.set_coefficients(which, machine.coefficients[name],
-                                    override=f"benchmark: the {name} set")
+        if args.sets:
+            for which, name in zip(("hold", "track"), args.sets.split(","), strict=True):
+                client.set_coefficients(which, machine.coefficients[name],
+                                        override=f"benchmark: the {name} set")
         for speed in SPEEDS:
             client.wait(client.go_to(middle, 0.5))
             for label, target in moves_of(machine):
