@@ -70,7 +70,7 @@ def test_round_trip_is_exact_at_the_written_precision(tmp_path: Path) -> None:
     assert back == as_written(run)
     assert load_run(files.csv) == back and load_run(tmp_path / files.stem) == back
     assert back.meta == {"target": 10.5, "joint": 2}
-    assert back.coefficients["kp"][2] == [31.0]  # Unimate track set, Up/Down
+    assert back.coefficients["kp"][2] == [UNIMATE.track.kp[2][0]]  # track set, Up/Down
     assert back.joint_resolution == tuple(abs(j.encoder.gradient) for j in UNIMATE.joints)
     half_unit = 0.5 * 10.0 ** -np.array(back.decimals())  # (J,) a tenth of a count, halved
     assert back.decimals() == (2, 3, 3, 3, 3, 3)
