@@ -12,10 +12,7 @@ new override), when the path's rate began to change and when it reached the new 
 (the rate ramps within every joint's max_accel), and the rate the path then advanced at,
 measured from the rows the controller recorded per tick over the next 50 ms. The rate a
 path advances at is its speed scale: at 0.5 each joint moves at half its path speed.
-The streamed velocity jog (``ControlClient.jog_velocity``, the Cartesian hold-to-move's
-way) is scaled by the override too: for it the script streams Rotate at 10°/s at 50 Hz and
-prints when the hold target's speed (from the status, every tick) began to change and when it
-reached the new speed. A last line gives the issue's case: a 4 s Rotate ramp with the
+A last line gives the issue's case: a 4 s Rotate ramp with the
 override dropped to 50 % one second in must reach its end after about 7 s.
 """
 
@@ -23,7 +20,6 @@ from __future__ import annotations
 
 import sys
 import tempfile
-import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -42,7 +38,6 @@ MACHINE = load_machine("unimate2000b")
 ROTATE, INOUT, UPDOWN = 1, 0, 2
 UNDER_WAY_S = 0.8  # controller seconds into the path before the override changes
 RATE_WINDOW_TICKS = 50
-JOG_SPEED = 10.0  # °/s, Rotate's streamed jog
 Start = Callable[[ControlClient, np.ndarray], MoveHandle]
 
 
@@ -105,42 +100,6 @@ def change(client: ControlClient, value: float) -> tuple[float, float, float, fl
     return taken, first, reached, rate
 
 
-def jog_change(client: ControlClient, value: float, before: float) -> tuple[float, float,
-                                                                           float, float]:
-    """As ``change``, for the streamed jog: Rotate's hold-target speed (°/s) from ``before``."""
-    goal = JOG_SPEED * value
-    last = client.status()
-    sent = time.monotonic_ns()
-    client.feed_override(value)
-    taken = first = reached = float("nan")
-    while True:
-        status = client.status()
-        ms = (status.wall_ns - sent) / 1e6
-        if taken != taken and status.feed_override == value:
-            taken = ms
-        if status.tick > last.tick:
-            speed = ((status.desired[ROTATE] - last.desired[ROTATE])
-                     / ((status.tick - last.tick) * MACHINE.sample_time_s))
-            if first != first and abs(speed - before) > 0.02 * before:
-                first = ms
-            if abs(speed - goal) < 0.01 * JOG_SPEED:
-                reached = ms
-                break
-            last = status
-        if ms > 5_000:
-            break
-        time.sleep(0.0002)
-    return taken, first, reached, speed / JOG_SPEED
-
-
-def stream_jog(client: ControlClient, stop: threading.Event) -> None:
-    command = [0.0] * MACHINE.n_joints
-    command[ROTATE] = JOG_SPEED
-    while not stop.is_set():
-        client.jog_velocity(command)
-        time.sleep(0.02)
-
-
 def under_way(client: ControlClient, handle: MoveHandle, seconds: float) -> None:
     deadline = time.monotonic() + 30.0
     while client.status().move_id != handle.move_id or client.status().mode != Mode.FOLLOW_TRACK:
@@ -167,21 +126,6 @@ def main() -> None:
                 time.sleep(0.3)
             result = client.wait(handle, timeout=120)
             assert result.status, result.status
-        client.feed_override(1.0)
-        stop = threading.Event()
-        streamer = threading.Thread(target=stream_jog, args=(client, stop))
-        streamer.start()
-        time.sleep(0.5)
-        before = JOG_SPEED
-        for value in (0.5, 1.0):
-            taken, first, reached, scale = jog_change(client, value, before)
-            print(f"{'velocity jog':>18} {'→ ' + format(value, '.0%'):>9} {taken:9.1f} "
-                  f"{first:14.1f} {reached:15.1f} {scale:10.2f} (speed)")
-            before = JOG_SPEED * value
-            time.sleep(0.3)
-        stop.set()
-        streamer.join()
-        time.sleep(0.5)
         here = np.array(client.status().position)
         end = here[ROTATE] + 40.0
         handle = client.run(form_plans.ramp(MACHINE, here, ROTATE, end, 4.0, dt=client.dt))

@@ -11,9 +11,10 @@ saturated its valve).
 Velocity jog (MoveIt Servo's, a pendant's hold-to-move): the client streams each
 joint's velocity; the hold target moves at it, changing by at most ``max_accel``,
 capped at ``jog_speed``. A stream not renewed within ``DEADMAN_S`` (counted in
-samples, so a lockstep clock counts the same) brakes to a stop at ``max_accel``. The feed
-override scales it (``scale``), as a pendant's override scales its jog, a change ramped
-within ``max_accel`` like any other; a position jog's step goes at jog speed whatever it is.
+samples, so a lockstep clock counts the same) brakes to a stop at ``max_accel``. The
+velocities are taken as sent: the feed override is the streamer's to apply (a client's
+Cartesian servo tracks a reference along its line, and a controller that scaled what it
+sends would only leave that servo lagging its reference at full speed).
 
 Both come to rest ``rest_margin`` inside the soft limits (``rest_range``), and brake
 within their braking distance of that edge, never past it: a target on the limit
@@ -63,7 +64,6 @@ class PositionJog:
         self.wanted = [0.0] * n  # the streamed velocity (units/s), capped at jog_speed
         self.deadman_samples = max(1, round(DEADMAN_S / dt))
         self.renew_left = 0  # samples until the stream counts as stopped
-        self.scale = 1.0  # the feed override: a streamed velocity is scaled by it
         self.moving = False
 
     def stop_at(self, target: list[float]) -> None:
@@ -142,7 +142,7 @@ class PositionJog:
     def follow_stream(self, j: int, target: list[float]) -> bool:
         q, v, lower, upper = target[j], self.velocity[j], self.lower[j], self.upper[j]
         wanted = max(-self.braking_speed(j, q - lower),
-                     min(self.braking_speed(j, upper - q), self.scale * self.wanted[j]))
+                     min(self.braking_speed(j, upper - q), self.wanted[j]))
         dv = self.accel[j] * self.dt
         v += max(-dv, min(dv, wanted - v))
         moved = q + v * self.dt

@@ -299,7 +299,6 @@ class Controller:
 
     def on_feed(self, command: cmd.FeedOverride | cmd.Pause | cmd.Resume) -> None:
         self.modes.feed_command(command, self.clock.now_ns())
-        self.modes.jog.scale = self.modes.feed.override  # a streamed jog's speed too
 
     def on_inject(self, command: cmd.Inject) -> None:
         """Drive a simulator-only input (``press_estop``) from a test; refused on real hardware."""

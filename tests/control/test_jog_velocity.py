@@ -143,13 +143,14 @@ def test_a_velocity_jog_is_refused_while_a_move_runs_and_checked_when_built(
     assert lockstep.wait(handle, timeout=60).complete
 
 
-def test_the_feed_override_scales_a_streamed_jog(lockstep: ControlClient) -> None:
-    """As a pendant's override scales its jog (the Cartesian hold-to-move streams joint
-    velocities): at 50 % the one command of the deadman test goes half as far."""
+def test_a_streamed_velocity_is_taken_as_sent_whatever_the_feed_override(
+        lockstep: ControlClient) -> None:
+    """The override is the streamer's to apply (a Cartesian servo scales its reference by
+    it): at 50 % the one command of the deadman test goes as far as at 100 %."""
     lockstep.feed_override(0.5)
     ticks_pass(lockstep, 10)
     start = lockstep.status().desired[UPDOWN]
     lockstep.jog_velocity(velocity(5.0))
     ticks_pass(lockstep, 2_000)
     travel = lockstep.status().desired[UPDOWN] - start
-    assert travel == pytest.approx(0.5 * 5.0 * DEADMAN_S, rel=0.05), travel
+    assert travel == pytest.approx(5.0 * DEADMAN_S, rel=0.05), travel

@@ -176,14 +176,3 @@ def test_a_target_held_outside_the_rest_range_is_not_pushed_further_out() -> Non
     jog.move_goal(UPDOWN, jog.goal[UPDOWN] - 1.0)
     assert jog.goal[UPDOWN] == pytest.approx(joint.upper - 1.1)
 
-
-def test_the_feed_override_scales_a_streamed_velocity_ramped_within_max_accel() -> None:
-    joint = UNIMATE.joints[UPDOWN]
-    jog, target = started()
-    first = stream(jog, target, 4.0, 500)
-    jog.scale = 0.5  # the operator's override, mid-jog
-    second = stream(jog, target, 4.0, 500)
-    velocity = np.diff(np.concatenate([[0.0], first, second])) / DT
-    assert velocity[400] == pytest.approx(4.0) and velocity[-1] == pytest.approx(2.0)
-    assert velocity[500 + round(2.0 / joint.max_accel / DT) + 1] == pytest.approx(2.0)
-    assert np.abs(np.diff(velocity)).max() / DT <= joint.max_accel * (1 + 1e-6)

@@ -1,7 +1,7 @@
 """The streamed velocity jog in the loop, ticked in-process (``tests/control/rt/test_loop.py``'s
 scripted backend, its arm following the hold target exactly): the deadman counts the loop's
-ticks, a renewed stream keeps moving, the feed override scales it, and a record that fails its
-checks, or comes while latched, moves nothing."""
+ticks, a renewed stream keeps moving, taken as sent whatever the feed override, and a record
+that fails its checks, or comes while latched, moves nothing."""
 
 from __future__ import annotations
 
@@ -69,14 +69,14 @@ def test_a_stream_renewed_within_the_deadman_keeps_moving(rig) -> None:
                                       rel=0.01)
 
 
-def test_the_feed_override_scales_the_stream(rig) -> None:
+def test_the_stream_is_taken_as_sent_whatever_the_feed_override(rig) -> None:
     controller, backend, _ = rig
     controller.channel.deliver(FeedOverride(0.5))
     ticks(controller, backend, 1)
     for _ in range(5):
         controller.channel.deliver(velocity(4.0))
         follow(controller, backend, 100)
-    assert controller.modes.jog.velocity[UPDOWN] == pytest.approx(2.0)
+    assert controller.modes.jog.velocity[UPDOWN] == pytest.approx(4.0)
 
 
 @pytest.mark.parametrize("command", [
