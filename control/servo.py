@@ -37,6 +37,7 @@ import numpy as np
 from control.client import ControlClient
 from control.motion.cartesian_jog import FRAMES, Line, line_of
 from control.motion.robot_model import unimate_model
+from control.rt.jog import rest_range
 from control.rt.layout import Mode, Status
 from kinematics.unimate import Unimate2000B
 
@@ -45,6 +46,8 @@ CORRECTION_PER_S = 10.0  # 1/s: a pose error is taken back at this rate (0.1 s t
 APPROACH_LOOK_S = 0.05  # a halt looks this far ahead to tell nearing a singularity from leaving
 LIMIT_LOOK_S = 0.3  # the servo brakes when a joint would reach a soft limit within this
 SETTLE_TICKS = 3  # periods of zero velocity sent after the tool stopped on its line
+ARRIVED = 0.02  # mm or deg: the commanded tool is at the line's end (it caught up its lag)
+CATCH_UP_S = 1.0  # at most this long after the reference stopped (10 time constants)
 
 
 @dataclass(frozen=True)
@@ -91,8 +94,9 @@ class CartesianServo:
         self.ramp = float(min(a / n for a, n in zip(accel, lengths, strict=True) if n > 0))
         self.vjog = np.array([j.jog_speed for j in machine.joints])
         self.vmax = np.array([j.max_speed for j in machine.joints])
-        self.lower = np.array(machine.lower)
-        self.upper = np.array(machine.upper)
+        ranges = [rest_range(j) for j in machine.joints]  # where the controller's jog stops
+        self.lower = np.array([low for low, _ in ranges])
+        self.upper = np.array([high for _, high in ranges])
         self.period = 1.0 / SERVO_HZ
         self._held = threading.Event()
         self._renewed = time.monotonic()
@@ -138,7 +142,7 @@ class CartesianServo:
                                                    else line.omega)])
         s = u = drift = 0.0
         released: float | None = None  # how far it had gone when the release was seen
-        last, quiet = began, 0
+        last, quiet, stopping = began, 0, 0.0
         try:
             while quiet < SETTLE_TICKS:
                 now = time.monotonic()
@@ -157,10 +161,12 @@ class CartesianServo:
                 scale = self._zone(q, twist) if u > 0 else 0.0
                 s += u * scale * dt
                 drift = max(drift, self._sideways(line, q))
-                qdot = self._joint_velocity(q, line, s, twist * u * scale)
+                qdot, off = self._joint_velocity(q, line, s, twist * u * scale)
                 if not self._held.is_set() and u == 0.0:
-                    qdot[:] = 0.0
-                    quiet += 1
+                    stopping = stopping or now
+                    if off < ARRIVED or now - stopping > CATCH_UP_S:  # on the line's end
+                        qdot[:] = 0.0
+                        quiet += 1
                 self.client.jog_velocity(qdot.tolist())
                 time.sleep(max(0.0, self.period - (time.monotonic() - now)))
         except Exception as exc:  # the controller died or refused: the deadman brakes it
@@ -224,17 +230,19 @@ class CartesianServo:
         return np.abs(self._qdot(q, twist))
 
     def _joint_velocity(self, q: np.ndarray, line: Line, s: float, feed: np.ndarray
-                        ) -> np.ndarray:
-        """``J⁻¹·(feed + K·e)``, scaled as a whole to the joints' jog speeds."""
+                        ) -> tuple[np.ndarray, float]:
+        """``J⁻¹·(feed + K·e)``, scaled as a whole to the joints' jog speeds, and how far the
+        commanded tool is from the reference (mm, and deg counted as mm)."""
         t = self.model.forward(q)
         p_ref, r_ref = line.at(np.array([s]))
         error = np.concatenate([p_ref[0] - t[:3, 3],
                                 np.degrees(_rotation_vector(r_ref[0] @ t[:3, :3].T))])
+        off = float(np.abs(error).max())
         qdot = self._qdot(q, feed + CORRECTION_PER_S * error)
         if not np.isfinite(qdot).all():
-            return np.zeros(6)
+            return np.zeros(6), off
         over = float(np.max(np.abs(qdot) / self.vjog))
-        return qdot / over if over > 1.0 else qdot
+        return (qdot / over if over > 1.0 else qdot), off
 
     def _sideways(self, line: Line, q: np.ndarray) -> float:
         """How far the commanded tool point is from the line's (mm)."""

@@ -105,7 +105,7 @@ SYMBOLS = {"mm": " mm", "deg": "°"}  # after a number
 RELEASE_CHECK_S = 0.01
 JOINT_RELEASE = (0.11, 2.5)  # KeyRepeat's most (s) and factor in the joint frame
 TOOL_RELEASE = (0.15, 4.0)  # and in a Cartesian frame: 4 repeats of 33 ms missed is a release
-STALL_S = 0.05  # a release check this late follows a stall of the UI: it judges nothing
+STALL_S = 0.03  # a release check this late follows a stall of the UI: its silence is excused
 LATCHED_NOTICE_S = 3.0  # while latched, a jog key says why at most this often
 LATCHED = ("E-stop latched: the jog keys do nothing until you release it (^R); the joints "
            "then hold where they are")
@@ -176,6 +176,11 @@ class KeyRepeat:
         self._repeats[key] += 1
         self._last[key] = now
         return False
+
+    def excuse(self, seconds: float) -> None:
+        """The UI could not hear keys for ``seconds`` (a stall): that silence is no release."""
+        for k in self._last:
+            self._last[k] += seconds
 
     def timeout(self, key: int) -> float:
         return self.first_timeout if self._repeats.get(key, 0) == 0 else self.repeat_timeout
@@ -399,7 +404,7 @@ class JogPad(Widget, can_focus=True):
         assert self.cartesian_speeds is not None  # the frame is joint without them
         d[axis] = sign * self.cartesian_speed * self.cartesian_speeds[0 if unit == "mm" else 1]
         self.post_message(self.CartesianHeld(tuple(d), self.frame, repeat=not new))
-        self._release_timer.resume()
+        self._listen()
 
     def action_arrow(self, sign: int) -> None:
         if self.refused_while_latched():
@@ -426,14 +431,26 @@ class JogPad(Widget, can_focus=True):
         if self.repeat.press(joint, time.monotonic()) or self.duty[joint] != duty:
             self.duty[joint] = duty
             self.send()
+        self._listen()
+
+    def _listen(self) -> None:
+        """Check for releases from now on (every RELEASE_CHECK_S while a key is held)."""
+        if self._checked == -math.inf:  # paused: its first check is on time, not late
+            self._checked = time.monotonic()
         self._release_timer.resume()
+
+    def _deafen(self) -> None:
+        """No key held: stop checking (the next hold starts afresh)."""
+        self._release_timer.pause()
+        self._checked = -math.inf
 
     def _check_release(self) -> None:
         """Every RELEASE_CHECK_S while a key is held: stop the joints let go; when the last
         is let go, hold every joint where it stopped (at zero duty a joint would sag)."""
         now = time.monotonic()
-        stalled, self._checked = now - self._checked > STALL_S, now
-        if stalled:  # the UI was not listening: a repeat may be waiting behind this check
+        late, self._checked = now - self._checked - RELEASE_CHECK_S, now
+        if late > STALL_S:  # the UI was not listening: repeats may be waiting behind this
+            self.repeat.excuse(late)
             return
         gone = self.repeat.released(now)
         if self.frame != "joint":  # one Cartesian axis at a time: its release stops the jog
@@ -442,7 +459,7 @@ class JogPad(Widget, can_focus=True):
                 self.post_message(self.Stopped(True, tool=True))
             return
         if not self.repeat.held:
-            self._release_timer.pause()
+            self._deafen()
             if gone:
                 self.stop(hold=True)
         elif gone:
@@ -468,7 +485,7 @@ class JogPad(Widget, can_focus=True):
     def let_go(self) -> None:
         """Forget every held key and zero every duty; the tab decides about the hold."""
         self.repeat.forget()
-        self._release_timer.pause()
+        self._deafen()
         self.duty = [0.0] * self.n
 
     def forget_duties(self) -> None:
@@ -492,6 +509,7 @@ class JogTab(TabPage):
     TITLE = "Jog"
     _was_manual = False
     cartesian_note = Text("")  # why the last Cartesian jog was refused or ends early
+    zone_note = ""  # the singularity zone's warning in full, when the arm is near one
     _jog: MoveHandle | None = None  # the last Cartesian jog sent
     _steps: StepQueue | None = None  # steps pressed while it ran (made with the client)
     _refused = 0  # queued steps refused since the queue began: the reason is told once
@@ -702,7 +720,10 @@ class JogTab(TabPage):
             self._was_manual = manual
         self.pad.refresh()
         self.query_one("#jog-pose", LiveText).show(self._pose(status))
-        self.query_one("#jog-cartesian-note", LiveText).show(self.cartesian_note)
+        note = self.cartesian_note
+        if not note.plain and self.zone_note:  # nothing else to say: the whole warning
+            note = Text.assemble(("⚠ ", "bold yellow"), (self.zone_note, "yellow"))
+        self.query_one("#jog-cartesian-note", LiveText).show(note)
         self.query_one("#jog-table", LiveText).show(self._table(status))
         self.query_one("#jog-dead-band", LiveText).show(self._dead_band_note())
 
@@ -721,19 +742,22 @@ class JogTab(TabPage):
             position, angles = (f"x {x:8.1f}  y {y:8.1f}  z {z:8.1f} mm   ",
                                 f"γ {g:7.2f}°  β {b:7.2f}°  α {a:7.2f}°")
         parts: list[str | tuple[str, str]] = [("tool  ", "dim"), position, angles]
-        warning = self._zone_warning(status)
-        if warning:
-            parts += [("   ⚠ ", "bold yellow"), (warning, "yellow")]
+        warnings = self._zone_warnings(status)
+        self.zone_note = warnings[0] if warnings else ""
+        if warnings:
+            room = self.query_one("#jog-pose").size.width - len(Text.assemble(*parts)) - 5
+            fits = [w for w in warnings if len(w) <= room]
+            parts += [("   ⚠ ", "bold yellow"), (fits[0] if fits else "", "yellow")]
         elif self.pad.frame != "joint":
             keys = "  ".join(f"{p}/{m} {axis}" for (p, m), axis in zip(JOG_KEYS, AXES,
                                                                      strict=True))
             parts += [("   keys (", "dim"), (self.pad.frame, "bold"), (" frame) ", "dim"), keys]
         return Text.assemble(*parts)
 
-    def _zone_warning(self, status: Status) -> str:
+    def _zone_warnings(self, status: Status) -> list[str]:
         """What the singularity zone does to a Cartesian jog from the commanded joints, in the
-        pad's frame (world in the joint frame) at its speed: '' when every axis runs as asked.
-        """
+        pad's frame (world in the joint frame) at its speed, said at three lengths (the pose
+        line takes the longest that fits): none when every axis runs as asked."""
         q = np.array(status.desired)
         if not np.isfinite(q).all():
             q = np.array(status.position)
@@ -742,13 +766,17 @@ class JogTab(TabPage):
         near = zone(q, self.machine, frame, speed)
         slowed = np.flatnonzero(near.scale < ZONE_WARNING)
         if not len(slowed):
-            return ""
+            return []
         joints = self.machine.joints
-        axes = [f"{AXES[k]} stops ({joints[near.joint[k]].name})" if near.scale[k] == 0.0
-                else f"{AXES[k]} {near.scale[k]:.0%}" for k in slowed]
-        where = (f"wrist singularity near: Yaw {near.yaw:.1f}° from 0°"
-                 if abs(near.yaw) < WRIST_WARNING_DEG else "near a singularity")
-        return f"{where}; {frame} jog {', '.join(axes)}"
+        axes = ", ".join(f"{AXES[k]} stops ({joints[near.joint[k]].name})"
+                         if near.scale[k] == 0.0 else f"{AXES[k]} {near.scale[k]:.0%}"
+                         for k in slowed)
+        short = ", ".join(f"{AXES[k]} {'stops' if near.scale[k] == 0.0 else 'slow'}"
+                          for k in slowed)
+        if abs(near.yaw) >= WRIST_WARNING_DEG:
+            return [f"near a singularity; {frame} jog {axes}", short]
+        return [f"wrist singularity near: Yaw {near.yaw:.1f}° from 0°; {frame} jog {axes}",
+                f"Yaw {near.yaw:.1f}° from 0°: {short}", f"Yaw {near.yaw:.1f}°"]
 
     def _command(self, j: int) -> Text:
         """Joint ``j``'s commanded duty, marked when its valve will not open at it."""

@@ -117,7 +117,8 @@ def test_every_tab_shows_what_it_is_for(tui, size: tuple[int, int]) -> None:
                 if name == "jog":
                     await joints_whole(tui, app, "#jog-table")
                     pose = tui.text(app.query_one("#jog-pose", LiveText))
-                    assert "…" not in pose and pose.count("°") == 3, pose
+                    # γ β α whole (then, near a singularity, its warning as far as it fits)
+                    assert "…" not in pose and pose.split("⚠")[0].count("°") == 3, pose
                 if name == "moves":  # each kind on one line, the feed hold's label whole
                     assert "Multi-step" in tui.text(app.query_one("#move-kinds"))
                     assert app.query_one("#feed-hold").region.height == 1
