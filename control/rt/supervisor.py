@@ -21,7 +21,13 @@ its duty should have done, and trusts neither the readings nor the law:
   the reading stays within a count of where it was (frozen words, a cut cable,
   a seized joint, no supply), or moves the other way (a swapped wire, a
   reading that lies), is a feedback fault: every valve closes and the E-stop
-  latches.
+  latches. A joint resting on a soft limit (within its rest margin, ``control/rt/jog.py``)
+  with its valve pushing it that way is held by the limit's stop, not frozen: a target on
+  the limit leaves the arm a count short of it, the integrator winding the valve open
+  against the stop (issue 25), so a still reading there is no feedback fault. Unless the
+  arm is past its target there (by more than ``REST_COUNTS``) and the valve still pushes
+  it on into the stop: that is the law holding it wrong (an integral wound up on the way),
+  a ``Trip`` (not feedback) saying so.
 
 Each joint is judged in actuator coordinates, where its own valve acts (the
 Yaw reading includes Bend; Yaw's actuator does not). Each tick samples one joint
@@ -37,7 +43,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from control.rt.jog import rest_margin
+from control.rt.jog import REST_COUNTS, rest_margin
 from hw.machine import Machine
 from hw.transmission import output_min_pwm
 
@@ -178,7 +184,7 @@ class Supervisor:
                  f"{self.min_pwm[j][0 if u > 0 else 1]:g} %) for {span:.2f} s")
         if abs(moved) <= STILL_COUNTS * count:
             if self.on_stop(j, w.a[new], expected):
-                return None
+                return self.pushed_past(j, w.e[new], expected, where, w.a[new])
             return Trip(j, f"feedback fault: {where} and its reading has not moved from "
                            f"{w.a[new]:.2f}{joint.symbol} (it should have moved about "
                            f"{abs(expected):.1f}{joint.symbol}): frozen encoder, cut cable, "
@@ -196,6 +202,18 @@ class Supervisor:
         if expected > 0.0:
             return actuator >= self.stop_above[j]
         return actuator <= self.stop_below[j]
+
+    def pushed_past(self, j: int, error: float, expected: float, where: str, at: float
+                    ) -> Trip | None:
+        """On a limit's stop with the valve pushing into it: None while the target is there
+        too (or open loop), a Trip when the arm is past its target and pushed on."""
+        if not error * math.copysign(1.0, expected) < -REST_COUNTS * self.count[j]:
+            return None  # NaN (open loop) fails the comparison too
+        joint = self.joints[j]
+        return Trip(j, f"{where}, pushing {joint.name} onto its limit stop at {at:.2f}"
+                       f"{joint.symbol}, {abs(error):.2f}{joint.symbol} past its target: its "
+                       "gains hold it there (an integral wound up on the way?) or its valve "
+                       "is wrong: check them")
 
     def following(self, j: int, w: _Window, old: int, new: int, velocity: float) -> Trip | None:
         """Beyond the limit at both ends of the window: a fault if its duty was zero and the

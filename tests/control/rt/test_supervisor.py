@@ -115,3 +115,14 @@ def test_a_joint_resting_on_its_limit_with_its_valve_pushing_there_is_no_feedbac
     trip, _ = drive(UNIMATE, 2, 60.0, 0.0, at=joint.upper - 2 * joint.goal_tolerance,
                     error=error)
     assert trip.feedback and "has not moved" in trip.message
+
+
+def test_a_joint_pushed_onto_its_limit_past_its_target_is_tripped_as_held_wrong() -> None:
+    """On the stop with the valve pushing into it while the target is 0.5° back inside (a
+    law whose integral wound up on the way holds it there): not a frozen encoder, and not
+    let be either."""
+    joint = UNIMATE.joints[2]
+    at = joint.upper - 0.45 * abs(joint.encoder.gradient)
+    trip, _ = drive(UNIMATE, 2, 60.0, 0.0, at=at, error=-joint.goal_tolerance)
+    assert not trip.feedback and "onto its limit stop" in trip.message
+    assert "0.50° past its target" in trip.message
