@@ -666,7 +666,7 @@ class JogTab(TabPage):
                 f"{report.stopped}")
         self.desk.events.add(LogEntry(time.time(), "jog", what, data={
             "velocity": list(asked.velocity), "frame": asked.frame,
-            "distance": report.distance, "drift_mm": report.drift,
+            "distance": report.distance, "drift_mm": report.drift, "braked": report.braked,
             "duration_s": report.duration, "stopped": report.stopped}))
         if report.stopped not in QUIET_STOPS:
             self.cartesian_note = Text.assemble(("the jog stopped: ", "bold yellow"),
