@@ -48,6 +48,7 @@ LIMIT_LOOK_S = 0.3  # the servo brakes when a joint would reach a soft limit wit
 SETTLE_TICKS = 3  # periods of zero velocity sent after the tool stopped on its line
 ARRIVED = 0.02  # mm or deg: the commanded tool is at the line's end (it caught up its lag)
 CATCH_UP_S = 1.0  # at most this long after the reference stopped (10 time constants)
+AFTER_S = 2.0  # the longest a servo waits for the one before it to stop
 
 
 @dataclass(frozen=True)
@@ -102,12 +103,16 @@ class CartesianServo:
         self._renewed = time.monotonic()
         self._stopped = ""
         self._thread: threading.Thread | None = None
+        self._after: CartesianServo | None = None
         self.report: ServoReport | None = None
         self.done = threading.Event()
 
-    def start(self) -> None:
+    def start(self, after: CartesianServo | None = None) -> None:
+        """Begin; ``after``: a servo still braking (a key let go just before), which must end
+        first, so that two never stream at once and this one starts where that one stops."""
         self._held.set()
         self._renewed = time.monotonic()
+        self._after = after
         self._thread = threading.Thread(target=self._run, name="cartesian-servo", daemon=True)
         self._thread.start()
 
@@ -134,7 +139,9 @@ class CartesianServo:
     # -- the loop ------------------------------------------------------------------------------
 
     def _run(self) -> None:
-        began = time.monotonic()
+        if self._after is not None:
+            self._after.done.wait(AFTER_S)
+        began = self._renewed = time.monotonic()
         status = self.client.status()
         q = np.array(status.desired)
         line = line_of(self.model.forward(q), self.velocity, self.frame == "tool")

@@ -67,7 +67,7 @@ from app.widgets.live_text import LiveText
 from control.client import ControlClient, MoveHandle
 from control.motion.cartesian_jog import AXES, Step, StepQueue, zone
 from control.rt.layout import Mode, Status
-from control.servo import CartesianServo
+from control.servo import CartesianServo, ServoReport
 from hw.machine import Joint
 from hw.transmission import output_min_pwm
 
@@ -514,7 +514,8 @@ class JogTab(TabPage):
     _steps: StepQueue | None = None  # steps pressed while it ran (made with the client)
     _refused = 0  # queued steps refused since the queue began: the reason is told once
     _servo: CartesianServo | None = None  # the held Cartesian jog, while it runs or brakes
-    _servo_logged = True  # its end is in the event log
+    _unlogged: tuple[tuple[CartesianServo, JogPad.CartesianHeld], ...] = ()  # held jogs whose
+    # ends are not in the event log yet, with what each was started with
 
     def compose(self) -> ComposeResult:
         speed = self.machine.cartesian_jog_speed if self.model is not None else None
@@ -640,24 +641,23 @@ class JogTab(TabPage):
     def _start_servo(self, client: ControlClient, message: JogPad.CartesianHeld) -> None:
         servo = CartesianServo(client, message.velocity, message.frame,
                                keepalive_s=SERVO_KEEPALIVE_S)
-        servo.start()
-        self._servo, self._servo_logged = servo, False
-        self._servo_asked = message
-
-    _servo_asked: JogPad.CartesianHeld | None = None  # what the servo was started with
+        servo.start(after=self._servo)  # the one let go may still be braking
+        self._servo = servo
+        self._unlogged += ((servo, message),)
 
     def _release_servo(self, why: str = "released") -> None:
         if self._servo is not None:
             self._servo.release(why)
 
     def _servo_ended(self) -> None:
-        """A held jog has stopped: one log entry for the press-and-hold, and a note and a
-        notification when something other than the release stopped it."""
-        servo, asked = self._servo, self._servo_asked
-        if servo is None or asked is None or self._servo_logged or not servo.done.is_set():
-            return
-        self._servo_logged = True
-        report = servo.wait(0)
+        """Each held jog that has stopped: one log entry for the press-and-hold, and a note
+        and a notification when something other than the release stopped it."""
+        while self._unlogged and self._unlogged[0][0].done.is_set():
+            (servo, asked), *rest = self._unlogged
+            self._unlogged = tuple(rest)
+            self._log_held(servo.wait(0), asked)
+
+    def _log_held(self, report: ServoReport, asked: JogPad.CartesianHeld) -> None:
         axis = int(np.flatnonzero(asked.velocity)[0])
         unit = " mm" if axis < 3 else "°"
         moved = math.copysign(report.distance, asked.velocity[axis])  # along the axis's sign
