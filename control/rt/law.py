@@ -16,8 +16,10 @@ edge, or a wrong reading of section 6.2, neither starts nor ends one); while
 resting the law sees no error, the integral holds, and the output goes out without the
 compensation, clipped to the minimum PWM, so the valve stays inside its overlap.
 The set's ``integral_separation`` (%) stops the integral too while the feedback terms
-(all but the integral and the feed-forward) ask for more than it (conditional integration,
-Åström and Hägglund): a P.I.
+(all but the feed-forward) ask for more than it and the step would add to that
+(conditional integration, Åström and Hägglund); a step that unwinds it is always taken (held
+whenever the feedback was large, an integral wound up on the way to a jog's goal stayed, and
+held the arm past the goal, on the stop at a limit): a P.I.
 designed for the small errors of a followed path otherwise winds up on the way to a step
 (the rig's 100 mm step overshot 13.6 mm, 2.7 with 20 %).
 Taps are newest first (errata #21). With ``w`` empty, ``kp = [Kp]`` and the
@@ -180,8 +182,9 @@ class DifferenceLaw:
         u = sum(map(mul, g.w, s.u))  # Σ w[i]·u(k−i)
         u += sum(map(mul, g.b, errors))  # Σ kp[i]·e(k−i) + kd·Σ f[i]·e(k−i) / (p·Δt)
         step = g.ki_dt * (errors[-1] if g.oldest else e)  # errata #2, #3
-        if g.separation and not -g.separation <= u <= g.separation:
-            step = 0.0  # conditional integration: the feedback alone asks for much
+        if g.separation and ((step > 0.0 and u + s.integral > g.separation)
+                             or (step < 0.0 and u + s.integral < -g.separation)):
+            step = 0.0  # conditional integration: the feedback asks for much, this way already
         u += g.kv * velocity  # velocity feed-forward (chapter 6)
         integral = s.integral + step
         if integral > g.integral_limit:

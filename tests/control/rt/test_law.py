@@ -267,6 +267,23 @@ def test_integral_separation_holds_the_integral_while_the_other_terms_ask_for_mu
     none.update(0, 30.0)
     assert none.state(0).integral == pytest.approx(30.0 * 0.001)
 
+
+def test_integral_separation_never_holds_a_step_that_unwinds_the_integral() -> None:
+    """An integral wound up on the way to a goal must unwind past it, however large the error
+    that unwinds it: held there, it kept a jogged Up/Down past its goal, on the stop at its
+    limit (issue 25). Wound to +15 %, a −30-count error (−22.5 % of feedback) unwinds it."""
+    c = replace(one_joint(kp=(0.75,), ki=1.0, integral_limit=100.0), integral_separation=20.0)
+    law = DifferenceLaw(plain_machine(), c, 0.001)
+    run(law, [1.0] * 15_000)  # 0.75 % of feedback: integrated, to 15 %
+    wound = law.state(0).integral
+    assert wound == pytest.approx(15.0)
+    law.update(0, -30.0)
+    assert law.state(0).integral == pytest.approx(wound - 30.0 * 0.001)
+    fresh = DifferenceLaw(plain_machine(), c, 0.001)
+    fresh.update(0, -30.0)  # not wound: the feedback alone asks for much, this way: held
+    assert fresh.state(0).integral == 0.0
+
+
 def test_a_move_ignores_the_deadband() -> None:
     """While the path moves (a desired velocity) a one-count error is acted on, compensated."""
     bend = 3
