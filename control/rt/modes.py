@@ -383,6 +383,7 @@ class ModeMachine:
             return
         if abs(self.position[0] - run.reference_q) < 0.5 and now - run.started_ns > 500 * MS:
             self.encoders.zero()
+            self.law.reset()  # resting on the stop: nothing of the law before the zero holds
             self.hold_here()
             self.outbox.put(Initialised("complete: initialised at the bottom"))
         elif now - run.started_ns > self.initialise_config.timeout_ns:
