@@ -15,7 +15,8 @@ be saved nowhere now (disk full) stays in its segment for the next start.
 Two clients may start at once (the TUI and a script): each segment is recovered by the
 one holding an exclusive ``flock`` on its file; the other waits for it (up to ``wait_s``),
 so one never clears the half-placed files of the other's save, and when either returns
-the run is saved.
+the run is saved. A move segment of another layout version (a servodesk upgraded while an
+older one runs) is left alone: its run is that version's to save.
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ from pathlib import Path
 
 from control.recorder import default_data_dir
 from control.rt import shm
+from control.rt.layout import MoveLayout
 from control.run_keeper import FinishedMove, keep
 
 UNENDED = "interrupted: the client and the controller died"
@@ -93,6 +95,11 @@ def _recover(name: str, fallback: Path) -> str:
         segment = shm.attach(name)
     except OSError:
         return ""  # gone meanwhile: another start recovered it
+    other = MoveLayout.other_version(segment.buf)
+    if other is not None:  # an upgrade beside a running older servodesk: its run, not junk
+        shm.release(segment, unlink=False)
+        return (f"left {name} alone: a run a servodesk of another version wrote (layout "
+                f"v{other}); that version saves it when it next starts")
     try:
         move = FinishedMove.in_segment(segment)
     except (ValueError, UnicodeDecodeError) as exc:

@@ -319,6 +319,15 @@ class MoveLayout:
         meta_size, settle_rows = struct.unpack_from("<QQ", buf, cls.META_SIZE_OFFSET)
         return cls(samples, n, meta_size, settle_rows)
 
+    @classmethod
+    def other_version(cls, buf: memoryview) -> int | None:
+        """The layout version of a move segment a servodesk of another version wrote; None
+        for this version's, or for what is no move segment at all."""
+        if len(buf) < cls.HEADER.size:
+            return None
+        magic, version, _, _ = cls.HEADER.unpack_from(buf, 0)
+        return version if magic == MOVE_MAGIC and version != LAYOUT_VERSION else None
+
     def write_header(self, buf: memoryview) -> None:
         self.HEADER.pack_into(buf, 0, MOVE_MAGIC, LAYOUT_VERSION, self.samples, self.n)
         struct.pack_into("<QQ", buf, self.META_SIZE_OFFSET, self.meta_size, self.settle_rows)

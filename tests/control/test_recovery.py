@@ -157,6 +157,20 @@ def test_a_segment_that_is_not_a_move_is_removed_with_a_notice(tmp_path) -> None
         shm.release(junk, unlink=True)
 
 
+def test_a_move_segment_of_another_layout_version_is_left_alone(left, tmp_path) -> None:
+    """Upgraded beside a running older servodesk, a start must not take that version's
+    unsaved run for junk and remove it (it did: a test run of one version beside another's
+    lost its runs)."""
+    segment = left()
+    header = MoveLayout.HEADER
+    magic, version, samples, n = header.unpack_from(segment.segment.buf, 0)
+    header.pack_into(segment.segment.buf, 0, magic, version - 1, samples, n)
+    (notice,) = recover_runs(tmp_path / "fallback")
+    assert notice.startswith(f"left {segment.name} alone: a run a servodesk of another version")
+    assert f"(layout v{version - 1})" in notice
+    assert not segment.gone() and list_runs(tmp_path / "runs") == []
+
+
 def test_a_segment_another_start_recovers_is_waited_for_then_left_to_it(left, tmp_path) -> None:
     segment = left()
     fd = os.open(shm.SHM_DIR / segment.name, os.O_RDONLY)
