@@ -5,10 +5,11 @@ A thread in the client, ``SERVO_HZ`` times a second:
 
 1. reads the commanded joints ``q`` (the controller's hold target, ``Status.desired``);
 2. advances its reference along the straight line of the jog (``cartesian_jog.line_of``:
-   the start pose moved by ``s`` seconds of the tool's velocity ``v``) at ``u·z·|v|``: ``u``
-   ramps from 0 to 1 at the machine's ``cartesian_jog_accel`` while held and back to 0 on
-   release, so the tool brakes along its line; ``z`` is the singularity zone's scale
-   (``cartesian_jog`` docstring): every joint within its ``jog_speed``;
+   the start pose moved by ``s`` seconds of the tool's velocity ``v``) at ``u·z·f·|v|``:
+   ``u`` ramps from 0 to 1 at the machine's ``cartesian_jog_accel`` while held and back to 0
+   on release, so the tool brakes along its line; ``z`` is the singularity zone's scale
+   (``cartesian_jog`` docstring): every joint within its ``jog_speed``; ``f`` the operator's
+   feed override, as it scales a move;
 3. sends ``client.jog_velocity(q̇)`` with ``q̇ = J(q)⁻¹·(u·z·v + K·e)``: ``J`` the geometric
    Jacobian at the commanded joints (``Unimate2000B.jacobian``), ``e`` the pose error from
    the commanded tool to the reference (mm and deg), ``K = CORRECTION_PER_S``: the drift of
@@ -165,7 +166,8 @@ class CartesianServo:
                 if released is None and not self._held.is_set():
                     released = self._along(line, q)
                 u = self._ramp(u, dt)
-                scale = self._zone(q, twist) if u > 0 else 0.0
+                # the operator's feed override scales a held jog as it scales a move
+                scale = self._zone(q, twist) * status.feed_override if u > 0 else 0.0
                 s += u * scale * dt
                 drift = max(drift, self._sideways(line, q))
                 qdot, off = self._joint_velocity(q, line, s, twist * u * scale)

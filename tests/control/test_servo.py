@@ -100,6 +100,24 @@ def test_a_held_jog_moves_the_tool_along_its_line_and_brakes_on_release(
     assert len(list_runs(Path(robot.data_dir))) == runs  # a servo records no run
 
 
+def test_the_feed_override_scales_a_held_jog(controller: ControlClient) -> None:
+    """Issue 25: the override acts on every motion. 2 s held at 25 mm/s with the override at
+    50 %: about 25 mm, not 50 (the stream was taken as sent, at full speed)."""
+    robot = at(controller, START)
+    robot.feed_override(0.5)
+    try:
+        wait_until(lambda: robot.status().feed_override == 0.5, 5, "the override at 50 %")
+        start = MODEL.pose(np.array(robot.status().desired))
+        servo = CartesianServo(robot, [25.0, 0, 0, 0, 0, 0], "world", keepalive_s=KEEPALIVE_S)
+        hold(servo, 2.0, lambda: None)
+        report = servo.wait(5.0)
+    finally:
+        robot.feed_override(1.0)
+    moved = MODEL.pose(np.array(robot.status().desired))[0] - start[0]
+    assert report.stopped == "released", report
+    assert 18.0 <= moved <= 32.0, moved  # 25 mm, the ramps and a loaded machine's periods
+
+
 def test_the_servo_halts_before_the_wrist_singularity_naming_the_joint(
         controller: ControlClient) -> None:
     """Turning the tool about its y axis from Yaw 10° takes Yaw towards 0°, where Bend and
