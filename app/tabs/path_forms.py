@@ -18,6 +18,7 @@ from textual.widgets import Button, Input, Label, Select, Static, Switch, TextAr
 
 from app.tabs.move_forms import MoveForm, mid_range
 from app.widgets.fields import NumberCheck, NumberField
+from app.widgets.typed import FieldInput, FieldTextArea
 from control.motion import form_plans
 from control.motion.fields import VIA_SPEED, fraction_rule
 from control.motion.path_files import PathFileError, PathPoints, read_path
@@ -63,7 +64,7 @@ class PathFileForm(MoveForm):
     def fields(self) -> ComposeResult:
         with Horizontal(classes="field"):
             yield Label("file", classes="field-label")
-            yield Input(placeholder="path.csv or path.tsv", id="path-file", compact=True)
+            yield FieldInput(placeholder="path.csv or path.tsv", id="path-file", compact=True)
         yield Static("", id="path-state")
 
     @on(Input.Submitted, "#path-file")
@@ -124,7 +125,7 @@ class ViaPointsForm(MoveForm):
         yield NumberField("speed fraction", NumberCheck.of(fraction_rule("speed fraction")),
                           f"{VIA_SPEED:g}", id="speed")
         yield Label("points", classes="field-label")
-        yield TextArea(id="via-points", soft_wrap=False, show_line_numbers=True)
+        yield FieldTextArea(id="via-points", soft_wrap=False, show_line_numbers=True)
         yield Button("Add the current position", id="via-add", compact=True)
         with Horizontal(classes="field"):
             yield Select[int]([], prompt="a named position", id="via-named", compact=True,

@@ -17,6 +17,8 @@ from textual.screen import ModalScreen
 from textual.validation import ValidationResult, Validator
 from textual.widgets import Button, Input, Label, Static
 
+from app.widgets.typed import FieldInput
+
 Answer = TypeVar("Answer")
 
 
@@ -147,7 +149,7 @@ class EditValueScreen(Dialog[str | None]):
         with Vertical(classes="dialog"):
             yield Label(self.title_text, classes="dialog-title")
             yield Static(self.hint, classes="dialog-detail")
-            yield Input(self.value, validators=[_Check(self.parse)], id="edit-value",
+            yield FieldInput(self.value, validators=[_Check(self.parse)], id="edit-value",
                         validate_on=["changed", "submitted"])
             yield Static("", classes="dialog-error", id="edit-error")
             with Horizontal(classes="dialog-buttons"):

@@ -14,6 +14,7 @@ from textual.containers import Horizontal, Vertical
 from textual.validation import ValidationResult, Validator
 from textual.widgets import Input, Label, Select, Static
 
+from app.widgets.typed import FieldInput
 from control.motion.fields import FieldError, NumberRule, position_rule, seconds_rule
 from control.motion.path_files import MAX_MOVE_S
 from hw.machine import Joint, Machine
@@ -63,7 +64,7 @@ class NumberField(Vertical):
     def compose(self) -> ComposeResult:
         with Horizontal(classes="field-row"):
             yield Label(self.label, classes="field-label")
-            yield Input(self._initial, placeholder=self._placeholder, validators=[self.check],
+            yield FieldInput(self._initial, placeholder=self._placeholder, validators=[self.check],
                         validate_on=["changed", "submitted"], compact=True,
                         classes="field-input")
             yield Static(self.check.unit, classes="field-unit")
