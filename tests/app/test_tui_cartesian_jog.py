@@ -79,10 +79,12 @@ def test_steps_pressed_while_a_step_runs_are_added_and_run_after_it(tui) -> None
                             what="the first step running")
             await pilot.press("s", "s")
             # both wait for the first step (+40 mm), or, on a loaded machine where it ended
-            # before the second press, the last waits for the second (+20 mm)
+            # before the second press, the last waits for the second (+20 mm); on one loaded
+            # more the queue may have been sent already and the note say nothing of it: the
+            # 60 mm below tells the queue from the old cut-short steps either way
             note = app.query_one("#jog-cartesian-note", LiveText).text
-            assert re.search(r"next: y \+(40|20) mm \(world frame\), when this step ends",
-                             note), note
+            assert "next:" not in note or re.search(
+                r"next: y \+(40|20) mm \(world frame\), when this step ends", note), note
 
             def moved() -> float:
                 return float(MODEL.pose(np.array(client.status().desired))[1] - start[1])
