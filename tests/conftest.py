@@ -50,6 +50,7 @@ if os.environ.get("CI"):
 SLOW_PATHS = (
     "tests/faults/",                   # real controllers and emulators, faults injected
     "tests/app/test_smoke_tmux.py",    # the app in a tmux session
+    "tests/app/test_typing_tmux.py",   # the app in a tmux session, typed into fast
     "tests/app/test_cli_move.py",      # servodesk move: a controller (and an emulator) each
     "tests/app/test_cli_runs.py",      # servodesk runs in subprocesses
     "tests/control/test_client.py",    # the control subprocess, for real
@@ -132,6 +133,7 @@ ONE_AT_A_TIME = (
     "tests/app/test_tui_heartbeat.py",       # every tab opened beside a burner, 250 ms heartbeat
     "tests/app/test_serve.py",               # headless Chromium, twenty sessions beside a burner
     "tests/app/test_smoke_tmux.py",          # the app in tmux
+    "tests/app/test_typing_tmux.py",         # the app in tmux, keys 5 ms apart
     "tests/control/test_run_keeper.py",      # an E-stop's delivery timed while a run saves
 )
 # Audit events (PEP 578) of a process start. A multiprocessing "spawn" start raises none
