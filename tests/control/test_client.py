@@ -30,18 +30,11 @@ from control.rt import shm
 from control.rt.layout import ControlLayout
 from control.rt.seqlock import SeqlockReader
 from hw.machine import load_machine
+from tests.control.waiting import wait_until
 
 UNIMATE = load_machine("unimate2000b")
 STEPS = {"inout": 120.0, "rotate": 20.0, "updown": 8.0, "bend": 30.0, "yaw": 30.0, "swivel": 40.0}
 
-
-def wait_until(predicate, timeout: float, what: str, every: float = 0.005) -> None:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if predicate():
-            return
-        time.sleep(every)
-    raise AssertionError(f"timed out after {timeout} s waiting for {what}")
 
 
 def our_segments(pid: int) -> list[str]:

@@ -3,7 +3,6 @@ displacement along the commanded line, and a jog past a limit is refused with no
 
 from __future__ import annotations
 
-import time
 from collections.abc import Iterator
 
 import numpy as np
@@ -14,19 +13,13 @@ from control.motion.cartesian_jog import Step, StepQueue
 from control.motion.robot_model import unimate_model
 from hw.machine import load_machine
 from kinematics.unimate import Unreachable
+from tests.control.waiting import wait_until
 
 UNIMATE = load_machine("unimate2000b")
 MODEL = unimate_model(UNIMATE)
 START = np.array([1500.0, 10.0, 5.0, 20.0, 30.0, 10.0])
 TOLERANCE = np.array([j.tolerance for j in UNIMATE.joints])
 
-
-def wait_until(predicate, timeout: float, what: str) -> None:
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out after {timeout} s waiting for {what}")
-        time.sleep(0.005)
 
 
 @pytest.fixture(scope="module")

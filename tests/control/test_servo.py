@@ -16,6 +16,7 @@ from control.motion.robot_model import unimate_model
 from control.recorder import list_runs
 from control.servo import CartesianServo
 from hw.machine import load_machine
+from tests.control.waiting import wait_until
 
 UNIMATE = load_machine("unimate2000b")
 MODEL = unimate_model(UNIMATE)
@@ -24,13 +25,6 @@ JOG_SPEED = np.array([j.jog_speed for j in UNIMATE.joints])
 REPEAT_S = 0.033  # a terminal's auto-repeat
 KEEPALIVE_S = 1.0  # as the Jog tab's: its own release (no repeat for 0.15 s) comes first
 
-
-def wait_until(predicate, timeout: float, what: str) -> None:
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out after {timeout} s waiting for {what}")
-        time.sleep(0.005)
 
 
 @pytest.fixture(scope="module")
