@@ -128,6 +128,10 @@ class ServodeskApp(App[None]):
         Binding("ctrl+o", "release_command", "release command", priority=True,
                 tooltip="the controller holds; another client may take command"),
         Binding("ctrl+q", "quit", "quit", priority=True),
+        # the focus moves as the app takes the key, so the keys typed after it go to the next
+        # field (a focus key left to the screen moved it only after the keys behind it)
+        Binding("tab", "focus_next", "next field", show=False, priority=True),
+        Binding("shift+tab", "focus_previous", "previous field", show=False, priority=True),
     ]
 
     def __init__(self, machine: str | Path | Machine = "unimate2000b", backend: str = "sim",

@@ -143,8 +143,11 @@ class Typist:
 
     def type(self, text: str, clear: int = CLEAR, gap_s: float | None = None) -> None:
         """``clear`` backspaces then ``text``, a key every ``gap_s`` (the typist's)."""
+        self.press(["BSpace"] * clear + list(text), gap_s)
+
+    def press(self, keys: list[str], gap_s: float | None = None) -> None:
+        """tmux's key names, a key every ``gap_s`` (the typist's)."""
         gap_s = self.gap_s if gap_s is None else gap_s
-        keys = ["BSpace"] * clear + list(text)
         start = time.monotonic()
         for k, key in enumerate(keys):
             delay = start + k * gap_s - time.monotonic()
