@@ -655,7 +655,9 @@ class ServodeskApp(App[None]):
     def action_run_move(self) -> None:
         """Run the move filled in on the Moves tab (whichever widget has the focus)."""
         if isinstance(self._active, MovesTab) and not isinstance(self.screen, ModalScreen):
-            self._active.action_run()
+            # behind the keys typed before ^S, still in the focused field's queue: run what
+            # the operator typed, not what the field had taken when ^S came
+            (self.focused or self).call_later(self._active.action_run)
 
     def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
         if action == "dismiss_fault":
