@@ -51,6 +51,7 @@ SLOW_PATHS = (
     "tests/faults/",                   # real controllers and emulators, faults injected
     "tests/app/test_smoke_tmux.py",    # the app in a tmux session
     "tests/app/test_typing_tmux.py",   # the app in a tmux session, typed into fast
+    "tests/app/test_typing_pilot.py",  # the TUI under Pilot, every Moves form typed into
     "tests/app/test_cli_move.py",      # servodesk move: a controller (and an emulator) each
     "tests/app/test_cli_runs.py",      # servodesk runs in subprocesses
     "tests/control/test_client.py",    # the control subprocess, for real
