@@ -26,7 +26,8 @@ from control.runs import encode_meta
 SAMPLES = 600_000  # 600 s at 1 ms, the longest move
 POLL_S = 0.01  # the monitor thread's wait for an event, each pass (client._watch)
 LATENCY_S = 0.05
-BLOCKED_S = 0.01
+BLOCKED_S = 0.05  # a pass is wall time: preempted beside a burner on two workers it took
+# 11 ms; saving the run in it took 7-13 s
 # a wait's lateness is the CPU and the GIL others leave it: up to 98 ms seen at a load of 9
 # on the 2-core machine beside a burner; one step that held the GIL for a whole 600 s table
 # (bytes.translate of 120 MB, a join) would hold it longer
