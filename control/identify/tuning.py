@@ -40,7 +40,8 @@ feed-forward of the desired path are all there) closed around the identified
 models, with the valve's duty quantisation. ``predict_move`` runs issue 24's
 check on it: a minimum-jerk move of one joint at full speed, its overshoot and
 the time after the path arrives until the joint stays within its
-``goal_tolerance`` (``move_figures``, which judges a recorded move the same way).
+``goal_tolerance`` (``move_figures``, which judges a recorded move the same way, its
+wrong encoder readings taken out with hindsight: ``without_wrong_readings``).
 
 Feed-forward (``feed_forward``): the duty that gives the desired velocity on
 the identified line, expressed as an addition to the law's output u *before*
@@ -351,6 +352,7 @@ def move_figures(t: np.ndarray, desired: np.ndarray, actual: np.ndarray, arrives
                  joint: Joint) -> MoveFigures:
     """Overshoot and settle of one joint's move: ``t``, ``desired``, ``actual`` ``(N,)``,
     the path's end reached at row ``arrives`` and held after it."""
+    actual = without_wrong_readings(t, actual, joint.full_duty_speed)
     target, travel = desired[-1], desired[-1] - desired[0]
     overshoot = max(0.0, float(np.max(np.sign(travel) * (actual - target))))
     outside = np.flatnonzero(np.abs(actual[arrives:] - target) > joint.goal_tolerance)
@@ -358,6 +360,26 @@ def move_figures(t: np.ndarray, desired: np.ndarray, actual: np.ndarray, arrives
         return MoveFigures(overshoot, 0.0)
     last = arrives + int(outside[-1]) + 1
     return MoveFigures(overshoot, float(t[last] - t[arrives]) if last < len(t) else math.inf)
+
+
+def without_wrong_readings(t: np.ndarray, reading: np.ndarray, speed: float) -> np.ndarray:
+    """``reading (N,)`` at ``t`` with each wrong reading (section 6.2) taken out, with
+    hindsight: a value the reading jumps to and back from, each way further than the joint
+    moves at ``speed`` (its full-duty speed) while the value is held, is not the joint's. The
+    loop cannot tell such a word from motion when it comes (``control.rt.encoder_input``
+    believes a wrong word within reach), but the next one shows it; it is replaced by the
+    value before it. Motion, an overshoot or a hunt of a few counts, is kept as read."""
+    starts = np.concatenate(([0], np.flatnonzero(np.diff(reading)) + 1))
+    values = reading[starts].copy()
+    ends = np.append(starts[1:], len(reading))
+    out = reading.copy()
+    for i in range(1, len(starts) - 1):
+        reach = speed * float(t[ends[i]] - t[starts[i]])
+        away, back = values[i] - values[i - 1], values[i + 1] - values[i]
+        if away * back < 0 and min(abs(away), abs(back)) > reach:
+            values[i] = values[i - 1]
+            out[starts[i]:ends[i]] = values[i]
+    return out
 
 
 def move_path(machine: Machine, joint: int, start: ArrayLike, speed: float = 1.0, *,

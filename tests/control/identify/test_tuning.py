@@ -3,6 +3,7 @@ feed-forward; and on the simulator, the proposed gains against the thesis's P.I.
 
 from __future__ import annotations
 
+import math
 import os
 import time
 from collections.abc import Iterator
@@ -113,6 +114,31 @@ def test_with_feed_forward_sets_kv_per_joint() -> None:
     c = tuning.with_feed_forward(THESIS, ffs)
     assert c.kv[1] == pytest.approx((ffs[1].kv_pos + ffs[1].kv_neg) / 2) and c.kv[5] == 0.0
     assert (c.kp, c.ki) == (THESIS.kp, THESIS.ki)
+
+
+def test_a_moves_figures_see_through_a_wrong_reading_but_not_through_motion() -> None:
+    """A word held one 3 ms scan, 0.62 deg off a Yaw at rest (seen in a recorded check
+    move: 0.60 deg overshoot and a 1.03 s settle of a joint that never moved) is a wrong
+    reading; a 30 Hz swing of 0.3 deg read the same way is motion, and judged."""
+    yaw = load_machine("unimate2000b").joints[4]
+    t = np.arange(1000) * 1e-3
+    desired = np.where(t < 0.2, 4.0 * t / 0.2, 4.0)
+    arrives = int(np.flatnonzero(t >= 0.2)[0])
+    held = np.floor(np.arange(1000) / 3) * 3  # a word every 3 ms, held between
+    at_rest = np.interp(held * 1e-3, t, desired)
+    glitch = at_rest.copy()
+    glitch[600:603] += 0.62
+    assert tuning.move_figures(t, desired, glitch, arrives, yaw) == tuning.MoveFigures(0.0, 0.0)
+    swing = at_rest + np.where(held * 1e-3 >= 0.2,
+                               0.3 * np.sin(2 * np.pi * 30 * held * 1e-3), 0.0)
+    figures = tuning.move_figures(t, desired, swing, arrives, yaw)
+    assert figures.overshoot == pytest.approx(0.3, abs=0.02)
+    swing[600:603] += 0.62 + 0.3
+    assert tuning.move_figures(t, desired, swing, arrives, yaw).settle_s == 0.0
+    steps = at_rest.copy()
+    steps[600:] += 0.62  # a jump that stays is the joint's (the loop judged its reach)
+    assert tuning.move_figures(t, desired, steps, arrives, yaw) == \
+        tuning.MoveFigures(pytest.approx(0.62), math.inf)
 
 
 def test_simulate_closes_the_law_around_the_models() -> None:
