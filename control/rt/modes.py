@@ -169,6 +169,7 @@ class ModeMachine:
     def hold_at(self, target: list[float]) -> None:
         homed, clamp = self.encoders.homed, self.guards.clamp
         self.hold_target[:] = [clamp(j, target[j], homed) for j in range(self.n)]
+        self.desired[:] = self.hold_target  # published before the next tick's law sets it
         self.jog.stop_at(self.hold_target)
         for j in range(self.n):
             self.velocity[j] = 0.0

@@ -128,6 +128,16 @@ def events(client: Wire) -> list[tuple[str, dict]]:
     return out
 
 
+def test_the_first_status_holds_where_the_joints_are(rig) -> None:
+    """``start`` publishes before any tick: the desired it publishes is the hold target,
+    where the joints are (it read 0 until the first tick's law, and a jog measured from the
+    first status ran 1.5 deg long)."""
+    controller, _backend, _client = rig
+    assert controller.tick_count == 0 and controller.modes.mode == Mode.HOLD
+    assert controller.modes.desired == pytest.approx(HOME, abs=0.1)
+    assert controller.modes.desired == controller.modes.hold_target
+
+
 def test_events_never_block_a_client_that_stopped_reading(rig) -> None:
     controller, backend, _client = rig
     started = time.monotonic()
