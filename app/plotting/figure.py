@@ -19,6 +19,11 @@ ERROR = "#c94fd6"
 VELOCITY = "#16b3c9"
 APPROACH = "#9a9a9a"  # the approach ramp in front of a move (MovePlan.approach)
 PROPOSED = "#e0a526"
+ESTOP = "#b00020"
+FAULT = "#d9731a"
+STALL = "#6d6d6d"
+FLAT_SPAN = 1.0  # the y span (its unit) of a line that holds still, when the panel sets none
+END_PAD = 0.03  # of the time span, after a mark at the end (an E-stop ends its run)
 
 
 @dataclass(frozen=True)
@@ -32,31 +37,54 @@ class Line:
 
 
 @dataclass(frozen=True)
+class Mark:
+    """A moment of the run drawn across the panel: the E-stop, a fault, a stall (s)."""
+
+    t: float
+    label: str
+    color: str
+    kind: str = ""
+
+
+@dataclass(frozen=True)
 class Panel:
-    """One plot: a title, its lines over a shared x axis (s), the y unit."""
+    """One plot: a title, its lines over a shared x axis (s), the y unit; ``floor`` is the
+    least span of its y axis (a joint that holds still: a few encoder counts), ``marks``
+    the moments drawn across it."""
 
     title: str
     lines: tuple[Line, ...]
     unit: str = ""
     zero_line: bool = False
+    floor: float = 0.0
+    marks: tuple[Mark, ...] = ()
 
     def x_range(self) -> tuple[float, float]:
+        """Every line's time and every mark's; a mark at the end gets room after it, so its
+        line stands clear of the frame."""
         xs = [x for line in self.lines for x in (_finite_ends(line.x))]
-        if not xs:
+        marks = [m.t for m in self.marks if math.isfinite(m.t)]
+        if not xs + marks:
             return 0.0, 1.0
-        lo, hi = min(xs), max(xs)
-        return (lo, hi) if hi > lo else (lo, lo + 1.0)
+        lo, hi = min(xs + marks), max(xs + marks)
+        if hi <= lo:
+            return lo, lo + 1.0
+        return (lo, hi + END_PAD * (hi - lo)) if marks and max(marks) >= hi else (lo, hi)
 
     def y_range(self, floor: float = 0.0) -> tuple[float, float]:
-        """Around every line's values with 5 % to spare, at least ``floor`` wide (a line
-        that holds still is drawn mid-panel)."""
+        """Around every line's values with 5 % to spare, at least ``floor`` (or the panel's)
+        wide: a line that holds still is drawn mid-panel on a span that shows it still, not
+        its last digit's noise."""
         values = [v for line in self.lines for v in _finite_ends(line.y, extremes=True)]
         if self.zero_line:
             values.append(0.0)
         if not values:
             return -1.0, 1.0
         lo, hi = min(values), max(values)
-        half = max((hi - lo) / 2 * 1.05, floor / 2, 1e-9 * max(1.0, abs(hi)))
+        least = max(floor, self.floor)
+        if not least and hi - lo <= 1e-9 * max(1.0, abs(hi)):
+            least = FLAT_SPAN
+        half = max((hi - lo) / 2 * 1.05, least / 2)
         mid = (hi + lo) / 2
         return mid - half, mid + half
 

@@ -17,29 +17,60 @@ from app.plotting.figure import (
     DESIRED,
     DUTY,
     ERROR,
+    ESTOP,
+    FAULT,
+    STALL,
     VELOCITY,
     Figure,
     Line,
+    Mark,
     Panel,
 )
 from app.plotting.strips import figure_text
 from app.plotting.svg import figure_svg
 from control.recorder import Run
 
-SMOOTH_S = 0.02  # velocity estimate: moving average over 20 ms before differencing
+# The velocity: a running median outvotes a wrong reading (section 6.2) held up to one
+# 6-joint scan without moving a step's edge; then the slope of a line fitted over SLOPE_S
+# (Savitzky-Golay). Both are centred, so a step is not delayed, as a causal filter would.
+MEDIAN_S = 0.015
+SLOPE_S = 0.021
+FLAT_COUNTS = 10  # a joint that holds still is drawn on at least this many encoder counts
+DUTY_SPAN = 2.0  # % , the least span of a duty panel
+STATUS_MARKS = {"estop": ("E-stop", ESTOP), "fault": ("fault", FAULT)}
 JOINT_COLORS = ("#e8453c", "#3d8bfd", "#2fae5f", "#e0a526", "#c94fd6", "#16b3c9")
 
 
 def velocity(t: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """Estimated velocity (units/s): ``q`` smoothed over ``SMOOTH_S``, then differentiated."""
+    """Estimated velocity (units/s) of ``q (N,)`` at ``t``: its running median over
+    ``MEDIAN_S``, then at each sample the slope of the line fitted over ``SLOPE_S`` around
+    it (the Savitzky-Golay first derivative)."""
     if len(t) < 3:
         return np.zeros_like(q)
     dt = float(np.median(np.diff(t)))
-    width = max(1, round(SMOOTH_S / dt))
-    kernel = np.ones(width) / width
-    padded = np.pad(q, (width // 2, width - 1 - width // 2), mode="edge")
-    smooth = np.convolve(padded, kernel, mode="valid")
-    return np.gradient(smooth, t)
+    return _slope(_running_median(q, _half(MEDIAN_S, dt, len(q))), dt,
+                  _half(SLOPE_S, dt, len(q)))
+
+
+def _half(window_s: float, dt: float, n: int) -> int:
+    """Half a centred window of ``window_s`` in samples, within a record of ``n``."""
+    return max(1, min(round(window_s / dt) // 2, (n - 1) // 2))
+
+
+def _running_median(q: np.ndarray, half: int, chunk: int = 65_536) -> np.ndarray:
+    """The median of each sample's ``2·half + 1`` neighbours (the ends repeated), in chunks
+    so a 600 s run needs no more than a few MB."""
+    padded = np.pad(q, half, mode="edge")
+    windows = np.lib.stride_tricks.sliding_window_view(padded, 2 * half + 1)
+    return np.concatenate([np.median(windows[a:a + chunk], axis=1)
+                           for a in range(0, len(q), chunk)])
+
+
+def _slope(q: np.ndarray, dt: float, half: int) -> np.ndarray:
+    """Least-squares slope over ``2·half + 1`` samples centred on each; the first and last
+    ``half`` take their nearest whole window's."""
+    k = np.arange(-half, half + 1, dtype=float)
+    return np.pad(np.correlate(q, k, mode="valid") / (dt * float(k @ k)), half, mode="edge")
 
 
 def steady_velocity(t: np.ndarray, q: np.ndarray) -> float:
@@ -51,15 +82,37 @@ def steady_velocity(t: np.ndarray, q: np.ndarray) -> float:
     return float((q[-1] - q[mid]) / span) if span > 0 else 0.0
 
 
+def marks(run: Run) -> tuple[Mark, ...]:
+    """The moments to mark on a run's plots: the controller's stalls (its ``gaps``), and how
+    it ended when that was the E-stop or a fault, at its last sample (nothing is recorded
+    after either)."""
+    found = [Mark(float(at), f"stall {length:.2f} s", STALL, "stall")
+             for at, length in run.meta.get("gaps", ())]
+    kind, _, why = run.status.partition(":")
+    if kind in STATUS_MARKS and run.samples:
+        name, color = STATUS_MARKS[kind]
+        why = why.split(", with a ")[0].strip()  # the stall the status adds is marked above
+        found.append(Mark(float(run.t[-1]), f"{name}: {why}" if why else name, color, kind))
+    return tuple(found)
+
+
+def least_span(run: Run, j: int) -> float:
+    """The least y span of joint ``j``'s position: ``FLAT_COUNTS`` encoder counts (0: the
+    panel's own, for a run that does not say its encoder)."""
+    return FLAT_COUNTS * run.joint_resolution[j] if run.joint_resolution else 0.0
+
+
 def overview(run: Run, joints: Sequence[int], title: str = "") -> Figure:
     """plotsix.m: for each joint, desired and actual position beside its duty."""
     panels = []
+    moments = marks(run)
     for j in joints:
         name, unit = run.joint_names[j], run.joint_units[j]
         panels.append(Panel(name, (Line(run.t, run.desired[:, j], DESIRED, "desired"),
-                                   Line(run.t, run.actual[:, j], ACTUAL, "actual")), unit))
+                                   Line(run.t, run.actual[:, j], ACTUAL, "actual")), unit,
+                            floor=least_span(run, j), marks=moments))
         panels.append(Panel(f"{name} duty", (Line(run.t, run.duty[:, j], DUTY),), "%",
-                            zero_line=True))
+                            zero_line=True, floor=DUTY_SPAN, marks=moments))
     return Figure(title or f"{run.kind} run: position and duty", tuple(panels), columns=2)
 
 
@@ -67,14 +120,18 @@ def joint_figure(run: Run, j: int, title: str = "") -> Figure:
     """plotdata.m for one joint: response, error, duty and the estimated velocity."""
     name, unit = run.joint_names[j], run.joint_units[j]
     t, d, q, u = run.t, run.desired[:, j], run.actual[:, j], run.duty[:, j]
+    least, moments = least_span(run, j), marks(run)
     panels = (
         Panel(f"{name} output/response", (Line(t, d, DESIRED, "desired"),
-                                          Line(t, q, ACTUAL, "actual")), unit),
+                                          Line(t, q, ACTUAL, "actual")), unit,
+              floor=least, marks=moments),
         Panel(f"{name} error, desired − actual", (Line(t, d - q, ERROR),), unit,
-              zero_line=True),
-        Panel(f"{name} duty", (Line(t, u, DUTY),), "%", zero_line=True),
+              zero_line=True, floor=least, marks=moments),
+        Panel(f"{name} duty", (Line(t, u, DUTY),), "%", zero_line=True, floor=DUTY_SPAN,
+              marks=moments),
         Panel(f"{name} velocity, second half {steady_velocity(t, q):+.4g}",
-              (Line(t, velocity(t, q), VELOCITY),), f"{unit}/s", zero_line=True),
+              (Line(t, velocity(t, q), VELOCITY),), f"{unit}/s", zero_line=True,
+              floor=least / 0.1, marks=moments),  # ten counts in 0.1 s
     )
     return Figure(title or f"{run.kind} run: {name}", panels, columns=2)
 
