@@ -111,6 +111,9 @@ def _common_options() -> argparse.ArgumentParser:
     common.add_argument("--lockstep", action="store_true",
                         help="simulator only: run the controller as fast as it computes, not in "
                              "real time (scripts, tests)")
+    common.add_argument("--plot", action="store_true",
+                        help="after the move, draw desired, actual and duty of each joint that "
+                             "moved, sized to the terminal (on stderr with --json)")
     return common
 
 
@@ -502,6 +505,11 @@ def _move(args: argparse.Namespace, kind: Kind, client: ControlClient, machine: 
     result = handle.result
     assert result is not None
     _report(args, result, machine)
+    if args.plot:
+        from app.plotting.terminal import print_response
+
+        sys.stdout.flush()
+        print_response(result.run, sys.stderr if args.json else sys.stdout)
     return DONE if result.complete and result.files is not None else ENDED
 
 

@@ -1,5 +1,6 @@
 """``servodesk runs list|show|export``: the saved runs of the data directory, as the Runs tab
-lists, describes and exports them.
+lists, describes and exports them; ``show --plot`` draws the response in the terminal
+(``app.plotting.terminal``).
 
 A run is named by its stem (as ``list`` prints it), the path of any of its files, or
 ``latest``. Exit 0 done, 2 bad input (no such run, a damaged run, one past its bounds or
@@ -49,6 +50,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     show.add_argument("--machine", dest="run_machine",
                       help="the machine file, for a run of a machine that is not built in "
                            "(the metrics need its tolerances)")
+    show.add_argument("--plot", action="store_true",
+                      help="then draw desired, actual and duty of each joint that moved, "
+                           "sized to the terminal (on stderr with --json)")
     show.set_defaults(func=run, action=_show)
     export = actions.add_parser(
         "export", parents=[common],
@@ -136,9 +140,14 @@ def _show(args: argparse.Namespace, data_dir: Path) -> int:
             "samples": run.samples, "sample_time_s": run.sample_time_s,
             "meta": run.meta, "metrics": result_records(summaries),
             "problem": problem or None}, ensure_ascii=False, default=str))
-        return 0
-    print("\n".join(run_lines(run, files.stem)))
-    print(problem or "\n".join(summary_table(summaries)))
+    else:
+        print("\n".join(run_lines(run, files.stem)))
+        print(problem or "\n".join(summary_table(summaries)))
+    if args.plot:
+        from app.plotting.terminal import print_response
+
+        sys.stdout.flush()
+        print_response(run, sys.stderr if args.json else sys.stdout)
     return 0
 
 

@@ -1,0 +1,111 @@
+"""A run's response as terminal text, drawn with plotext: one panel per joint that moved, its
+desired and actual position on the left axis and its duty on the right, the E-stop, a fault
+and the controller's stalls as vertical lines; sized to the terminal. ``servodesk move
+--plot`` prints it after the move and ``servodesk runs show --plot`` for a saved run, so an
+operator over SSH sees the step response without the TUI.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+from dataclasses import dataclass
+from typing import TextIO
+
+import numpy as np
+
+from app.plotting.figure import END_PAD, decimate
+from app.plotting.run_plot import FLAT_COUNTS, marks
+from control.recorder import Run
+
+MIN_ROWS = 12  # lines a joint's panel needs to show a step response, title and axes included
+MIN_COLS = 60  # columns a panel needs beside another
+COLORS = {"desired": "red", "actual": "blue", "duty": "green", "estop": "red+",
+          "fault": "orange", "stall": "gray"}
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Panels in ``rows`` × ``columns``, the whole ``width`` × ``height`` characters."""
+
+    rows: int
+    columns: int
+    width: int
+    height: int
+
+
+def moved(run: Run) -> list[int]:
+    """The joints whose desired position changed, or whose reading moved more than
+    ``FLAT_COUNTS`` encoder counts (something moved it)."""
+    counts = np.asarray(run.joint_resolution or (0.0,) * len(run.joint_names))
+    if not run.samples:
+        return []
+    desired = np.ptp(run.desired, axis=0) > 1e-9 * np.maximum(1.0, np.abs(run.desired[0]))
+    actual = np.ptp(run.actual, axis=0) > FLAT_COUNTS * counts
+    return [j for j in range(len(run.joint_names)) if desired[j] or actual[j]]
+
+
+def layout(panels: int, width: int, height: int) -> Layout:
+    """One column while each panel keeps ``MIN_ROWS`` lines, else two if both are
+    ``MIN_COLS`` wide; the height grows past the terminal's rather than squash a panel."""
+    columns = 2 if (panels > 1 and height // panels < MIN_ROWS
+                    and width >= 2 * MIN_COLS) else 1
+    rows = -(-panels // columns)
+    return Layout(rows, columns, width, max(height, rows * MIN_ROWS))
+
+
+def response_text(run: Run, width: int, height: int, color: bool) -> str:
+    """The plot of the joints that moved in ``width`` × ``height`` characters (taller if
+    they need it), then a line for each mark and one naming the joints left out."""
+    import plotext as plt
+
+    joints = moved(run)
+    notes = [f"{m.label} at {m.t:.3f} s" for m in marks(run)]
+    still = [run.joint_names[j] for j in range(len(run.joint_names)) if j not in joints]
+    if still and joints:
+        notes.append(f"not drawn, did not move: {', '.join(still)}")
+    if not joints:
+        return "\n".join(["no joint moved: nothing to plot", *notes]) + "\n"
+    shape = layout(len(joints), width, max(MIN_ROWS, height - len(notes) - 1))
+    plt.clf()
+    plt.limitsize(False, False)
+    plt.subplots(shape.rows, shape.columns)
+    plt.plotsize(shape.width, shape.height)
+    for k, j in enumerate(joints):
+        plt.subplot(k // shape.columns + 1, k % shape.columns + 1)
+        _panel(plt, run, j, 2 * shape.width // shape.columns)
+    text = plt.build()
+    plt.clf()
+    if not color:
+        text = plt.uncolorize(text)
+    return "\n".join([text.rstrip("\n"), *notes]) + "\n"
+
+
+def _panel(plt: object, run: Run, j: int, points: int) -> None:
+    """Joint ``j``'s desired, actual and duty over the run, ``points`` samples a line."""
+    plt.theme("clear")  # the terminal's own background, dark or light
+    plt.title(f"{run.joint_names[j]} ({run.joint_units[j]})")
+    for name, values, side in (("desired", run.desired[:, j], "left"),
+                               ("actual", run.actual[:, j], "left"),
+                               ("duty", run.duty[:, j], "right")):
+        t, y = decimate(run.t, values, points)
+        plt.plot(t.tolist(), y.tolist(), label=name if side == "left" else "duty %",
+                 color=COLORS[name], yside=side, marker="braille")
+    moments = marks(run)
+    for mark in moments:
+        plt.vline(mark.t, COLORS.get(mark.kind, "gray"))
+    start, end = float(run.t[0]), float(run.t[-1])
+    if moments and end > start:  # room after the E-stop's line, clear of the frame
+        plt.xlim(start, end + END_PAD * (end - start))
+    plt.xlabel("time (s)")
+    plt.ylabel(run.joint_units[j])
+    plt.ylabel("duty (%)", yside="right")
+
+
+def print_response(run: Run, out: TextIO) -> None:
+    """The response plot of ``run`` on ``out``, sized to the terminal; coloured only on a
+    terminal and without ``NO_COLOR`` (https://no-color.org)."""
+    size = shutil.get_terminal_size()
+    color = out.isatty() and not os.environ.get("NO_COLOR")
+    out.write(response_text(run, size.columns, size.lines, color))
+    out.flush()
