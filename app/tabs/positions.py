@@ -4,7 +4,10 @@ The table lists every position with its joints and, for the Unimate, its pose
 (x, y, z, γ, β, α through the forward kinematics, eq. 4.11). ``t`` (or ^T on any
 tab) teaches where the joints are under a name; ``g`` goes to the selected one: a
 joint-space move at the speed fraction typed (``ControlClient.go_to``: every joint
-within that fraction of its max_speed and max_accel). ``r`` renames, Delete deletes,
+within that fraction of its max_speed and max_accel), after a confirmation that names the
+largest joint travel, the tool's straight-line distance (Unimate) and the planned time, all
+read from the path that will run; it leaves its result (tracking and settle per joint) below
+the table, as a Moves run does. ``r`` renames, Delete deletes,
 ``l`` reads the file again after an edit by hand. Only a TUI that commands may teach,
 rename or delete (``Desk.refusal``): the commander's go-tos use these names. Taught
 positions are kept in the data directory (``control/motion/positions.py``,
@@ -17,7 +20,7 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import ClassVar
 
 import numpy as np
@@ -37,6 +40,9 @@ from app.widgets.dialogs import ConfirmScreen, EditValueScreen
 from app.widgets.fields import FieldError, NumberCheck, NumberField
 from app.widgets.live_text import LiveText
 from control.client import ControlClient, ControllerError, MoveHandle, MoveResult
+from control.motion import form_plans
+from control.motion.moves import summary_cells, summary_columns
+from control.motion.plan import SETTLE_COLUMNS, MovePlan, Summary, settle_cell
 from control.motion.positions import (
     Position,
     PositionBook,
@@ -93,6 +99,7 @@ class PositionsTab(TabPage):
         name: str
         result: MoveResult
         away: str
+        summaries: list[tuple[str, Summary]]
 
     def __init__(self, desk: Desk, *, id: str | None = None) -> None:
         super().__init__(desk, id=id)
@@ -111,6 +118,7 @@ class PositionsTab(TabPage):
             with Vertical():
                 yield LiveText(id="positions-here")
                 yield LiveText(id="positions-state")
+                yield DataTable(id="positions-result", cursor_type="none", zebra_stripes=True)
 
     def on_mount(self) -> None:
         super().on_mount()
@@ -124,6 +132,7 @@ class PositionsTab(TabPage):
                 table.add_column(f"{name} {unit}", key=f"pose-{name}")
         self._state(Text("t teaches where the joints are; g goes to the selected position",
                          "dim"))
+        self.query_one("#positions-result", DataTable).display = False  # until a go-to ends
         self._change(None)
 
     def focus_main(self) -> None:
@@ -307,28 +316,80 @@ class PositionsTab(TabPage):
     # -- go to ---------------------------------------------------------------------------------
 
     def action_go_to(self) -> None:
-        """A joint-space move to the selected position at the speed fraction typed."""
+        """Plan a joint-space move to the selected position at the speed fraction typed, show
+        it (travel, distance, time) and run that same path once the operator confirms."""
         p = self.selected()
         refusal = self._go_refusal(p)
-        if refusal:
-            self._state(Text(f"not moved: {refusal}", "bold red"))
-            self.notify(f"go to: {refusal}", severity="error")
-            return
-        assert p is not None
-        speed = self.query_one("#positions-speed", NumberField).value()
         client = self.client
-        assert client is not None and speed is not None
+        if not refusal:
+            assert p is not None and client is not None
+            speed = self.query_one("#positions-speed", NumberField).value()
+            assert speed is not None
+            try:
+                plan = form_plans.go_to(self.machine, np.array(client.status().position),
+                                        p.joints, speed, dt=client.dt)
+            except ValueError as exc:
+                refusal = str(exc)
+        if refusal:
+            self._not_moved(refusal)
+            return
+        plan = replace(plan, meta={**plan.meta, "position": p.name})
+
+        def answered(yes: bool | None) -> None:
+            if yes:
+                self._go(plan, p)
+            else:
+                self._state(Text(f"not moved: the go to {p.name} was cancelled", "yellow"))
+
+        self.app.push_screen(ConfirmScreen(f"Go to {p.name}?", self._go_detail(plan, speed),
+                                           f"Go to {p.name}"), answered)
+
+    def _go_detail(self, plan: MovePlan, speed: float) -> str:
+        """What the planned path will do: the largest travel of each kind of joint, the tool's
+        distance (Unimate), the time."""
+        assert plan.path is not None
+        start, end = plan.path[0], plan.path[-1]
+        travel = np.abs(end - start)
+        joints = self.machine.joints
+        largest = []
+        for unit in dict.fromkeys(j.symbol for j in joints):  # mm, then ° (their order)
+            of = [i for i, j in enumerate(joints) if j.symbol == unit]
+            i = max(of, key=lambda k: travel[k])
+            if travel[i] > 0:
+                gap = "" if unit == "°" else " "
+                largest.append(f"{joints[i].name} {travel[i]:.1f}{gap}{unit}")
+        lines = [f"Largest joint travel: {', '.join(largest) or 'none: already there'}."]
+        if self.model is not None:
+            distance = float(np.linalg.norm(self.model.pose(end)[:3]
+                                            - self.model.pose(start)[:3]))
+            lines.append(f"The tool ends {distance:.0f} mm (straight line) from where it is.")
+        seconds = (len(plan.path) - 1) * self.desk.dt
+        lines.append(f"{seconds:.1f} s at {speed:g} of full speed, then in position within "
+                     f"{self.machine.goal_time_s:g} s. Esc is the E-stop.")
+        return "\n".join(lines)
+
+    def _go(self, plan: MovePlan, p: Position) -> None:
+        """Run the confirmed path, unless something changed while the dialog was open."""
+        refusal = self._go_refusal(p)
+        client = self.client
+        if refusal or client is None:
+            self._not_moved(refusal or "the controller is not running")
+            return
         try:
-            handle = client.go_to(p.joints, speed, meta={"position": p.name})
+            handle = client.run(plan)
         except (ControllerError, ValueError) as exc:
-            self._state(Text(f"not moved: {exc}", "bold red"))
-            self.notify(f"go to {p.name}: {exc}", severity="error")
+            self._not_moved(str(exc))
             return
         self.handle = handle
-        duration = handle.samples * self.machine.sample_time_s
-        self._state(Text(f"going to {p.name} at {speed:g} of full speed ({duration:.1f} s)…",
-                         "cyan"))
+        self.query_one("#positions-result", DataTable).display = False
+        duration = handle.samples * self.desk.dt
+        self._state(Text(f"going to {p.name} at {plan.meta['speed_fraction']:g} of full speed "
+                         f"({duration:.1f} s)…", "cyan"))
         self._wait(client, handle, p)
+
+    def _not_moved(self, reason: str) -> None:
+        self._state(Text(f"not moved: {reason}", "bold red"))
+        self.notify(f"go to: {reason}", severity="error")
 
     def _go_refusal(self, p: Position | None) -> str:
         """Why a go-to cannot start now, or "" if it can."""
@@ -340,10 +401,15 @@ class PositionsTab(TabPage):
         if status is None:
             return "the controller is not running — " + (self.client_problem
                                                          or "wait for it to start")
+        if refusal := self.desk.refusal(f"go to {p.name}"):
+            return refusal
         if status.estop:
             return "the E-stop is latched: release it (^R) when it is safe, then go again"
         if status.moving:
             return "a move is running (Moves tab): wait for it, or hold (^G)"
+        if not status.homed:
+            return ("the encoders are not zeroed: run Initialise (Moves tab) first, so the "
+                    "move steers by known positions")
         field = self.query_one("#positions-speed", NumberField)
         try:
             field.check_now()
@@ -360,7 +426,7 @@ class PositionsTab(TabPage):
         times = result.settle.get("settle_s") or ()
         names = ", ".join(j.name for j, t in zip(self.machine.joints, times, strict=False)
                           if t is None)
-        self.post_message(self.Arrived(p.name, result, names))
+        self.post_message(self.Arrived(p.name, result, names, result.summaries()))
 
     def on_positions_tab_arrived(self, message: Arrived) -> None:
         self.handle = None
@@ -378,4 +444,16 @@ class PositionsTab(TabPage):
         else:
             self._state(Text(f"go to {message.name}: {result.status} · {saved}", "bold yellow"))
             self.notify(f"go to {message.name}: {result.status}", severity="warning")
+        self._result_table(message)
         self.post_message(RunsChanged())
+
+    def _result_table(self, message: Arrived) -> None:
+        """How the joints that moved tracked the path and came in position (the Moves tab's
+        result rows)."""
+        table = self.query_one("#positions-result", DataTable)
+        table.clear(columns=True)
+        table.add_columns(*summary_columns(message.summaries), SETTLE_COLUMNS[1])
+        settle = message.result.settle
+        for label, s in message.summaries:
+            table.add_row(*summary_cells(label, s), settle_cell(label, settle, self.machine))
+        table.display = bool(message.summaries)

@@ -86,7 +86,9 @@ def test_teach_list_rename_go_to_and_delete(tui, data_dir: Path) -> None:
 
             async def go_to(row: int, name: str, target: np.ndarray) -> None:
                 table.move_cursor(row=row)
-                await pilot.press("g")
+                await pilot.press("g")  # it asks first (test_positions_go.py)
+                await tui.until(lambda: isinstance(app.screen, ConfirmScreen), what="the dialog")
+                await pilot.press("y")
                 await tui.until(lambda: state.text.startswith(f"at {name}"), MOVE_S,
                                 what=lambda: f"arrival at {name}: {state.text}")
                 here = np.array(app.client.status().position)
