@@ -67,6 +67,7 @@ def response_text(run: Run, width: int, height: int, color: bool) -> str:
     if not joints:
         return "\n".join(["no joint moved: nothing to plot", *notes]) + "\n"
     shape = layout(len(joints), width, max(MIN_ROWS, height - len(notes) - 1))
+    plt.main()  # plotext keeps one global figure: start from its whole, not a panel of it
     plt.clf()
     plt.limitsize(False, False)
     plt.subplots(shape.rows, shape.columns)
@@ -75,6 +76,7 @@ def response_text(run: Run, width: int, height: int, color: bool) -> str:
         plt.subplot(k // shape.columns + 1, k % shape.columns + 1)
         _panel(plt, run, j, 2 * shape.width // shape.columns)
     text = plt.build()
+    plt.main()
     plt.clf()
     if not color:
         text = plt.uncolorize(text)
@@ -102,10 +104,20 @@ def _panel(plt: object, run: Run, j: int, points: int) -> None:
     plt.ylabel("duty (%)", yside="right")
 
 
+def terminal_size(out: TextIO) -> os.terminal_size:
+    """COLUMNS × LINES when set, else the terminal's of stdout, else of ``out`` (stderr, when
+    stdout is a file), else 80 × 24."""
+    try:
+        fallback = os.get_terminal_size(out.fileno())
+    except (OSError, ValueError):  # not a terminal, or no file at all
+        fallback = os.terminal_size((80, 24))
+    return shutil.get_terminal_size(fallback)
+
+
 def print_response(run: Run, out: TextIO) -> None:
     """The response plot of ``run`` on ``out``, sized to the terminal; coloured only on a
     terminal and without ``NO_COLOR`` (https://no-color.org)."""
-    size = shutil.get_terminal_size()
+    size = terminal_size(out)
     color = out.isatty() and not os.environ.get("NO_COLOR")
     out.write(response_text(run, size.columns, size.lines, color))
     out.flush()
