@@ -112,13 +112,26 @@ def hline(y: float, y_range: tuple[float, float], cols: int, rows: int) -> np.nd
     return out
 
 
+def vline(x: float, x_range: tuple[float, float], cols: int, rows: int) -> np.ndarray:
+    """Dot bits of a dotted vertical line at ``x`` (a moment: the E-stop), ``(rows, cols)``."""
+    out = np.zeros((rows, cols), dtype=np.uint16)
+    x0, x1 = x_range
+    if not x0 <= x <= x1 or cols == 0:
+        return out
+    col = int(min(2 * cols - 1, np.floor((x - x0) * 2 * cols / (x1 - x0))))
+    out[:, col // 2] = _DOT_BITS[0, col % 2] | _DOT_BITS[2, col % 2]
+    return out
+
+
 def render(traces: Sequence[Trace], x_range: tuple[float, float],
            y_range: tuple[float, float], cols: int, rows: int,
-           guide: Style | None = None, guide_y: float | None = None) -> list[Strip]:
+           guide: Style | None = None, guide_y: float | None = None,
+           marks: Sequence[tuple[float, Style]] = ()) -> list[Strip]:
     """Draw ``traces`` (later ones on top) into ``rows`` strips of ``cols`` cells.
 
     A cell shared by several traces shows the dots of all of them in the colour
-    of the topmost. ``guide_y`` draws a dotted line (a zero line) in ``guide``.
+    of the topmost. ``guide_y`` draws a dotted line (a zero line) in ``guide``;
+    each of ``marks`` a dotted vertical line at its time in its style, beneath the traces.
     """
     if cols <= 0 or rows <= 0:
         return [Strip.blank(max(cols, 0)) for _ in range(max(rows, 0))]
@@ -130,6 +143,11 @@ def render(traces: Sequence[Trace], x_range: tuple[float, float],
         codes |= bits
         owner[bits > 0] = len(styles)
         styles.append(guide or Style(dim=True))
+    for x, style in marks:
+        bits = vline(x, x_range, cols, rows)
+        codes |= bits
+        owner[bits > 0] = len(styles)
+        styles.append(style)
     for index, trace in enumerate(traces):
         bits = raster(trace, x_range, y_range, cols, rows)
         codes |= bits

@@ -36,14 +36,16 @@ def tick_label(value: float, span: float) -> str:
 def plot_strips(traces: Sequence[Trace], x_range: tuple[float, float],
                 y_range: tuple[float, float], title: Text, width: int, height: int,
                 console: Console, *, zero_line: bool = False,
-                x_labels: tuple[str, str, str] = ("", "", "")) -> list[Strip]:
-    """``height`` strips of ``width`` cells: a title row, y labels and the traces, the time
-    axis (blank strips when there is no room for a plot)."""
+                x_labels: tuple[str, str, str] = ("", "", ""),
+                marks: Sequence[tuple[float, Style]] = ()) -> list[Strip]:
+    """``height`` strips of ``width`` cells: a title row, y labels and the traces (and the
+    ``marks``' vertical lines), the time axis (blank strips when there is no room for a
+    plot)."""
     if width <= LABEL_WIDTH + 2 or height < 3:
         return [Strip.blank(width) for _ in range(height)]
     cols, rows = width - LABEL_WIDTH - 1, height - 2
     body = render(traces, x_range, y_range, cols, rows, guide=AXIS_STYLE,
-                  guide_y=0.0 if zero_line else None)
+                  guide_y=0.0 if zero_line else None, marks=marks)
     labels = _y_labels(y_range, rows)
     lines = [Strip(list(title.render(console))).crop(0, width).adjust_cell_length(width)]
     for r, strip in enumerate(body):
@@ -135,7 +137,11 @@ def _panel_strips(panel: Panel, width: int, height: int, console: Console) -> li
         if line.label:
             title.append("  ━ ", line.color)
             title.append(line.label)
+    for mark in panel.marks:
+        title.append("  ┃ ", mark.color)
+        title.append(mark.label, mark.color)
     traces = [Trace(line.x, line.y, Style(color=line.color)) for line in panel.lines]
     return plot_strips(traces, (x0, x1), panel.y_range(), title, width, height,
                        console, zero_line=panel.zero_line,
-                       x_labels=(f"{x0:.2f}", "", f"{x1:.2f} s"))
+                       x_labels=(f"{x0:.2f}", "", f"{x1:.2f} s"),
+                       marks=[(m.t, Style(color=m.color)) for m in panel.marks])

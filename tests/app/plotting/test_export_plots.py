@@ -12,7 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from app.plotting.figure import Figure
 from app.plotting.run_plot import export, joint_figure, overview, velocity
+from app.plotting.strips import LABEL_WIDTH
 from app.plotting.svg import PANEL_W
 from control.recorder import Run
 from hw.machine import load_machine
@@ -137,3 +139,17 @@ def test_the_velocity_has_no_spike_for_a_wrong_reading_and_does_not_lag(tmp_path
     half_down = ramp.t[500 + np.argmax(v[500:] < 10.0)]
     assert half_up == pytest.approx(0.3, abs=0.002)  # half speed within 2 ms of the start
     assert half_down == pytest.approx(0.8, abs=0.002)  # and of the end: no lag
+
+
+def test_the_text_export_and_the_runs_tab_draw_the_marks_too(tmp_path: Path) -> None:
+    """The braille drawing (``--format txt`` at 160 columns, the Runs tab): a dotted column at
+    the E-stop, across a panel where nothing else is drawn but the held line."""
+    stopped = run("estop: operator E-stop")
+    held = Figure("Up/Down held", overview(stopped, [UPDOWN]).panels[:1])
+    text = export(tmp_path / "plot", held, formats=("txt",))[0].read_text(encoding="utf-8")
+    assert "┃ E-stop: operator E-stop" in text
+    rows = [line.split("┤", 1)[1] for line in text.splitlines() if "┤" in line]
+    across = [c for c in range(min(map(len, rows))) if all(row[c] != " " for row in rows)]
+    x0, x1 = held.panels[0].x_range()
+    cols = 160 - LABEL_WIDTH - 1
+    assert len(across) == 1 and abs(across[0] - (stopped.t[-1] - x0) / (x1 - x0) * cols) <= 1
