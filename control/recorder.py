@@ -8,20 +8,23 @@ time in UTC; ``-2``, ``-3``… when the stem is taken):
 - ``.csv.gz`` — a time column in seconds and the same columns, under a header
   that names joints and units: ``t [s],Ram desired [mm],Ram actual [mm],Ram duty [%]``.
 - ``.json`` — machine, kind, status, start time, sample time, coefficients,
-  joints (with each one's encoder resolution), sample count, the decimals the
-  numbers were written with, file names and free-form ``meta`` (a move's result
-  metrics among them, ``control/motion/plan.py``).
+  joints (with each one's encoder resolution and max_accel), sample count, the
+  decimals the numbers were written with, file names and free-form ``meta`` (a move's
+  result metrics among them, ``control/motion/plan.py``).
 
 Numbers are written at the precision that matters (``decimals``), trailing zeros
 dropped: time to the µs, duty to 0.01 %, an actual position (an encoder reading)
 to a tenth of its joint's encoder count (the rig's 0.1 mm to 0.01 mm; the
-listing's ``%.1f`` was too coarse for it). The desired positions are written in
-full, with the shortest text that reads back to the same float: a saved run's CSV
-plays again as a path file, whose rules judge accelerations from second
-differences at the sample time, where rounding a position to 10⁻⁶ already adds
-hundreds of units/s² (a path at its max_accel would be refused). A run that does
-not know its encoders writes its actual positions in full too. ``as_written`` is a
-run as it reads back.
+listing's ``%.1f`` was too coarse for it). A desired position is a command whose
+second difference at the sample time is an acceleration: it is written to the decimals
+at which rounding adds at most ``DESIRED_ACCEL_SHARE`` (0.2 %) of its joint's max_accel
+to one (``Run.desired_decimals``: 10⁻⁶ mm for In/Out and the rig's Ram, 10⁻⁷° for the
+Unimate's angles at 1 ms), so a saved run plays again within the path rules' 1 %
+(``control/motion/replay.py``). At a tenth of an encoder count, as the actual, a ramp at
+max_accel would read back at 13 times it. The numbers of the JSON (its ``meta`` and
+coefficients) are written to ``JSON_DIGITS`` significant digits: 0.0055, not
+0.005500000000012051. A run that does not know its encoders (or its max_accel) writes
+its actual (desired) positions in full. ``as_written`` is a run as it reads back.
 
 The two tables are gzipped (``gzip -d`` or ``servodesk runs export --format csv`` gives
 the plain text; numpy, pandas and servodesk's path files read them as they are): a 3.4 s
@@ -74,7 +77,7 @@ import numpy as np
 import platformdirs
 
 from control import decimal_text
-from control.decimal_text import Block, Cells, counting, fixed, shortest, slots
+from control.decimal_text import Block, Cells, Spell, counting, fixed, shortest, slots
 from hw.machine import SAMPLE_TIME_MS, Coefficients, Machine
 from hw.user_files import TEXT_ENCODING, NotRegularFile, open_regular
 
@@ -82,13 +85,17 @@ if TYPE_CHECKING:
     from control.motion.file_fields import FileBound
 
 FORMAT = "servodesk-run"
-VERSION = 3  # 2: numbers at their precision (``decimals``), joints' encoder resolution;
-#              3: the TSV and CSV gzipped
+VERSION = 4  # 2: numbers at their precision (``decimals``), joints' encoder resolution;
+#              3: the TSV and CSV gzipped; 4: desired at its joint's max_accel's decimals
 TIME_DECIMALS = 6  # µs
 # A number of a run's table written in full, -2.2250738585072014e-308, and its separator
 BYTES_PER_NUMBER = 26
 MAX_JSON_BYTES = 64 << 20  # a run's metadata; a 600 s move's lists are under 1 MB
 DUTY_DECIMALS = 2  # 0.01 %
+# rounding a desired position may change a second difference at the sample time by this
+# share of its joint's max_accel: a fifth of the path rules' 1 % (acceptance.SAMPLING_TOLERANCE)
+DESIRED_ACCEL_SHARE = 0.002
+JSON_DIGITS = 10  # significant digits of a JSON number: past any measurement, short of float noise
 GZIP_LEVEL = 1  # 14-16 % larger than level 9, packed ten times as fast (benchmarks/run_io.py)
 ROWS_AT_ONCE = 32_768  # rows written as one block (~10 MB of text): few steps, each without the GIL
 MAX_SUFFIX = 10_000  # stems tried before giving up: far beyond same-second saves
@@ -114,7 +121,9 @@ class Run:
     compares every field, arrays by value (NaN equal to NaN).
     ``joint_resolution`` is each joint's encoder count in its unit (the machine
     file's ``encoder.gradient``, its size), which sets the decimals actual positions
-    are saved with; empty when unknown (then every digit is saved).
+    are saved with; empty when unknown (then every digit is saved). ``joint_max_accel``
+    is each joint's max_accel (unit/s²), which sets the decimals desired positions are
+    saved with (``desired_decimals``); empty when unknown (every digit).
     """
 
     machine: str
@@ -131,12 +140,14 @@ class Run:
     duty: np.ndarray
     meta: Mapping[str, Any] = field(default_factory=dict)
     joint_resolution: tuple[float, ...] = ()
+    joint_max_accel: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
         put = object.__setattr__
         put(self, "joint_names", tuple(map(str, self.joint_names)))
         put(self, "joint_units", tuple(map(str, self.joint_units)))
         put(self, "joint_resolution", tuple(map(float, self.joint_resolution)))
+        put(self, "joint_max_accel", tuple(map(float, self.joint_max_accel)))
         put(self, "start_time", _utc(self.start_time).isoformat())
         coefficients = self.coefficients
         if isinstance(coefficients, Coefficients):
@@ -160,6 +171,11 @@ class Run:
                 or not all(math.isfinite(r) and r > 0 for r in self.joint_resolution)):
             raise ValueError(f"joint_resolution must be {j} positive numbers (each joint's "
                              f"encoder count), got {self.joint_resolution}")
+        if self.joint_max_accel and (
+                len(self.joint_max_accel) != j
+                or not all(math.isfinite(a) and a > 0 for a in self.joint_max_accel)):
+            raise ValueError(f"joint_max_accel must be {j} positive numbers (each joint's "
+                             f"max_accel), got {self.joint_max_accel}")
         if self.t.ndim != 1:
             raise ValueError(f"t must be (N,) seconds, got shape {self.t.shape}")
         for name in ("desired", "actual", "duty"):
@@ -178,7 +194,7 @@ class Run:
         return cls(machine.name, kind, status, _utc(start).isoformat(), machine.sample_time_s,
                    coefficients, tuple(j.name for j in machine.joints),
                    tuple(j.unit for j in machine.joints), t, desired, actual, duty, meta or {},
-                   resolution(machine))
+                   resolution(machine), tuple(j.max_accel for j in machine.joints))
 
     @property
     def samples(self) -> int:
@@ -191,6 +207,17 @@ class Run:
             return (None,) * len(self.joint_names)
         return tuple(max(0, math.ceil(-math.log10(r / 10) - 1e-9))
                      for r in self.joint_resolution)
+
+    def desired_decimals(self) -> tuple[int | None, ...]:
+        """Decimals each joint's desired positions are saved with: the fewest at which
+        rounding (by at most half their last digit a row) changes a second difference at the
+        sample time by at most ``DESIRED_ACCEL_SHARE`` of its max_accel, ``2·10⁻ᵈ/Δt²``
+        (None: every digit, for a run that does not know its max_accel)."""
+        if not self.joint_max_accel:
+            return (None,) * len(self.joint_names)
+        dt2 = self.sample_time_s ** 2
+        return tuple(max(0, math.ceil(-math.log10(DESIRED_ACCEL_SHARE * a * dt2 / 2) - 1e-9))
+                     for a in self.joint_max_accel)
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, Run):
@@ -360,7 +387,8 @@ def load_run(path: Path) -> Run:
         bound = table_bound(samples, columns, header, float(doc["sample_time_s"]))
         table = _read_table(files.csv, columns, samples, bound)
         resolutions = tuple(j["resolution"] for j in joints if "resolution" in j)  # version 2
-        return _run_of(doc, table, resolutions)
+        accels = tuple(j["max_accel"] for j in joints if "max_accel" in j)  # version 4
+        return _run_of(doc, table, resolutions, accels)
     except (KeyError, TypeError, ValueError) as exc:
         raise RecorderError(f"{files.json}: damaged run ({type(exc).__name__}: {exc})") from exc
 
@@ -371,10 +399,24 @@ def as_written(run: Run) -> Run:
     table = _parse_table(csv_text(run).splitlines()[1:], 1 + 3 * len(run.joint_names))
     by_joint = table[:, 1:].reshape(len(table), len(run.joint_names), 3)
     return replace(run, t=table[:, 0], desired=by_joint[:, :, 0], actual=by_joint[:, :, 1],
-                   duty=by_joint[:, :, 2])
+                   duty=by_joint[:, :, 2], coefficients=json_numbers(run.coefficients),
+                   meta=json_numbers(run.meta))
 
 
-def _run_of(doc: Mapping[str, Any], table: np.ndarray, resolutions: tuple[float, ...]) -> Run:
+def json_numbers(value: Any) -> Any:
+    """``value`` (JSON-compatible) with every float at ``JSON_DIGITS`` significant digits,
+    as a run's JSON holds it: the noise of float arithmetic (0.005500000000012051) gone."""
+    if isinstance(value, float):
+        return float(f"{value:.{JSON_DIGITS}g}") if math.isfinite(value) else value
+    if isinstance(value, Mapping):
+        return {k: json_numbers(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [json_numbers(v) for v in value]
+    return value
+
+
+def _run_of(doc: Mapping[str, Any], table: np.ndarray, resolutions: tuple[float, ...],
+            accels: tuple[float, ...]) -> Run:
     joints = doc["joints"]
     by_joint = table[:, 1:].reshape(len(table), len(joints), 3)
     return Run(
@@ -383,7 +425,7 @@ def _run_of(doc: Mapping[str, Any], table: np.ndarray, resolutions: tuple[float,
         coefficients=doc["coefficients"], joint_names=tuple(j["name"] for j in joints),
         joint_units=tuple(j["unit"] for j in joints), t=table[:, 0],
         desired=by_joint[:, :, 0], actual=by_joint[:, :, 1], duty=by_joint[:, :, 2],
-        meta=doc.get("meta", {}), joint_resolution=resolutions,
+        meta=doc.get("meta", {}), joint_resolution=resolutions, joint_max_accel=accels,
     )
 
 
@@ -554,7 +596,7 @@ def _tables(run: Run, *, tsv: bool = True) -> Iterator[tuple[np.ndarray, np.ndar
     """The rows of the TSV (if ``tsv``; else none) and of the CSV (no header) as ASCII
     bytes, a block of ``ROWS_AT_ONCE`` at a time: the joints' columns written once for
     both."""
-    desired, actual, duty = _joint_cells(run)
+    desired, actual, duty = joint_cells(run)
     for a in range(0, run.samples, ROWS_AT_ONCE):
         rows = slice(a, a + ROWS_AT_ONCE)
         joints = Block.of(*(slots(cells(rows)) for cells in (desired, actual, duty)))
@@ -565,23 +607,29 @@ def _tables(run: Run, *, tsv: bool = True) -> Iterator[tuple[np.ndarray, np.ndar
                decimal_text.lines([Block.of(slots(time)), joints], b","))
 
 
-def _joint_cells(run: Run) -> tuple[Callable[[slice], Cells], ...]:
-    """How the desired, actual and duty columns of a block of rows become text: desired in
-    full (``repr``), actual at each joint's decimals (``Run.decimals``; in full if it has
-    none), duty to ``DUTY_DECIMALS``."""
-    decimals = run.decimals()
-    duty = _spell(f".{DUTY_DECIMALS}f")
-    if None in decimals:
-        def actual(rows: slice) -> Cells:
-            return shortest(run.actual[rows], _spell("r"))
-    else:
-        places = np.array(decimals)
-        by_joint = [_spell(f".{d}f") for d in decimals]
-
-        def actual(rows: slice) -> Cells:
-            return fixed(run.actual[rows], places, lambda v, j: by_joint[j](v, j))
-    return (lambda rows: shortest(run.desired[rows], _spell("r")), actual,
+def joint_cells(run: Run, spell: Callable[[str], Spell] | None = None
+                ) -> tuple[Callable[[slice], Cells], ...]:
+    """How the desired, actual and duty columns of a block of rows become text: desired at
+    each joint's ``Run.desired_decimals``, actual at its ``Run.decimals`` (in full,
+    ``repr``, where a run has none), duty to ``DUTY_DECIMALS``. ``spell`` makes the text
+    of the few numbers left to Python from a %-format (the tables': ``_spell``)."""
+    spell = spell or _spell
+    duty = spell(f".{DUTY_DECIMALS}f")
+    return (_positions(run.desired, run.desired_decimals(), spell),
+            _positions(run.actual, run.decimals(), spell),
             lambda rows: fixed(run.duty[rows], DUTY_DECIMALS, duty))
+
+
+def _positions(values: np.ndarray, decimals: tuple[int | None, ...],
+               spell: Callable[[str], Spell]) -> Callable[[slice], Cells]:
+    """A column block of positions ``values (N, J)`` at each joint's ``decimals`` (in full
+    if any is None)."""
+    if None in decimals:
+        whole = spell("r")
+        return lambda rows: shortest(values[rows], whole)
+    places = np.array(decimals)
+    by_joint = [spell(f".{d}f") for d in decimals]
+    return lambda rows: fixed(values[rows], places, lambda v, j: by_joint[j](v, j))
 
 
 def _csv_header(names: tuple[str, ...], units: tuple[str, ...]) -> str:
@@ -600,7 +648,7 @@ _BARE_POINT = re.compile(r"\.(?=[,\t\n])")
 _NEGATIVE_ZERO = re.compile(r"(?<=[,\t])-0(?=[,\t\n])")
 
 
-def _spell(fmt: str, *, first: bool = False) -> Callable[[float, int], str]:
+def _spell(fmt: str, *, first: bool = False) -> Spell:
     """A number's text in %-format ``fmt`` (``r``: the shortest that reads back), trailing
     zeros dropped, and ``-0`` as ``0`` unless it starts the line (``first``): for the few
     numbers ``control/decimal_text.py`` leaves to Python (NaN, ±inf, near a rounding tie,
@@ -623,10 +671,10 @@ def _json(run: Run, files: RunFiles) -> bytes:
         "sample_time_s": run.sample_time_s,
         "samples": run.samples,
         "joints": _joints(run),
-        "decimals": {"t": TIME_DECIMALS, "desired": None, "actual": list(run.decimals()),
-                     "duty": DUTY_DECIMALS},
-        "coefficients": run.coefficients,
-        "meta": run.meta,
+        "decimals": {"t": TIME_DECIMALS, "desired": _listed(run.desired_decimals()),
+                     "actual": _listed(run.decimals()), "duty": DUTY_DECIMALS},
+        "coefficients": json_numbers(run.coefficients),
+        "meta": json_numbers(run.meta),
         "files": {"tsv": files.tsv.name, "csv": files.csv.name, "json": files.json.name},
         "tsv_columns": "sample, then desired, actual, duty of each joint (option.c SaveData)",
     }
@@ -638,7 +686,14 @@ def _joints(run: Run) -> list[dict[str, Any]]:
         {"name": n, "unit": u} for n, u in zip(run.joint_names, run.joint_units, strict=True)]
     for joint, r in zip(joints, run.joint_resolution, strict=False):
         joint["resolution"] = r
+    for joint, a in zip(joints, run.joint_max_accel, strict=False):
+        joint["max_accel"] = a
     return joints
+
+
+def _listed(decimals: tuple[int | None, ...]) -> list[int] | None:
+    """Decimals as the JSON lists them: None for a column written in full."""
+    return None if None in decimals else list(decimals)
 
 
 def _place_all(contents: tuple[tuple[Path, bytes], ...], placed: list[Path]) -> bool:

@@ -6,6 +6,10 @@ Channels (topic: one message holds):
 - ``/joints/desired``, ``/joints/actual``: each joint's position by name (mm, deg);
 - ``/joints/duty``: each joint's valve duty by name (%), what the valves were sent
   after the guards (a run records no other valve signal);
+
+  every number at the precision the run's own tables have (``control/recorder.py``:
+  desired to its max_accel's decimals, actual to a tenth of an encoder count, duty to
+  0.01 %), written by the same writer; NaN (no desired position, open loop) is null;
 - ``/events``: the run's status at its end, and its stalls, feed changes and feed holds
   (``gaps``, ``feed``, ``pauses`` of its metadata), each at its time;
 - ``/gains``: the coefficient sets in use, once at the start.
@@ -18,7 +22,7 @@ run's own files; this is an export (``servodesk runs export --format mcap``, the
 from __future__ import annotations
 
 import json
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import Any
@@ -27,11 +31,14 @@ import numpy as np
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
-from control.recorder import Run
+from control import decimal_text
+from control.decimal_text import Block, Cells, slots
+from control.recorder import ROWS_AT_ONCE, Run, joint_cells, json_numbers
 
 JOINT_TOPICS = {"/joints/desired": "desired", "/joints/actual": "actual",
                 "/joints/duty": "duty"}
 METADATA = "servodesk.run"
+NOT_FINITE = {"nan": "null", "inf": "null", "-inf": "null"}  # as the tables spell them
 EPOCH = datetime(1970, 1, 1, tzinfo=UTC)
 
 
@@ -55,19 +62,20 @@ def _write(run: Run, stream: Any) -> None:
     start_ns = _epoch_ns(run.start_time)
     stamps = start_ns + np.round(run.t * 1e9).astype(np.int64)
     names = run.joint_names
-    for topic, field_name in JOINT_TOPICS.items():
+    for (topic, field_name), cells in zip(JOINT_TOPICS.items(), joint_cells(run), strict=True):
         unit = "%" if field_name == "duty" else None
         schema = writer.register_schema(
             f"servodesk.joints.{field_name}", "jsonschema", _joint_schema(names, run, unit))
         channel = writer.register_channel(topic, "json", schema)
-        for i, (stamp, row) in enumerate(zip(stamps.tolist(), _json_rows(names, getattr(
-                run, field_name)), strict=True)):
+        for i, (stamp, row) in enumerate(zip(stamps.tolist(), _json_rows(names, cells,
+                                                                         run.samples),
+                                             strict=True)):
             writer.add_message(channel, stamp, row, stamp, i)
     _write_events(writer, run, start_ns, int(stamps[-1]) if len(stamps) else start_ns)
     schema = writer.register_schema("servodesk.gains", "jsonschema", json.dumps(
         {"type": "object", "description": "the coefficient sets of eq. 5.1 in use"}).encode())
     channel = writer.register_channel("/gains", "json", schema)
-    gains = json.dumps(run.coefficients, default=str).encode()
+    gains = json.dumps(json_numbers(run.coefficients), default=str).encode()
     writer.add_message(channel, start_ns, gains, start_ns, 0)
     writer.add_metadata(METADATA, {key: json.dumps(value, default=str)
                                    for key, value in _run_record(run).items()})
@@ -111,22 +119,23 @@ def _joint_schema(names: tuple[str, ...], run: Run, unit: str | None) -> bytes:
     }).encode()
 
 
-def _json_rows(names: tuple[str, ...], values: np.ndarray) -> Iterator[bytes]:
-    """Each row ``(J,)`` as a JSON object by joint name; NaN (no desired position in an
-    open-loop move) is null. A float's repr is its JSON, so finite rows fill a template."""
-    template = "{" + ", ".join(f"{json.dumps(name)}: %r" for name in names) + "}"
-    finite = np.isfinite(values).all(axis=1).tolist()
-    for ok, row in zip(finite, values.tolist(), strict=True):
-        yield (template % tuple(row) if ok else json.dumps(
-            {n: v if np.isfinite(v) else None for n, v in zip(names, row, strict=True)})
-        ).encode()
+def _json_rows(names: tuple[str, ...], cells: Callable[[slice], Cells], samples: int
+               ) -> Iterator[bytes]:
+    """Each row as a JSON object by joint name, its numbers as the run's tables write them
+    (``cells``, a block of rows at a time); NaN (no desired position in an open-loop move)
+    and ±inf are null."""
+    template = "{" + ", ".join(f"{json.dumps(name)}: %s" for name in names) + "}"
+    for a in range(0, samples, ROWS_AT_ONCE):
+        text = decimal_text.lines([Block.of(slots(cells(slice(a, a + ROWS_AT_ONCE))))], b",")
+        for line in text.tobytes().decode().splitlines():
+            yield (template % tuple(NOT_FINITE.get(v, v) for v in line.split(","))).encode()
 
 
 def _run_record(run: Run) -> dict[str, Any]:
     return {"machine": run.machine, "kind": run.kind, "status": run.status,
             "start_time": run.start_time, "sample_time_s": run.sample_time_s,
             "joints": [list(j) for j in zip(run.joint_names, run.joint_units, strict=True)],
-            "meta": dict(run.meta)}
+            "meta": json_numbers(dict(run.meta))}
 
 
 def _epoch_ns(stamp: str) -> int:

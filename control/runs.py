@@ -4,8 +4,8 @@
 Three parties may save a move: the client when the move ends, the controller after its
 loop when its client is gone, and the next client to start when both died
 (``control/recovery.py``). So the segment carries everything a run needs besides its
-record (``segment_meta``): the machine and its joints (name, unit and encoder count, which
-sets the decimals the run is saved with), the kind, the sample time, where
+record (``segment_meta``): the machine and its joints (name, unit, encoder count and
+max_accel, which set the decimals the run is saved with), the kind, the sample time, where
 runs go, a run id that tells whether it is already saved, and the metadata of the move.
 """
 
@@ -37,8 +37,8 @@ def segment_meta(machine: Machine, kind: str, sample_time_s: float, data_dir: Pa
     return {
         "run_id": uuid.uuid4().hex,
         "machine": machine.name,
-        "joints": [[j.name, j.unit, r] for j, r in zip(machine.joints, resolution(machine),
-                                                         strict=True)],
+        "joints": [[j.name, j.unit, r, j.max_accel]
+                   for j, r in zip(machine.joints, resolution(machine), strict=True)],
         "kind": kind,
         "sample_time_s": sample_time_s,
         "data_dir": str(data_dir),
@@ -66,6 +66,7 @@ def run_from_segment(buf: memoryview, layout: MoveLayout, meta: dict[str, Any], 
     ``ActiveMove.timeline``) goes into its metadata."""
     joints = [(str(name), str(unit)) for name, unit, *_ in meta["joints"]]
     resolutions = tuple(float(j[2]) for j in meta["joints"] if len(j) > 2)
+    accels = tuple(float(j[3]) for j in meta["joints"] if len(j) > 3)
     n = len(joints)
     record = layout.record(buf)[:layout.recorded(buf)].reshape(-1, 1 + 3 * n).copy()
     extra = {k: v for k, v in meta.items() if k not in STANDARD or k == "run_id"}
@@ -91,4 +92,5 @@ def run_from_segment(buf: memoryview, layout: MoveLayout, meta: dict[str, Any], 
         duty=record[:, 1 + 2 * n:],
         meta=extra,
         joint_resolution=resolutions,
+        joint_max_accel=accels,
     )

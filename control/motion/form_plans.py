@@ -162,12 +162,15 @@ def end_point(machine: Machine, current: np.ndarray, pose: np.ndarray, solutions
 def path_file(machine: Machine, current: np.ndarray, points: PathPoints, source: str, *,
               dt: float) -> MovePlan:
     """The path of a file read by ``path_files.read_path``, at the sample time; the joints the
-    file leaves out stay where they are now (``current``, on a limit if just past it)."""
+    file leaves out stay where they are now (``current``, on a limit if just past it). A
+    saved run plays as the kind it was (``control/motion/replay.py``)."""
     hold = np.clip(current, machine.lower, machine.upper)
     path = resample(points.held_at(hold), dt)
-    return MovePlan("path", f"path {Path(source).name}", path,
-                    meta={"file": str(Path(source).expanduser().resolve())},
-                    moving=moving_joints(path))
+    meta = {"file": str(Path(source).expanduser().resolve())}
+    if points.run:
+        meta["replays"] = points.run
+    title = f"replay of {points.run}" if points.run else f"path {Path(source).name}"
+    return MovePlan(points.kind, title, path, meta=meta, moving=moving_joints(path))
 
 
 def via_point_rows(text: str, machine: Machine, cartesian: bool) -> np.ndarray:

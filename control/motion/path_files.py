@@ -5,9 +5,12 @@
   position per joint in joint order. Blank lines and ``#`` comments are skipped.
 - **CSV** (``.csv``): a header naming the columns — a time column ``t``,
   ``time`` or ``t [s]``, and one column per joint by name or key (``In/Out``,
-  ``inout``, ``Up/Down [deg]``). A joint not in the file stays where it is. A
-  run saved by servodesk can be played back: its ``<joint> desired [unit]``
-  columns are used and its actual and duty columns ignored.
+  ``inout``, ``Up/Down [deg]``). A joint not in the file stays where it is.
+- **A saved run** (its ``.json``, either table, or its stem): its desired path plays
+  again, one row per sample, as the move it was (``control/motion/replay.py``): a table
+  beside its JSON is read through the JSON; one without (a CSV with ``<joint> desired
+  [unit]`` columns, a TSV of sample then desired, actual and duty of each joint, as
+  option.c SaveData wrote) plays as a path on the machine's sample grid.
 
 Either may be gzipped (``.tsv.gz``, ``.csv.gz``: a saved run's files are). Times are
 seconds, positions mm or degrees. Every malformed line is reported
@@ -40,6 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
+from control.motion import replay
 from control.motion.acceptance import (
     MAX_MOVE_S,
     MoveRefused,
@@ -68,8 +72,10 @@ class PathFileError(ValueError):
 @dataclass(frozen=True)
 class PathPoints:
     """Points of a path file: ``t (M,)`` s from 0, ``q (M, J)`` mm/deg, ``lines (M,)``,
-    ``max_accel (J,)`` the changes of speed are blended at (none: straight corners), and
-    ``held``, the joints the file leaves out (they stay where they are: ``held_at``)."""
+    ``max_accel (J,)`` the changes of speed are blended at (none: straight corners, as a
+    saved run's rows, one a sample), ``held``, the joints the file leaves out (they stay
+    where they are: ``held_at``), the move ``kind`` they play as, and ``run``, what they
+    replay (a saved run: ``replay.RunPath.title``; empty for a path file)."""
 
     source: str
     t: np.ndarray
@@ -77,6 +83,15 @@ class PathPoints:
     lines: tuple[int, ...]
     max_accel: tuple[float, ...] = ()
     held: tuple[int, ...] = ()
+    kind: str = "path"
+    run: str = ""
+
+    @classmethod
+    def of_run(cls, played: replay.RunPath) -> PathPoints:
+        """A saved run's rows as points, one a sample: the path ``resample`` makes of them
+        at their sample time is the rows themselves."""
+        return cls(played.source, np.arange(len(played.q)) * played.dt, played.q,
+                   played.lines(), kind=played.kind, run=played.title)
 
     def held_at(self, hold: np.ndarray) -> PathPoints:
         """These points with the joints the file leaves out at ``hold (J,)``: where they are
@@ -114,7 +129,10 @@ def path_file_bound(machine: Machine) -> FileBound:
 
 def read_path(path: str | Path, machine: Machine, hold: tuple[float, ...]) -> PathPoints:
     """Read a path file for ``machine``, within ``path_file_bound``; joints the file leaves
-    out stay at ``hold``."""
+    out stay at ``hold``. A saved run (any of its files, its stem) is its desired path."""
+    if (json := replay.saved_run(path)) is not None:
+        return PathPoints.of_run(replay.read_run(json, machine, PathFileError,
+                                                 named=str(path)))
     path, text = read_text_file(path, path_file_bound(machine), PathFileError)
     if format_suffix(path) in CSV_SUFFIXES:
         return parse_csv(text, machine, hold, str(path))
@@ -123,22 +141,30 @@ def read_path(path: str | Path, machine: Machine, hold: tuple[float, ...]) -> Pa
 
 def parse_tsv(text: str, machine: Machine, hold: tuple[float, ...],
               source: str = "<tsv>") -> PathPoints:
-    """``time<TAB>position…`` lines: 1 + J numbers each (or 2 on a one-joint machine)."""
+    """``time<TAB>position…`` lines: 1 + J numbers each (or 2 on a one-joint machine); or a
+    saved run's TSV, 1 + 3·J (sample, then desired, actual, duty of each joint), whose
+    desired columns play on the sample grid (``replay.table_run``)."""
     n = machine.n_joints
     times, rows, lines = [], [], []
+    width = 0
     for number, raw in enumerate(text.splitlines(), start=1):
         line = raw.split("#", 1)[0].strip()
         if not line:
             continue
         fields = line.split("\t") if "\t" in line else line.split()
-        if len(fields) != 1 + n:
-            want = "time<TAB>position" if n == 1 else f"time then {n} positions"
+        width = width or (len(fields) if len(fields) == 1 + 3 * n else 1 + n)
+        if len(fields) != width:
+            want = ("sample, then desired, actual and duty of each joint (a saved run)"
+                    if width != 1 + n else
+                    "time<TAB>position" if n == 1 else f"time then {n} positions")
             raise PathFileError(f"{source}: line {number}: {len(fields)} field(s), expected "
-                                f"{1 + n} ({want})")
+                                f"{width} ({want})")
         values = [_number(f, source, number, k) for k, f in enumerate(fields, start=1)]
         times.append(values[0])
-        rows.append(values[1:])
+        rows.append(values[1::3] if width != 1 + n else values[1:])
         lines.append(number)
+    if width not in (0, 1 + n):
+        return _saved_table(source, rows, lines, machine)
     return _points(source, times, rows, lines, machine)
 
 
@@ -151,6 +177,7 @@ def parse_csv(text: str, machine: Machine, hold: tuple[float, ...],
         raise PathFileError(f"{source}: empty file: expected a header of joint names")
     header_line, header = first[0], [c.strip() for c in first[1]]
     time_col, joint_cols = _columns(header, machine, source, header_line)
+    saved = any(_joint_part(header[col])[1] == "desired" for col in joint_cols)
     base = list(hold)
     times, rows, lines = [], [], []
     for number, row in reader:
@@ -166,6 +193,8 @@ def parse_csv(text: str, machine: Machine, hold: tuple[float, ...],
         rows.append(q)
         lines.append(number)
     held = tuple(j for j in range(machine.n_joints) if j not in joint_cols.values())
+    if saved:  # a saved run's table: its times are when each sample was taken, jitter too
+        return replace(_saved_table(source, rows, lines, machine), held=held)
     return replace(_points(source, times, rows, lines, machine), held=held)
 
 
@@ -255,6 +284,15 @@ def _joint_part(name: str) -> tuple[str, str]:
 
 def _number(text: str, source: str, line: int, field: int) -> float:
     return field_number(text, source, line, field, PathFileError)
+
+
+def _saved_table(source: str, rows: list[list[float]], lines: list[int], machine: Machine
+                 ) -> PathPoints:
+    """A saved run's table without its JSON: its desired rows, one a sample."""
+    if not rows:
+        raise PathFileError(f"{source}: no rows: a saved run's table holds one per sample")
+    q = np.array(rows, dtype=np.float64).reshape(len(rows), machine.n_joints)
+    return PathPoints.of_run(replay.table_run(source, q, machine, lines[0], PathFileError))
 
 
 def _points(source: str, times: list[float], rows: list[list[float]], lines: list[int],

@@ -75,7 +75,9 @@ def test_round_trip_is_exact_at_the_written_precision(tmp_path: Path) -> None:
     half_unit = 0.5 * 10.0 ** -np.array(back.decimals())  # (J,) a tenth of a count, halved
     assert back.decimals() == (2, 3, 3, 3, 3, 3)
     assert np.all(np.abs(back.actual - run.actual) <= half_unit + 1e-9)
-    assert back.desired.tolist() == run.desired.tolist()  # in full: it plays again as a path
+    assert back.desired_decimals() == (6, 7, 7, 7, 7, 7)  # rounding: ≤ 0.2 % of max_accel
+    assert np.all(np.abs(back.desired - run.desired)
+                  <= 0.5 * 10.0 ** -np.array(back.desired_decimals()) + 1e-9)
     assert np.abs(back.duty - run.duty).max() <= 0.005 + 1e-9
     assert np.abs(back.t - run.t).max() <= 0.5e-6
 
@@ -90,17 +92,19 @@ def test_numbers_are_written_at_the_precision_that_matters(tmp_path: Path) -> No
     files = save_run(run, tmp_path)
     row = table_text(files.csv).splitlines()[2].split(",")
     assert row[0] == "0.001"  # to the µs, trailing zeros dropped
-    # desired in full, actual to a tenth of a count: In/Out's 0.26 mm to 0.01 mm
-    assert row[1:4] == ["1508.4405000000002", "1508.44", "0"]
+    # desired to 10⁻⁶ mm (its max_accel's share at 1 ms), actual to a tenth of a count:
+    # In/Out's 0.26 mm to 0.01 mm
+    assert row[1:4] == ["1508.4405", "1508.44", "0"]
     assert row[4:7] == ["0.0056", "0.006", "-17.21"]  # Rotate's 0.03° to 0.001°; duty 0.01 %
     assert row[10:13] == ["-0.00488", "-0.005", "0"]  # −0.001 % is written as 0, not −0
     assert row[16:19] == ["100", "100", "0"]
     assert table_text(files.tsv).splitlines()[2].split("\t") == ["2", *row[1:]]
     doc = json.loads(files.json.read_text())
-    assert doc["version"] == 3
-    assert doc["decimals"] == {"t": 6, "desired": None, "actual": [2, 3, 3, 3, 3, 3],
-                               "duty": 2}
-    assert doc["joints"][0] == {"name": "In/Out", "unit": "mm", "resolution": 0.2617}
+    assert doc["version"] == 4
+    assert doc["decimals"] == {"t": 6, "desired": [6, 7, 7, 7, 7, 7],
+                               "actual": [2, 3, 3, 3, 3, 3], "duty": 2}
+    assert doc["joints"][0] == {"name": "In/Out", "unit": "mm", "resolution": 0.2617,
+                                "max_accel": 2000.0}
 
 
 def test_a_run_that_does_not_know_its_encoders_keeps_every_digit_of_its_positions(
@@ -110,7 +114,8 @@ def test_a_run_that_does_not_know_its_encoders_keeps_every_digit_of_its_position
               made.coefficients, made.joint_names, made.joint_units, made.t, made.desired,
               made.actual, made.duty, made.meta)
     back = load_run(save_run(run, tmp_path).json)
-    assert run.decimals() == (None,) * 6 and back == as_written(run)
+    assert run.decimals() == run.desired_decimals() == (None,) * 6
+    assert back == as_written(run)
     assert back.actual.tolist() == run.actual.tolist()
     assert back.desired.tolist() == run.desired.tolist()
 
@@ -206,7 +211,8 @@ def test_json_carries_the_metadata(tmp_path: Path) -> None:
     assert doc["status"] == "estop"
     assert doc["sample_time_s"] == 0.001 and doc["samples"] == 50
     assert doc["start_time"] == "2024-03-01T09:30:15.250000+00:00"
-    assert doc["joints"][2] == {"name": "Up/Down", "unit": "deg", "resolution": 0.01432}
+    assert doc["joints"][2] == {"name": "Up/Down", "unit": "deg", "resolution": 0.01432,
+                                "max_accel": 150.0}
     assert doc["coefficients"]["name"] == "track"
     assert doc["files"] == {"tsv": f"{files.stem}.tsv.gz", "csv": f"{files.stem}.csv.gz",
                             "json": f"{files.stem}.json"}
@@ -373,8 +379,8 @@ def test_default_data_dir_is_under_the_user_data_dir() -> None:
 
 
 def test_a_saved_runs_csv_plays_again_as_a_path_even_at_max_accel(tmp_path: Path) -> None:
-    """The desired path is saved in full: the path rules judge accelerations at the sample
-    time, where rounding even to 10⁻⁶ would refuse a ramp that keeps max_accel exactly."""
+    """The desired path is saved to the decimals its max_accel needs: the path rules judge
+    accelerations at the sample time, and a ramp that keeps max_accel exactly still plays."""
     here = np.array([1508.4405000000002, 0.0055000000000120, 6.4968, -0.00488, 2.49876, 0.1])
     end = here + np.array([300.0, 40.0, 15.0, 30.0, 20.0, 10.0])
     path = moves.ramp(here, end, moves.min_ramp_time(here, end, UNIMATE), machine=UNIMATE)
@@ -383,7 +389,7 @@ def test_a_saved_runs_csv_plays_again_as_a_path_even_at_max_accel(tmp_path: Path
     run = Run.from_machine(UNIMATE, "ramp", "complete", UNIMATE.track, t, path, noisy,
                            np.zeros_like(path))
     points = read_path(save_run(run, tmp_path).csv, UNIMATE, tuple(here))
-    assert points.q.tolist() == path.tolist()
+    assert points.q.tolist() == as_written(run).desired.tolist()
 
 
 # -- the tables' text, written a block at a time (control/decimal_text.py) ----------------------
@@ -405,8 +411,9 @@ def old_table(rows: np.ndarray, sep: str, formats: list[str]) -> str:
 
 def old_formats(run: Run) -> list[str]:
     out = []
-    for d in run.decimals():
-        out += ["r", "r" if d is None else f".{d}f", ".2f"]
+    full = None in run.desired_decimals()
+    for d, a in zip(run.desired_decimals(), run.decimals(), strict=True):
+        out += ["r" if full else f".{d}f", "r" if a is None else f".{a}f", ".2f"]
     return out
 
 
@@ -448,6 +455,8 @@ def random_runs(draw: st.DrawFn) -> Run:
                            start_time="2024-03-01T09:30:15+00:00")
     if draw(st.booleans()):  # a run that does not know its encoders: actual in full
         run = replace(run, joint_resolution=())
+    if draw(st.booleans()):  # nor its max_accel: desired in full
+        run = replace(run, joint_max_accel=())
     return run
 
 
@@ -504,5 +513,5 @@ def test_what_is_written_loads_back_and_plays_as_a_path(reach: list[float], seco
     with tempfile.TemporaryDirectory() as directory:
         files = save_run(run, Path(directory))
         back = load_run(files.json)
-        assert back == as_written(run) and back.desired.tolist() == path.tolist()
-        assert read_path(files.csv, UNIMATE, tuple(here)).q.tolist() == path.tolist()
+        assert back == as_written(run)
+        assert read_path(files.csv, UNIMATE, tuple(here)).q.tolist() == back.desired.tolist()
