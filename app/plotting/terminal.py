@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 import shutil
 from dataclasses import dataclass
+from types import ModuleType
 from typing import TextIO
 
 import numpy as np
@@ -83,7 +84,7 @@ def response_text(run: Run, width: int, height: int, color: bool) -> str:
     return "\n".join([text.rstrip("\n"), *notes]) + "\n"
 
 
-def _panel(plt: object, run: Run, j: int, points: int) -> None:
+def _panel(plt: ModuleType, run: Run, j: int, points: int) -> None:
     """Joint ``j``'s desired, actual and duty over the run, ``points`` samples a line."""
     plt.theme("clear")  # the terminal's own background, dark or light
     plt.title(f"{run.joint_names[j]} ({run.joint_units[j]})")
