@@ -6,13 +6,16 @@ runs an Up/Down step from the Moves tab (and watches it on the Scope), identifie
 then saves each tab as the operator would see it. Then every tab again at 80 × 24, the
 smallest terminal servodesk is laid out for, in ``docs/screenshots/80x24/``. Runs go to
 a temporary directory; ``--rig`` adds the rig's Jog and Moves tabs; ``--small`` makes
-only the 80 × 24 ones.
+only the 80 × 24 ones. Every SVG is written to load nothing from the network (``offline``:
+Textual's names its font on a CDN); ``--offline`` makes the SVGs already there so, without
+running the app.
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import re
 import sys
 import tempfile
 import time
@@ -47,10 +50,31 @@ async def wait_for(condition: Callable[[], object], timeout: float = 30.0) -> No
         await asyncio.sleep(0.05)
 
 
+# a font Textual's SVG loads from a CDN after the local one: `, url("https://…") format("woff2")`
+REMOTE_FONT = re.compile(r',\s*url\("https?://[^"]*"\)\s*format\("[^"]*"\)')
+
+
+def offline(svg: str) -> str:
+    """``svg`` loading nothing from the network: its fonts only by their local names (a
+    viewer without Fira Code draws the text in its monospace, as the SVG's font-family
+    says), so the README shows the same offline and sends no reader to a CDN."""
+    return REMOTE_FONT.sub("", svg)
+
+
 def save(app: ServodeskApp, name: str, folder: Path = OUT) -> None:
     folder.mkdir(parents=True, exist_ok=True)
-    path = app.save_screenshot(filename=f"{name}.svg", path=str(folder))
-    print(f"wrote {Path(path).relative_to(ROOT)}")
+    path = Path(app.save_screenshot(filename=f"{name}.svg", path=str(folder)))
+    path.write_text(offline(path.read_text(encoding="utf-8")), encoding="utf-8")
+    print(f"wrote {path.relative_to(ROOT)}")
+
+
+def make_offline() -> None:
+    """Every SVG already in ``docs/screenshots/`` rewritten by ``offline``."""
+    for path in sorted(OUT.rglob("*.svg")):
+        text = path.read_text(encoding="utf-8")
+        if (kept := offline(text)) != text:
+            path.write_text(kept, encoding="utf-8")
+            print(f"wrote {path.relative_to(ROOT)}")
 
 
 async def latest_run(app: ServodeskApp, pilot: Pilot) -> None:
@@ -193,7 +217,12 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rig", action="store_true", help="also the rig's Jog and Moves tabs")
     parser.add_argument("--small", action="store_true", help="only the 80 × 24 screenshots")
+    parser.add_argument("--offline", action="store_true",
+                        help="only rewrite the SVGs there to load nothing from the network")
     args = parser.parse_args()
+    if args.offline:
+        make_offline()
+        return
     OUT.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as data_dir:
         if not args.small:
