@@ -184,9 +184,13 @@ def _endpoint(kinds: argparse._SubParsersAction, common: argparse.ArgumentParser
 
 def _path(kinds: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
     p = _kind(kinds, common, Kind("path", "a path from a file: a CSV with a header of joint "
-                                          "names, or the thesis's time/position TSV",
+                                          "names, or the thesis's time/position TSV; or a "
+                                          "saved run's desired path, played again as the "
+                                          "move it was",
                                   _plan_path))
-    p.add_argument("file", help="path.csv or path.tsv")
+    p.add_argument("file", metavar="FILE",
+                   help="path.csv or path.tsv; or a saved run: any of its files, its stem in "
+                        "--data-dir (as `servodesk runs list` names it), or latest")
 
 
 def _via(kinds: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
@@ -340,10 +344,28 @@ def _plan_path(args: argparse.Namespace, machine: Machine, here: np.ndarray, dt:
     from control.motion.path_files import PathFileError, read_path
 
     try:
-        points = read_path(args.file, machine, tuple(here))
+        points = read_path(_path_file(args), machine, tuple(here))
     except PathFileError as exc:
         raise BadInput(f"FILE: {exc}") from None
     return form_plans.path_file(machine, here, points, args.file, dt=dt)
+
+
+def _path_file(args: argparse.Namespace) -> Path:
+    """FILE as given, or the saved run it names as ``servodesk runs`` does: its stem in the
+    data directory, or ``latest``, the newest there."""
+    from control.recorder import default_data_dir, list_runs
+
+    given = Path(args.file).expanduser()
+    if given.exists():
+        return given
+    data_dir = Path(args.data_dir).expanduser() if args.data_dir else default_data_dir()
+    if args.file == "latest":
+        runs = [info for info in list_runs(data_dir) if not info.damaged]
+        if not runs:
+            raise BadInput(f"FILE latest: no saved run in {data_dir} (--data-dir)")
+        return runs[0].files.json
+    stem = data_dir / f"{args.file}.json"
+    return stem if stem.is_file() else given
 
 
 def _plan_via(args: argparse.Namespace, machine: Machine, here: np.ndarray, dt: float

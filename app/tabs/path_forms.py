@@ -34,11 +34,14 @@ class PathFileForm(MoveForm):
     LABEL = "Path file"
 
     def help_text(self) -> str:
+        again = (" Or a saved run (its .json, .csv.gz or .tsv.gz): its desired path plays "
+                 "again, at its own timing, as the move it was.")
         if self.machine.n_joints == 1:
             return ("A time/position TSV as the thesis's data files (time<TAB>position per "
-                    "line), or a CSV with a header t,Ram. Seconds and mm.")
+                    "line), or a CSV with a header t,Ram. Seconds and mm." + again)
         return ("A CSV with a header of joint names (t,In/Out,Rotate,…; a joint left out "
-                "stays where it is) or a TSV of time then six positions. Seconds, mm, deg.")
+                "stays where it is) or a TSV of time then six positions. Seconds, mm, deg."
+                + again)
 
     @dataclass
     class Loaded(Message, bubble=False):
@@ -64,7 +67,8 @@ class PathFileForm(MoveForm):
     def fields(self) -> ComposeResult:
         with Horizontal(classes="field"):
             yield Label("file", classes="field-label")
-            yield FieldInput(placeholder="path.csv or path.tsv", id="path-file", compact=True)
+            yield FieldInput(placeholder="path.csv, path.tsv or a run's .json", id="path-file",
+                             compact=True)
         yield Static("", id="path-state")
 
     @on(Input.Submitted, "#path-file")
@@ -98,8 +102,10 @@ class PathFileForm(MoveForm):
     def on_path_file_form_loaded(self, message: Loaded) -> None:
         points = self.points = message.points
         self.loaded_from = message.source
-        self.query_one("#path-state", Static).update(Text(
-            f"{len(points.t)} points over {points.duration:g} s from {message.source}", "green"))
+        what = (f"{points.run}: {len(points.t)} samples over {points.duration:g} s, as a "
+                f"{points.kind}" if points.run else
+                f"{len(points.t)} points over {points.duration:g} s from {message.source}")
+        self.query_one("#path-state", Static).update(Text(what, "green"))
         self.post_message(self.PreviewWanted())
 
     def plan(self, current: np.ndarray, dt: float) -> MovePlan:
