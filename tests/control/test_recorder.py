@@ -515,3 +515,43 @@ def test_what_is_written_loads_back_and_plays_as_a_path(reach: list[float], seco
         back = load_run(files.json)
         assert back == as_written(run)
         assert read_path(files.csv, UNIMATE, tuple(here)).q.tolist() == back.desired.tolist()
+
+
+def decimals_of(text: str) -> int:
+    """How many decimals a number's text carries (an exponent counts as too many)."""
+    assert "e" not in text.lower(), text
+    return len(text.partition(".")[2])
+
+
+def test_every_exported_number_carries_no_more_digits_than_its_precision(
+        tmp_path: Path) -> None:
+    """Positions off by float arithmetic's noise (1508.4405000000002), metrics with 17 digits:
+    the CSV and TSV write each column at most to its decimals (JSON ``decimals``), and the
+    JSON's numbers have at most 10 significant digits."""
+    n = 200
+    rng = np.random.default_rng(2)
+    t = np.arange(n) * UNIMATE.sample_time_s + rng.uniform(-2e-4, 2e-4, n) / 3
+    base = np.array([1508.4405, 0.0055, 6.4968, -0.00488, 2.49876, 0.1])
+    desired = base + np.linspace(0, 1, n)[:, None] / 3 + 2e-13
+    actual = desired + rng.normal(0.0, 0.05, (n, 6))
+    duty = rng.uniform(-100.0, 100.0, (n, 6)) / 3
+    run = Run.from_machine(UNIMATE, "ramp", "complete", UNIMATE.track, t, desired, actual,
+                           duty, meta={"initial": 0.005500000000012051,
+                                       "results": [{"overshoot_pct": 1.283333333333303}]})
+    files = save_run(run, tmp_path)
+    doc = json.loads(files.json.read_text())
+    places = doc["decimals"]
+    assert places["desired"] is not None, "the desired positions are written in full"
+    per_joint = [[d, a, places["duty"]] for d, a in zip(places["desired"], places["actual"],
+                                                         strict=True)]
+    columns = [places["t"], *[p for joint in per_joint for p in joint]]
+    for table, sep in ((files.csv, ","), (files.tsv, "\t")):
+        rows = [line.split(sep) for line in table_text(table).splitlines()[sep == ",":]]
+        most = np.array([[decimals_of(v) for v in row] for row in rows]).max(axis=0)
+        assert np.all(most[1:] <= columns[1:]), (table.name, most, columns)
+        assert most[0] <= (columns[0] if sep == "," else 0)
+        assert most[1:].max() > 2  # not all rounded away
+    numbers = re.findall(r"-?\d+\.\d+(?:[eE][-+]?\d+)?", files.json.read_text())
+    assert numbers and all(len(re.sub(r"[-.]|^-?0\.0*|[eE].*", "", x)) <= 10
+                           for x in numbers), [x for x in numbers if len(x) > 12]
+    assert doc["meta"]["initial"] == 0.0055

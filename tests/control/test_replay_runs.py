@@ -21,12 +21,13 @@ import pytest
 from control import ControlClient
 from control.client import MoveResult
 from control.identify.excitation import prbs
-from control.motion import form_plans
+from control.motion import form_plans, moves
+from control.motion.acceptance import accept
 from control.motion.path_files import PathFileError, read_path
 from control.motion.plan import MovePlan
 from control.motion.robot_model import model_of
-from control.recorder import RunFiles, load_run, resolution
-from hw.machine import Machine
+from control.recorder import Run, RunFiles, load_run, resolution, save_run
+from hw.machine import Machine, load_machine
 
 ROOT = Path(__file__).resolve().parents[2]
 Planner = Callable[[ControlClient, Machine, np.ndarray, Path], MovePlan | None]
@@ -220,3 +221,26 @@ def test_servodesk_move_path_plays_a_run_again(lockstep: ControlClient,
     want = original_path(recorded["ramp"])
     played = replayed.desired[approach:approach + len(want)]
     assert np.all(np.abs(played - want) <= np.array(resolution(m)))
+
+
+def test_a_run_with_jittered_times_plays_at_max_accel_on_its_sample_grid(tmp_path: Path
+                                                                         ) -> None:
+    """A real-time run's times are when each sample was taken (±0.3 ms here); its desired
+    rows, a ramp of every joint at max_accel, play on the grid its JSON names, not at those
+    times, which would read as accelerations far past max_accel (fast: no controller)."""
+    m = load_machine("unimate2000b")
+    here = np.array([1508.4405000000002, 0.0055000000000120, 6.4968, -0.00488, 2.49876, 0.1])
+    end = here + np.array([300.0, 40.0, 15.0, 30.0, 20.0, 10.0])
+    path = moves.ramp(here, end, moves.min_ramp_time(here, end, m), machine=m)
+    grid = np.arange(len(path)) * m.sample_time_s
+    jitter = np.random.default_rng(5).uniform(-3e-4, 3e-4, len(path))
+    run = Run.from_machine(m, "ramp", "complete", m.track, grid + jitter, path, path,
+                           np.zeros_like(path), meta={"path_samples": len(path)})
+    files = save_run(run, tmp_path)
+    for name in (files.csv, files.tsv, files.json):
+        points = read_path(name, m, tuple(here))
+        np.testing.assert_array_equal(points.t, grid)
+        assert np.all(np.abs(points.q - path) <= 0.5 * 10.0 ** -np.array(
+            run.desired_decimals()) + 1e-9)
+        plan = form_plans.path_file(m, here, points, str(name), dt=m.sample_time_s)
+        accept(plan, here, m, m.sample_time_s)  # the rules a move is sent under

@@ -5,10 +5,12 @@ the mcap package's own reader. The numbers are those of the run's own tables, at
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
 import pytest
+from mcap.reader import make_reader
 
 from control.recorder import Run, as_written
 from control.run_mcap import read_mcap, write_mcap
@@ -64,3 +66,23 @@ def test_a_failed_write_leaves_no_file(tmp_path: Path) -> None:
     with pytest.raises(OSError):
         write_mcap(run, target)
     assert not target.exists() and not list(tmp_path.rglob("*.tmp"))
+
+
+def test_its_numbers_carry_no_more_digits_than_the_runs_tables(tmp_path: Path) -> None:
+    """Each message's text, as Foxglove reads it: desired to its joint's max_accel decimals
+    (6 for In/Out, 7 for the angles), actual to a tenth of an encoder count, duty to 0.01 %;
+    the float noise of 1508.4405000000002 is gone."""
+    run = six_joint_run(300)
+    run = Run.from_machine(UNIMATE, "path", "complete", UNIMATE.track, run.t,
+                           run.desired + 1508.4405000000002, run.actual, run.duty / 3)
+    path = write_mcap(run, tmp_path / "run.mcap")
+    most: dict[str, np.ndarray] = {}
+    with path.open("rb") as stream:
+        for _, channel, message in make_reader(stream).iter_messages():
+            if channel.topic in ("/joints/desired", "/joints/actual", "/joints/duty"):
+                values = re.findall(r": (-?[\d.]+|null)", message.data.decode())
+                places = np.array([len(v.partition(".")[2]) for v in values])
+                most[channel.topic] = np.maximum(most.get(channel.topic, places), places)
+    assert most["/joints/desired"].tolist() == [6, 7, 7, 7, 7, 7]
+    assert most["/joints/actual"].tolist() == [2, 3, 3, 3, 3, 3]
+    assert most["/joints/duty"].tolist() == [2] * 6
