@@ -69,6 +69,8 @@ class Panel:
         lo, hi = min(xs + marks), max(xs + marks)
         if hi <= lo:
             return lo, lo + 1.0
+        if 0.0 < lo <= 0.01 * (hi - lo):  # a run's first sample, a tick after its start
+            lo = 0.0
         return (lo, hi + END_PAD * (hi - lo)) if marks and max(marks) >= hi else (lo, hi)
 
     def y_range(self, floor: float = 0.0) -> tuple[float, float]:

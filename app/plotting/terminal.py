@@ -9,14 +9,15 @@ from __future__ import annotations
 
 import os
 import shutil
+from collections.abc import Callable
 from dataclasses import dataclass
 from types import ModuleType
 from typing import TextIO
 
 import numpy as np
 
-from app.plotting.figure import END_PAD, decimate
-from app.plotting.run_plot import FLAT_COUNTS, marks
+from app.plotting.figure import decimate, nice_ticks, tick_text
+from app.plotting.run_plot import FLAT_COUNTS, marks, overview
 from control.recorder import Run
 
 MIN_ROWS = 12  # lines a joint's panel needs to show a step response, title and axes included
@@ -75,7 +76,7 @@ def response_text(run: Run, width: int, height: int, color: bool) -> str:
     plt.plotsize(shape.width, shape.height)
     for k, j in enumerate(joints):
         plt.subplot(k // shape.columns + 1, k % shape.columns + 1)
-        _panel(plt, run, j, 2 * shape.width // shape.columns)
+        _panel(plt, run, j, shape.width // shape.columns, shape.height // shape.rows)
     text = plt.build()
     plt.main()
     plt.clf()
@@ -84,25 +85,37 @@ def response_text(run: Run, width: int, height: int, color: bool) -> str:
     return "\n".join([text.rstrip("\n"), *notes]) + "\n"
 
 
-def _panel(plt: ModuleType, run: Run, j: int, points: int) -> None:
-    """Joint ``j``'s desired, actual and duty over the run, ``points`` samples a line."""
+def _panel(plt: ModuleType, run: Run, j: int, width: int, height: int) -> None:
+    """Joint ``j``'s panel in ``width`` × ``height`` characters: the plotsix.m panels of the
+    SVG export (``run_plot.overview``), its position on the left axis and its duty on the
+    right, on the same spans, round ticks and marks."""
+    position, duty = overview(run, [j]).panels
     plt.theme("clear")  # the terminal's own background, dark or light
-    plt.title(f"{run.joint_names[j]} ({run.joint_units[j]})")
-    for name, values, side in (("desired", run.desired[:, j], "left"),
-                               ("actual", run.actual[:, j], "left"),
-                               ("duty", run.duty[:, j], "right")):
-        t, y = decimate(run.t, values, points)
-        plt.plot(t.tolist(), y.tolist(), label=name if side == "left" else "duty %",
-                 color=COLORS[name], yside=side, marker="braille")
-    moments = marks(run)
-    for mark in moments:
+    plt.title(f"{position.title} ({position.unit})")
+    for panel, side in ((position, "left"), (duty, "right")):
+        for line in panel.lines:
+            t, y = decimate(line.x, line.y, 2 * width)
+            plt.plot(t.tolist(), y.tolist(), label=line.label or "duty %",
+                     color=COLORS[line.label or "duty"], yside=side, marker="braille")
+        y0, y1 = panel.y_range()
+        plt.ylim(y0, y1, yside=side)
+        _ticks(plt.yticks, y0, y1, max(3, height // 4), yside=side)
+    x0, x1 = position.x_range()
+    plt.xlim(x0, x1)
+    _ticks(plt.xticks, x0, x1, max(3, width // 12))
+    for mark in position.marks:
         plt.vline(mark.t, COLORS.get(mark.kind, "gray"))
-    start, end = float(run.t[0]), float(run.t[-1])
-    if moments and end > start:  # room after the E-stop's line, clear of the frame
-        plt.xlim(start, end + END_PAD * (end - start))
     plt.xlabel("time (s)")
-    plt.ylabel(run.joint_units[j])
+    plt.ylabel(position.unit)
     plt.ylabel("duty (%)", yside="right")
+
+
+def _ticks(set_ticks: Callable[..., None], lo: float, hi: float, most: int,
+           **side: str) -> None:
+    """Round ticks from ``lo`` to ``hi`` (as the SVG's), labelled with the decimals they need."""
+    ticks = nice_ticks(lo, hi, most)
+    step = ticks[1] - ticks[0] if len(ticks) > 1 else 1.0
+    set_ticks(ticks, [tick_text(v, step) for v in ticks], **side)
 
 
 def terminal_size(out: TextIO) -> os.terminal_size:

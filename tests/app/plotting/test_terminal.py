@@ -74,6 +74,10 @@ def test_one_joint_fills_the_terminal_titled_with_its_axes(columns: int, rows: i
     assert "time (s)" in text and "duty (%)" in text and lines[-3].startswith("deg")
     assert "desired" in text and "actual" in text
     assert lines[-2:] == ["E-stop: operator E-stop at 1.499 s", STILL]
+    ticks = [float(v) for v in lines[-4].split()]  # round, as the SVG's: 0, 0.5, 1.0 …
+    assert ticks[0] == 0.0 and len(ticks) >= 3
+    assert np.allclose(np.diff(ticks), ticks[1] - ticks[0])
+    assert ticks[1] - ticks[0] in (0.1, 0.2, 0.25, 0.5, 1.0)
     assert not ANSI.search(text)
 
 
