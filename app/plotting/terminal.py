@@ -22,8 +22,10 @@ from control.recorder import Run
 
 MIN_ROWS = 12  # lines a joint's panel needs to show a step response, title and axes included
 MIN_COLS = 60  # columns a panel needs beside another
-COLORS = {"desired": "red", "actual": "blue", "duty": "green", "estop": "red+",
-          "fault": "orange", "stall": "gray"}
+# each line's colour and marker: told apart by the marker too, for a terminal without colour
+STYLES = {"desired": ("red", "·"), "actual": ("blue", "braille"), "": ("green", "dot")}
+KEY = "· desired  ⣀ actual  • duty % (right)"  # in the title: a legend inside would hide the step
+MARK_COLORS = {"estop": "red+", "fault": "orange", "stall": "gray"}
 
 
 @dataclass(frozen=True)
@@ -91,31 +93,33 @@ def _panel(plt: ModuleType, run: Run, j: int, width: int, height: int) -> None:
     right, on the same spans, round ticks and marks."""
     position, duty = overview(run, [j]).panels
     plt.theme("clear")  # the terminal's own background, dark or light
-    plt.title(f"{position.title} ({position.unit})")
+    plt.title(f"{position.title} ({position.unit})   {KEY}")
     for panel, side in ((position, "left"), (duty, "right")):
         for line in panel.lines:
             t, y = decimate(line.x, line.y, 2 * width)
-            plt.plot(t.tolist(), y.tolist(), label=line.label or "duty %",
-                     color=COLORS[line.label or "duty"], yside=side, marker="braille")
+            color, marker = STYLES[line.label]
+            plt.plot(t.tolist(), y.tolist(), color=color, yside=side, marker=marker)
         y0, y1 = panel.y_range()
         plt.ylim(y0, y1, yside=side)
-        _ticks(plt.yticks, y0, y1, max(3, height // 4), yside=side)
+        # a space after the right axis's labels keeps them off the next panel's
+        _ticks(plt.yticks, y0, y1, max(3, height // 4), " " if side == "right" else "",
+               yside=side)
     x0, x1 = position.x_range()
     plt.xlim(x0, x1)
     _ticks(plt.xticks, x0, x1, max(3, width // 12))
     for mark in position.marks:
-        plt.vline(mark.t, COLORS.get(mark.kind, "gray"))
+        plt.vline(mark.t, MARK_COLORS.get(mark.kind, "gray"))
     plt.xlabel("time (s)")
     plt.ylabel(position.unit)
-    plt.ylabel("duty (%)", yside="right")
+    plt.ylabel("duty (%) ", yside="right")
 
 
-def _ticks(set_ticks: Callable[..., None], lo: float, hi: float, most: int,
+def _ticks(set_ticks: Callable[..., None], lo: float, hi: float, most: int, after: str = "",
            **side: str) -> None:
     """Round ticks from ``lo`` to ``hi`` (as the SVG's), labelled with the decimals they need."""
     ticks = nice_ticks(lo, hi, most)
     step = ticks[1] - ticks[0] if len(ticks) > 1 else 1.0
-    set_ticks(ticks, [tick_text(v, step) for v in ticks], **side)
+    set_ticks(ticks, [tick_text(v, step) + after for v in ticks], **side)
 
 
 def terminal_size(out: TextIO) -> os.terminal_size:

@@ -70,7 +70,7 @@ def test_one_joint_fills_the_terminal_titled_with_its_axes(columns: int, rows: i
     lines = lines_of(text)
     assert columns - 2 <= max(map(len, lines)) <= columns
     assert rows - 2 <= len(lines) <= rows
-    assert lines[0].strip() == "Rotate (deg)"
+    assert lines[0].strip() == "Rotate (deg)   · desired  ⣀ actual  • duty % (right)"
     assert "time (s)" in text and "duty (%)" in text and lines[-3].startswith("deg")
     assert "desired" in text and "actual" in text
     assert lines[-2:] == ["E-stop: operator E-stop at 1.499 s", STILL]
@@ -89,7 +89,7 @@ def test_six_joints_take_two_columns_where_they_fit_and_grow_where_not() -> None
     assert max(map(len, wide)) <= 160 and len(wide) <= 48
     narrow = lines_of(response_text(six, 80, 24, color=False))
     assert max(map(len, narrow)) <= 80
-    assert len([line for line in narrow if line.strip().endswith(("(deg)", "(mm)"))]) == 6
+    assert len([line for line in narrow if "desired  ⣀ actual" in line]) == 6
     assert len(narrow) >= 6 * 12  # taller than the terminal: each panel keeps 12 lines
     assert "did not move" not in "\n".join(narrow)
 
