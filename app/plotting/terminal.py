@@ -41,9 +41,9 @@ class Layout:
 def moved(run: Run) -> list[int]:
     """The joints whose desired position changed, or whose reading moved more than
     ``FLAT_COUNTS`` encoder counts (something moved it)."""
-    counts = np.asarray(run.joint_resolution or (0.0,) * len(run.joint_names))
     if not run.samples:
         return []
+    counts = np.asarray(run.joint_resolution or (0.0,) * len(run.joint_names))
     desired = np.ptp(run.desired, axis=0) > 1e-9 * np.maximum(1.0, np.abs(run.desired[0]))
     actual = np.ptp(run.actual, axis=0) > FLAT_COUNTS * counts
     return [j for j in range(len(run.joint_names)) if desired[j] or actual[j]]
