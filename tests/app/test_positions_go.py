@@ -24,7 +24,7 @@ MOVE_S = 60.0  # a go-to of a few seconds on a loaded machine
 
 def test_go_asks_first_and_leaves_its_result(tui, data_dir: Path) -> None:
     async def scenario() -> None:
-        app = tui.app(lockstep=False)  # real time: the go-to is still under way at the next g
+        app = tui.app()
         async with app.run_test(size=SIZE) as pilot:
             start = np.array((await tui.ready(app, pilot)).position)
             tab = app.query_one(PositionsTab)
@@ -56,7 +56,9 @@ def test_go_asks_first_and_leaves_its_result(tui, data_dir: Path) -> None:
             assert tab.handle is None and app.client.status().mode != Mode.FOLLOW_TRACK
             assert not list_runs(data_dir)
 
-            # Enter confirms: the planned path runs, g again meanwhile is refused at once
+            # Enter confirms: the planned path runs (held at its start by a 0 % feed
+            # override, so that g meanwhile is refused at once), then goes on
+            app.client.feed_override(0.0)
             await pilot.press("g")
             await tui.until(lambda: isinstance(app.screen, ConfirmScreen), what="the dialog")
             await pilot.press("enter")
@@ -64,6 +66,7 @@ def test_go_asks_first_and_leaves_its_result(tui, data_dir: Path) -> None:
             await pilot.press("g")
             assert not isinstance(app.screen, ConfirmScreen)
             assert "a go-to is running" in state.text, state.text
+            app.client.feed_override(1.0)
             await tui.until(lambda: state.text.startswith("at home"), MOVE_S,
                             what=lambda: f"arrival at home: {state.text}")
             result = app.query_one("#positions-result", DataTable)
