@@ -1,11 +1,12 @@
 """The session's event log: what happened to the robot and what the operator did about it.
 
-Every E-stop (with its reason) and release, fault, limit, move start and end
-(its status, its stalls), gain change, link or UI loss and return, loop stall
-and controller death becomes a ``LogEntry``: kept in memory for the Log tab
-and the header, and appended as one JSON object a line to ``events.jsonl`` in
-the session's folder of the data directory by a writer thread, so the UI
-thread never waits on the disk::
+Every E-stop (with its reason, and who pressed it when several clients attach) and
+release, fault, limit and its clearing, move start and end (its status, its stalls), feed
+override and feed hold, gain change and refusal, change of command (taken, released,
+lost), taught position, link or UI loss and return, loop stall, controller death, and the
+session's start and end becomes a ``LogEntry``: kept in memory for the Log tab and the
+header, and appended as one JSON object a line to ``events.jsonl`` in the session's folder
+of the data directory by a writer thread, so the UI thread never waits on the disk::
 
     {"time": "2026-11-21T13:21:05.123Z", "kind": "E-stop", "joint": null,
      "what": "latched: operator E-stop", "data": {"latched": true, ...}}
@@ -20,12 +21,13 @@ import queue
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 from pathlib import Path
 
 from control.rt.events import (
     CoefficientsApplied,
+    Commander,
     ControllerEvent,
     Died,
     EStop,
@@ -42,7 +44,8 @@ CAPACITY = 5_000  # entries kept in memory; the file keeps them all
 SESSIONS = "sessions"  # the data directory's folder of session folders
 FILE = "events.jsonl"
 SERIOUS = frozenset({"E-stop", "fault", "limit", "link lost", "UI lost", "stall",
-                     "controller died"})
+                     "controller died", "command lost"})
+HELD_START_S = 1.0  # a move's start waits at most this for the end of the move before it
 
 
 @dataclass(frozen=True)
@@ -60,6 +63,12 @@ class LogEntry:
     def clock(self) -> str:
         """Local time of day, to the millisecond."""
         return datetime.fromtimestamp(self.wall).strftime("%H:%M:%S.%f")[:-3]
+
+    @property
+    def move_id(self) -> int | None:
+        """The move a move start or end names (None for another entry)."""
+        move_id = self.data.get("move_id") if self.kind in ("move start", "move end") else None
+        return move_id if isinstance(move_id, int) else None
 
     @property
     def serious(self) -> bool:
@@ -122,6 +131,10 @@ def entries_of(record: ControllerEvent, machine: Machine, wall: float | None = N
             return [entry("initialise", status)]
         case Died(message=text):
             return [entry("controller died", text)]
+        case Commander(change="lost", reason=reason):
+            return [entry("command lost", reason)]
+        case Commander(reason=reason):
+            return [entry("command", reason)]
     return []
 
 
@@ -131,6 +144,8 @@ class EventLog:
     def __init__(self, capacity: int = CAPACITY) -> None:
         self.capacity = capacity
         self.entries: list[LogEntry] = []
+        self.open_moves: set[int] = set()  # moves whose start is logged and end is not yet
+        self._held: list[LogEntry] = []  # starts that came before the end of the move before
         self.count = 0  # entries ever added (the list keeps the last ``capacity``)
         self.path: Path | None = None
         self.problem = ""  # why the file is not being written, once it is not
@@ -150,30 +165,85 @@ class EventLog:
         self._writer = threading.Thread(target=self._write, args=(self.path,),
                                         name="servodesk-event-log", daemon=True)
         self._writer.start()
+        self.add(LogEntry(time.time(), "session", f"session started: {machine}, pid "
+                          f"{os.getpid()}", data={"folder": str(folder)}))
         return self.path
 
     def add(self, entry: LogEntry) -> LogEntry:
-        """Keep ``entry`` and queue it for the file; never waits."""
+        """Keep ``entry`` and queue it for the file; never waits.
+
+        Entries go in the order the controller's events happened. A move's start is raised
+        by the client as it sends the move, its end by the controller: the next move can be
+        sent (the status shows the last one over) before the last one's end has come back.
+        So a move's start that comes while the move before is still open waits for that
+        end (at most ``HELD_START_S``) and follows it."""
+        if entry.kind == "move start" and self.open_moves:
+            self._held.append(entry)
+            return entry
+        self._keep(entry)
+        if entry.kind == "move end" and entry.move_id is not None:
+            self.open_moves.discard(entry.move_id)
+            if not self.open_moves:
+                self._release_held(after=entry.wall)
+        self._release_stale(entry.wall)
+        return entry
+
+    def _release_stale(self, now: float) -> None:
+        """Log the held starts whose move's end did not come within ``HELD_START_S``."""
+        if self._held and now - self._held[0].wall >= HELD_START_S:
+            self.open_moves.clear()  # an end that did not come in time is not waited for
+            self._release_held()
+
+    def _release_held(self, after: float | None = None) -> None:
+        """Log the held starts, ``after`` the end they waited for (at its time, when that is
+        later than theirs: by the thread that took it, not on the controller's clock)."""
+        held, self._held = self._held, []
+        for entry in held:
+            late = after is not None and entry.wall < after
+            self._keep(replace(entry, wall=after) if late else entry)
+
+    def _keep(self, entry: LogEntry) -> None:
+        if entry.kind == "move start" and entry.move_id is not None:
+            self.open_moves.add(entry.move_id)
         self.entries.append(entry)
         if len(self.entries) > self.capacity:
             del self.entries[: len(self.entries) - self.capacity]
         self.count += 1
         if not self.problem:
             self._queue.put(entry)
-        return entry
 
     @property
     def latest(self) -> LogEntry | None:
+        self._release_stale(time.time())
         return self.entries[-1] if self.entries else None
+
+    def move_just_stopped(self, status: str, within_s: float = 1.0) -> int | None:
+        """The move whose end, ``status``, was logged within ``within_s`` of the newest entry
+        (the controller ends a move and then says why: its fault comes right after), or
+        None when no move was stopped so."""
+        if not self.entries:
+            return None
+        newest = self.entries[-1].wall
+        for entry in reversed(self.entries[-8:]):
+            if newest - entry.wall > within_s:
+                break
+            status_of = entry.data.get("status")
+            if entry.kind == "move end" and isinstance(status_of, str) \
+                    and status_of.startswith(status):
+                return entry.move_id
+        return None
 
     def since(self, count: int) -> list[LogEntry]:
         """The entries added after the first ``count`` (those still kept)."""
+        self._release_stale(time.time())
         new = self.count - count
         return self.entries[-new:] if new > 0 else []
 
     def close(self, timeout: float = 1.0) -> None:
-        """Write what is queued and stop the writer."""
+        """Log the session's end, write what is queued and stop the writer."""
         if self._writer is not None:
+            self._release_held()
+            self.add(LogEntry(time.time(), "session", "session ended: servodesk closed"))
             self._queue.put(None)
             self._writer.join(timeout)
             self._writer = None

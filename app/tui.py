@@ -67,7 +67,7 @@ FAULT_ADVICE = {
              "limits.",
     "following_error": "Check the hydraulic supply and the valve, slow the move down or raise "
                        "the gains (Tuning), then run it again.",
-    "ui_lost": "The UI missed its heartbeat; it is back now. Run the move again.",
+    "ui_lost": "The UI missed its heartbeat; it is back now, and every joint holds.",
     "crash": "Every valve is closed. Quit (^Q) and start servodesk again.",
     "initialise": "Check that the ram can move down freely, then run Initialise again (Moves).",
     "path_row": "The move's data was damaged in shared memory; the robot holds. Run the move "
@@ -360,7 +360,11 @@ class ServodeskApp(App[None]):
                     self.action_dismiss_fault()
                 self.notify("E-stop released: every joint holds where it is")
             case Fault(kind=kind, message=text):
-                self._fault(kind, f"{text}. {FAULT_ADVICE.get(kind, '')}".strip())
+                advice = FAULT_ADVICE.get(kind, "")
+                if kind == "ui_lost" and (stopped := self.desk.events.move_just_stopped(
+                        "interrupted: client silent")) is not None:
+                    advice += f" It stopped move {stopped}: run it again."
+                self._fault(kind, f"{text}. {advice}".strip())
             case Died(message=text):
                 self._died()
                 self._fault("died", text)
@@ -458,6 +462,8 @@ class ServodeskApp(App[None]):
             self._died()
         if self.sampler is not None and self.sampler.latest is not None:
             self.header.status = self.sampler.latest
+            if self.desk.story.update(self.sampler.latest) and self.fault_kind == "limit":
+                self.action_dismiss_fault()  # the joint has left its limit
         self.header.latest = self.desk.events.latest  # a tab's refusal logs without the app
 
     # -- tabs ----------------------------------------------------------------------------------
@@ -527,6 +533,9 @@ class ServodeskApp(App[None]):
     def action_reset(self) -> None:
         """Release the E-stop latch, after a deliberate confirmation."""
         if isinstance(self.screen, ModalScreen):
+            return
+        if refusal := self.desk.refusal("release the E-stop"):  # an observer: before asking
+            self.notify(refusal, severity="error", timeout=8)
             return
 
         def answer(yes: bool | None) -> None:

@@ -9,7 +9,8 @@ relays between it and the clients that attach (``control/attached.py``):
   the controller whatever this process does); a move's sealed path comes with its command
   and goes on to the controller as it came (``control/rt/sealed.py``);
 - **events** from the controller to every client, and ``Commander`` when command changes
-  hands (``TakeCommand``/``ReleaseCommand``, explicitly);
+  hands (``TakeCommand``/``ReleaseCommand``, explicitly; ``lost`` when its holder leaves or
+  falls silent); an operator E-stop is named for the client that pressed it;
 - the **heartbeat**, along the commands' path: every client sends one every 50 ms, and
   the service beats the controller's heartbeat word for the commander's alone (while
   nobody commands, its own thread beats it). So a commander that falls silent, or a
@@ -48,7 +49,7 @@ from control.client import ControlClient, Event
 from control.rt import shm
 from control.rt.channel import command_name
 from control.rt.commands import Command, EmergencyStop, Shutdown, StartMove
-from control.rt.events import Commander, Died, MoveDone, Refused
+from control.rt.events import Commander, Died, EStop, MoveDone, Refused
 from control.rt.wire import Broken, Unreadable, Wire
 from control.run_keeper import FinishedMove, RunKeeper, RunKept
 
@@ -60,6 +61,8 @@ SILENT_S = 10.0  # a client not heard from this long (it beats every 50 ms) is d
 MAX_CLIENTS = 64  # connections served at once, joined or joining
 BACKOFF_S = 0.2  # after accept fails (no descriptor left), wait this long before trying again
 POLL_S = 0.1
+OPERATOR_ESTOP = "operator E-stop"  # the controller's reason for a client's E-stop
+PRESS_S = 1.0  # the controller's E-stop after a client's press, within this, is that client's
 
 
 @dataclass(eq=False)
@@ -113,6 +116,7 @@ class ControllerService:
         self._numbers = itertools.count(1)
         self._slots = threading.BoundedSemaphore(MAX_CLIENTS)
         self._moves: dict[int, tuple[Peer, str]] = {}  # move id: its client, its segment
+        self._pressed: tuple[str, float] = ("", 0.0)  # who sent the last E-stop, and when
         self._claim()
         self._key = rendezvous.new_key(self.socket_path)  # first: who sees the socket can log in
         self._socket = self._listen()
@@ -248,7 +252,7 @@ class ControllerService:
             self._peers.pop(peer.number, None)
             if self._holder is peer:
                 self._release(f"{why}: command released, the controller holds",
-                              f"interrupted: the commanding client ({peer.name}) left")
+                              f"interrupted: the commanding client ({peer.name}) left", "lost")
         log.info("%s (%d attached)", why, len(self._peers))
 
     # -- requests from a client ---------------------------------------------------------------
@@ -263,7 +267,7 @@ class ControllerService:
             with self._lock:
                 if self._holder is peer:
                     self._release(f"{peer.name} released command; the controller holds",
-                                  "aborted: command released")
+                                  "aborted: command released", "released")
                 else:
                     peer.put(Refused("release command", "this client does not hold command"))
         elif isinstance(record, Command):
@@ -281,16 +285,16 @@ class ControllerService:
             self._holder = peer
             self.client.heartbeat_on = False  # the commander's heartbeats beat it now
             self.client.beat()
-            self._broadcast(Commander(peer.name, f"{peer.name} took command"))
+            self._broadcast(Commander(peer.name, f"{peer.name} took command", "taken"))
 
-    def _release(self, reason: str, move_ends: str) -> None:
-        """Nobody holds command: the controller holds (a running move ends ``move_ends``), and
-        this service keeps its heartbeat."""
+    def _release(self, reason: str, move_ends: str, change: str) -> None:
+        """Nobody holds command (``change``: released, or lost): the controller holds (a
+        running move ends ``move_ends``), and this service keeps its heartbeat."""
         self._holder = None
         self.client.heartbeat_on = True
         with contextlib.suppress(Exception):
             self.client.hold(move_ends)
-        self._broadcast(Commander("", reason))
+        self._broadcast(Commander("", reason, change))
         log.info("%s", reason)
 
     def _relay(self, peer: Peer, command: Command, fds: tuple[int, ...]) -> None:
@@ -305,6 +309,8 @@ class ControllerService:
                           if holder else "observing: nobody holds command; take it first")
             if not reason and isinstance(command, StartMove):
                 self._moves[command.move_id] = (peer, command.segment)
+            if isinstance(command, EmergencyStop):  # the latch it brings says who pressed
+                self._pressed = (peer.name, time.monotonic())
             if not reason:
                 try:
                     # the descriptors go on with the command; the embedded client closes them
@@ -329,7 +335,20 @@ class ControllerService:
             return
         if isinstance(record, MoveDone):
             self._move_done(record)
+        if isinstance(record, EStop) and record.latched and record.reason == OPERATOR_ESTOP:
+            record = self._who_pressed(record)
         self._broadcast(record)
+
+    def _who_pressed(self, latched: EStop) -> EStop:
+        """An operator E-stop, named for the client whose EmergencyStop came just before it
+        (the E-stop word in shared memory says nobody: the controller latches on it first, and
+        again on the command relayed behind it, which this names)."""
+        with self._lock:
+            name, when = self._pressed
+            if not name or time.monotonic() - when > PRESS_S:
+                return latched
+            self._pressed = ("", 0.0)
+        return EStop(True, f"{OPERATOR_ESTOP} from {name}")
 
     def _broadcast(self, record: object) -> None:
         with self._lock:
@@ -361,7 +380,7 @@ class ControllerService:
                     self._release(f"{holder.name} silent for {self.release_after_s:g} s: "
                                   "command released, the controller holds",
                                   f"interrupted: the commanding client ({holder.name}) fell "
-                                  "silent")
+                                  "silent", "lost")
                 for peer in self._peers.values():
                     if peer.connected and now - peer.heard > self.drop_after_s:
                         log.warning("%s silent for %g s: disconnected", peer.name,

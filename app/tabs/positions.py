@@ -19,6 +19,7 @@ overwritten.
 from __future__ import annotations
 
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import ClassVar
@@ -33,6 +34,7 @@ from textual.message import Message
 from textual.widgets import DataTable, Static
 
 from app.desk import Desk
+from app.event_log import LogEntry
 from app.messages import RunsChanged
 from app.tabs.status import POSE_LABELS
 from app.tabs.tab import TabPage
@@ -83,6 +85,7 @@ class PositionsTab(TabPage):
         book: PositionBook
         done: str = ""
         select: str | None = None
+        changed: bool = False  # the file was changed (logged), not only read
 
     @dataclass
     class Problem(Message, bubble=False):
@@ -210,7 +213,7 @@ class PositionsTab(TabPage):
             except ValueError as exc:  # a name taken meanwhile (an edit by hand)
                 self.post_message(self.Problem(str(exc), in_file=False))
                 return
-        self.post_message(self.Loaded(book, done, select))
+        self.post_message(self.Loaded(book, done, select, change is not None))
 
     def on_positions_tab_loaded(self, message: Loaded) -> None:
         self.book = message.book
@@ -218,6 +221,9 @@ class PositionsTab(TabPage):
         if message.done:
             self._state(Text(message.done, "green"))
             self.notify(message.done)
+        if message.changed:
+            self.desk.events.add(LogEntry(time.time(), "position", message.done,
+                                          data={"file": str(self.path)}))
         self.post_message(self.Changed(message.book.positions))
 
     def on_positions_tab_problem(self, message: Problem) -> None:
@@ -260,7 +266,8 @@ class PositionsTab(TabPage):
         def taught(name: str | None) -> None:
             if name is not None:
                 name = name.strip()
-                self._write("teach", lambda book: book.teach(name, q), f"taught {name}", name)
+                self._write("teach", lambda book: book.teach(name, q),
+                            f"taught {name}: {where}", name)
 
         self.app.push_screen(EditValueScreen(
             "Teach the current position", self._free_name(), self.book.check_name,

@@ -254,6 +254,7 @@ class TuningTab(TabPage):
                 applied.append(before)
         except (ControllerError, ValueError, OSError) as exc:
             self.undo_stack.extend(applied)  # only a dying controller stops after the first
+            self.desk.log_refusal(f"apply {what}", str(exc))
             self._outcome(Text.assemble((f"{what}: ", "bold"), (str(exc), "bold red")))
             self.notify(f"apply {what}: {exc}", severity="error", timeout=10)
             self._fill()

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from datetime import datetime
 
 from rich.text import Text
 from textual.app import ComposeResult
@@ -182,8 +183,11 @@ class StatusHeader(Horizontal):
             text.append(f"  rx {counters['frames_rx']} · errors {errors}",
                         "yellow" if errors else "dim")
         text.append("   mode ", "dim")
-        text.append(MODE_NAMES.get(status.mode, str(status.mode)), "bold cyan")
-        if status.move_total:
+        if status.estop or link.estop_sent:  # the controller holds, and nothing moves it
+            text.append("E-STOP", "bold red")
+        else:
+            text.append(MODE_NAMES.get(status.mode, str(status.mode)), "bold cyan")
+        if status.move_total and not status.estop:
             pct = 100.0 * status.move_done / status.move_total
             text.append(f"  move {status.move_id} {pct:3.0f} %", "cyan")
         if status.settling:  # the path is over: the move holds its end until in position
@@ -216,7 +220,9 @@ class StatusHeader(Horizontal):
 
 
 class FaultBanner(Static):
-    """The latest fault in plain words: what happened, and what to do. Hidden when clear."""
+    """The latest fault in plain words: what happened, and what to do, each line with the time
+    it first appeared (a lesser fault added below a latched E-stop keeps the E-stop's time on
+    its line). Hidden when clear."""
 
     DEFAULT_CSS = """
     FaultBanner {
@@ -231,6 +237,20 @@ class FaultBanner(Static):
 
     message: reactive[str] = reactive("")
 
+    def __init__(self, *, id: str | None = None) -> None:
+        super().__init__(id=id)
+        self.shown_at: dict[str, float] = {}  # each line shown, and when it first was
+
     def watch_message(self, message: str) -> None:
         self.display = bool(message)
-        self.update(Text.assemble(("⚠ ", "bold"), message, ("   (^L dismiss)", "dim")))
+        now = time.time()
+        lines = message.splitlines()
+        self.shown_at = {line: self.shown_at.get(line, now) for line in lines}
+        text = Text()
+        for i, line in enumerate(lines):
+            clock = datetime.fromtimestamp(self.shown_at[line]).strftime("%H:%M:%S")
+            text.append_text(Text.assemble("\n" if i else "", ("⚠ " if not i else "  ", "bold"),
+                                           (clock, "not bold"), "  ", line))
+        if lines:
+            text.append("   (^L dismiss)", "dim")
+        self.update(text)

@@ -2,18 +2,23 @@
 
 ``●`` is the position, ``○`` the desired position; the bar turns yellow in the
 outer ``WARN_FRACTION`` of the range and red at a limit. A Rich renderable, so
-it fits any table cell it is put in.
+it fits any table cell it is put in. ``LimitWatch`` tells when a joint the controller
+reported at a limit has left it.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 from rich.console import Console, ConsoleOptions, RenderResult
 from rich.measure import Measurement
 from rich.text import Text
 
 WARN_FRACTION = 0.05
+# a joint reported at a limit has left it this far inside (of its range): well past the two
+# encoder counts where the guard stops its duty, so one resting there does not flicker
+CLEAR_FRACTION = 0.01
 
 
 class LimitBar:
@@ -50,3 +55,26 @@ class LimitBar:
 
     def _cell(self, value: float, inner: int) -> int:
         return min(inner - 1, max(0, int(self.fraction(value) * inner)))
+
+
+class LimitWatch:
+    """The joints reported at a limit (``reported``), each until it is back inside by
+    ``CLEAR_FRACTION`` of its range (``cleared``)."""
+
+    def __init__(self, lower: Sequence[float], upper: Sequence[float]) -> None:
+        self.lower = tuple(lower)
+        self.upper = tuple(upper)
+        self.at: set[int] = set()
+
+    def reported(self, joint: int) -> None:
+        self.at.add(joint)
+
+    def cleared(self, position: Sequence[float]) -> list[int]:
+        """The joints reported at a limit that are clear of both now; forgotten."""
+        out = []
+        for j in sorted(self.at):
+            margin = CLEAR_FRACTION * (self.upper[j] - self.lower[j])
+            if self.lower[j] + margin < position[j] < self.upper[j] - margin:
+                out.append(j)
+        self.at.difference_update(out)
+        return out

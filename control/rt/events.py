@@ -167,11 +167,14 @@ class Died(ControllerEvent):
 @dataclass(frozen=True)
 class Commander(ControllerEvent):
     """Who holds command of a controller service ("" nobody) and why that changed
-    (``control/service.py``): sent to every attached client."""
+    (``control/service.py``): sent to every attached client. ``change`` is what happened to
+    command: ``taken``, ``released`` (by its holder), ``lost`` (its holder left or fell
+    silent)."""
 
     KIND: ClassVar[str] = "commander"
     holder: str
     reason: str
+    change: str = ""
 
     @property
     def message(self) -> str:
