@@ -155,7 +155,8 @@ def the_interrupted_run(runs: Path, rows_before: int, path: np.ndarray) -> Path:
     run = load_run(info.files.json)
     assert run.status == "interrupted: client silent"
     assert rows_before <= run.samples < len(path)
-    np.testing.assert_allclose(run.desired, path[:run.samples], atol=1e-9)
+    # desired as saved: to 10⁻⁶ mm and 10⁻⁷° (recorder: its max_accel's decimals)
+    np.testing.assert_allclose(run.desired, path[:run.samples], atol=0.5e-6)
     return info.files.json
 
 
@@ -248,19 +249,20 @@ def test_a_killed_client_leaves_a_holding_controller_that_saves_and_exits(
     assert leftovers(script.proc.pid) == []
 
 
-def test_a_client_killed_30_s_into_a_60_s_move_costs_the_loop_no_stall(
+def test_a_client_killed_10_s_into_a_20_s_move_costs_the_loop_no_stall(
         tmp_path: Path, until, leftovers, measured) -> None:
     """The case that stalled the loop for a second when the controller saved the run inside
-    its tick: the client dies 30 s into a 60 s move. The loop holds and goes on ticking with
-    no stall (no more than a few ticks missed, where the save cost ~900; the latest wake-up
-    around the kill measured: 110 µs on a quiet machine, the target is under 2 ms), and
-    after its orphan timeout, its loop ended, the controller's saver saves the 30 s run."""
+    its tick (a 30 s run: ~900 ticks): the client dies 10 s into a 20 s move. The loop holds
+    and goes on ticking with no stall (no more than a few ticks missed, where saving these
+    10 s inside the tick cost ~300; the latest wake-up around the kill measured: 110 µs on a
+    quiet machine, the target is under 2 ms), and after its orphan timeout, its loop ended,
+    the controller's saver saves the 10 s run."""
     runs = tmp_path / "runs"
     with adopting_orphans():
-        script = ClientScript(runs, orphan_timeout_s=1.5, seconds=60.0)
+        script = ClientScript(runs, orphan_timeout_s=1.5, seconds=20.0)
         watch = StatusWatch(script.segment)
         try:
-            until(lambda: watch.status().move_done >= 30_000, 180.0, "30 s of the move")
+            until(lambda: watch.status().move_done >= 10_000, 120.0, "10 s of the move")
             rows_before = watch.status().move_done
             h0, s0 = watch.histogram(), watch.status()
             script.proc.kill()
