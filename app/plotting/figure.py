@@ -60,8 +60,8 @@ class Panel:
     marks: tuple[Mark, ...] = ()
 
     def x_range(self) -> tuple[float, float]:
-        """Every line's time and every mark's; a mark at the end gets room after it, so its
-        line stands clear of the frame."""
+        """Every line's time and every mark's, from 0 when the first sample is just after it;
+        a mark at the end gets room after it, so its line stands clear of the frame."""
         xs = [x for line in self.lines for x in (_finite_ends(line.x))]
         marks = [m.t for m in self.marks if math.isfinite(m.t)]
         if not xs + marks:
