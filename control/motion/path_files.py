@@ -292,7 +292,7 @@ def _saved_table(source: str, rows: list[list[float]], lines: list[int], machine
     if not rows:
         raise PathFileError(f"{source}: no rows: a saved run's table holds one per sample")
     q = np.array(rows, dtype=np.float64).reshape(len(rows), machine.n_joints)
-    return PathPoints.of_run(replay.table_run(source, q, machine, lines[0], PathFileError))
+    return PathPoints.of_run(replay.table_run(source, q, machine, tuple(lines), PathFileError))
 
 
 def _points(source: str, times: list[float], rows: list[list[float]], lines: list[int],

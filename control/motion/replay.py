@@ -47,18 +47,18 @@ TABLE_SUFFIXES = (".csv", ".csv.gz", ".tsv", ".tsv.gz")
 class RunPath:
     """A saved run's desired path to play: ``q (N, J)`` mm/deg, one row per sample of
     ``dt`` s, the move ``kind`` it plays as, ``title`` what it is ("the ramp run
-    20261125-…"), and the file line of row 0 (a table's; 0 for rows read through a JSON)."""
+    20261125-…"), and each row's line in its table (none for rows read through a JSON)."""
 
     source: str
     q: np.ndarray
     dt: float
     kind: str
     title: str
-    first_line: int = 0
+    table_lines: tuple[int, ...] = ()
 
     def lines(self) -> tuple[int, ...]:
         """Each row's line in its table, or its sample number (through a JSON)."""
-        return tuple(range(self.first_line, self.first_line + len(self.q)))
+        return self.table_lines or tuple(range(len(self.q)))
 
 
 def saved_run(path: str | Path) -> Path | None:
@@ -105,12 +105,12 @@ def read_run(json: Path, machine: Machine, error: type[ValueError], *,
     return played
 
 
-def table_run(source: str, q: np.ndarray, machine: Machine, first_line: int,
+def table_run(source: str, q: np.ndarray, machine: Machine, lines: tuple[int, ...],
               error: type[ValueError]) -> RunPath:
     """A saved run's table without its JSON: its desired columns ``q (N, J)`` played as a
-    ``path`` on ``machine``'s sample grid, its first row on line ``first_line``."""
+    ``path`` on ``machine``'s sample grid, row k from line ``lines[k]``."""
     played = RunPath(source, q, machine.sample_time_s, "path", "a saved run's table",
-                     first_line)
+                     tuple(lines))
     check(played, machine, error, f"{source}: a saved run's table, played as a path on the "
                                   f"{machine.sample_time_s * 1e3:g} ms sample grid: ")
     return played
@@ -127,7 +127,7 @@ def check(played: RunPath, machine: Machine, error: type[ValueError], prefix: st
         check_path(np.asarray(played.q, dtype=np.float64), played.kind, machine, dt,
                    where=_row_names(played))
     except MoveRefused as exc:
-        hint = ("" if played.first_line == 0 or played.kind != "path" else
+        hint = ("" if not played.table_lines or played.kind != "path" else
                 "; a step run's table plays as its kind beside its JSON: give the run's .json")
         raise error(f"{prefix}{exc}{hint}") from None
 
@@ -135,7 +135,7 @@ def check(played: RunPath, machine: Machine, error: type[ValueError], prefix: st
 def _row_names(played: RunPath) -> Callable[[int], str]:
     def name(k: int) -> str:
         at = f"t = {k * played.dt:.3f} s of the run"
-        return (f"line {played.first_line + k} ({at})" if played.first_line
+        return (f"line {played.table_lines[k]} ({at})" if played.table_lines
                 else f"sample {k} ({at})")
     return name
 
