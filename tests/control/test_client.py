@@ -97,7 +97,8 @@ def test_a_path_that_starts_away_gets_an_approach_and_the_tuis_summary(
     (saved,) = load_run(result.files.json).meta["results"]  # the same metrics, in the JSON
     assert saved["label"] == "Up/Down" and saved["metric"] == "step"
     assert saved["step"] == pytest.approx(5.0)
-    assert saved["settling_time_s"] == rows[0][1].settling_time_s
+    # as the JSON writes numbers: 10 significant digits (control/recorder.py JSON_DIGITS)
+    assert saved["settling_time_s"] == pytest.approx(rows[0][1].settling_time_s, rel=1e-9)
 
 
 def test_a_jump_is_refused_as_a_path_and_runs_as_a_step(lockstep: ControlClient) -> None:
