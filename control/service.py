@@ -62,7 +62,7 @@ MAX_CLIENTS = 64  # connections served at once, joined or joining
 BACKOFF_S = 0.2  # after accept fails (no descriptor left), wait this long before trying again
 POLL_S = 0.1
 OPERATOR_ESTOP = "operator E-stop"  # the controller's reason for a client's E-stop
-PRESS_S = 1.0  # the controller's E-stop after a client's press, within this, is that client's
+PRESS_S = 2.0  # the controller's E-stop after a client's press, within this, is that client's
 
 
 @dataclass(eq=False)
@@ -335,19 +335,21 @@ class ControllerService:
             return
         if isinstance(record, MoveDone):
             self._move_done(record)
-        if isinstance(record, EStop) and record.latched and record.reason == OPERATOR_ESTOP:
+        if isinstance(record, EStop):
             record = self._who_pressed(record)
         self._broadcast(record)
 
-    def _who_pressed(self, latched: EStop) -> EStop:
+    def _who_pressed(self, estop: EStop) -> EStop:
         """An operator E-stop, named for the client whose EmergencyStop came just before it
         (the E-stop word in shared memory says nobody: the controller latches on it first, and
-        again on the command relayed behind it, which this names)."""
+        again on the command relayed behind it, which is named however the two arrive)."""
         with self._lock:
+            if not estop.latched:
+                self._pressed = ("", 0.0)  # the next press is another's
+                return estop
             name, when = self._pressed
-            if not name or time.monotonic() - when > PRESS_S:
-                return latched
-            self._pressed = ("", 0.0)
+        if estop.reason != OPERATOR_ESTOP or not name or time.monotonic() - when > PRESS_S:
+            return estop
         return EStop(True, f"{OPERATOR_ESTOP} from {name}")
 
     def _broadcast(self, record: object) -> None:

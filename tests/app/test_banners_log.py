@@ -132,19 +132,23 @@ def test_banners_and_the_log_tell_the_story_of_a_session(controller_service, tui
             await tui.until(lambda: table.row_count == app.desk.events.count
                             and table.max_scroll_y > 0 and table.at_newest,
                             what="the Log at its newest row")
+            assert table.max_scroll_x > 0  # one row is wider than the screen
             await pilot.press("end")
-            assert table.at_newest and table.scroll_x == 0 and table.max_scroll_x > 0
+            await tui.until(lambda: table.at_newest and table.scroll_x == 0,
+                            what="End at the newest row, the time column in view")
             app.desk.events.add(LogEntry(time.time(), "notice", "followed"))
             await tui.until(lambda: table.row_count == app.desk.events.count
                             and table.at_newest, what="the new row followed")
             await pilot.press("pageup", "pageup")
-            back = table.scroll_y
+            await tui.until(lambda: not table.at_newest, what="scrolled back")
+            back = table.cursor_row
             app.desk.events.add(LogEntry(time.time(), "notice", "not followed"))
             await tui.until(lambda: table.row_count == app.desk.events.count)
             await pilot.pause()
-            assert table.scroll_y == back and not table.at_newest
+            assert table.cursor_row == back and not table.at_newest
             await pilot.press("end")
-            assert table.at_newest and table.scroll_x == 0
+            await tui.until(lambda: table.at_newest and table.scroll_x == 0,
+                            what="End at the newest row")
 
             # released command: an observer is refused the E-stop's release before any dialog
             await pilot.press("ctrl+o")
