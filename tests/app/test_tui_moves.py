@@ -264,6 +264,19 @@ def test_path_file_plays_and_a_bad_line_is_reported(tui, tmp_path: Path) -> None
             tab = await run_and_wait(tui, app, pilot)
             assert tab.last_result.complete, tab.last_result.status
             assert tab.last_result.run.meta["file"] == str(good.resolve())
+            # the run just saved plays again from the same form, by its JSON
+            first = tab.last_result
+            path_input.value = str(first.files.json)
+            await pilot.press("enter")
+            await tui.until(lambda: f"the path run {first.files.stem}" in str(state.render()),
+                            what="the run loaded")
+            tab = await run_and_wait(tui, app, pilot)
+            again = tab.last_result
+            assert again.complete and again.run.meta["replays"].startswith("the path run")
+            rows = first.run.meta["path_samples"]
+            approach = again.run.meta["approach_samples"]
+            np.testing.assert_allclose(again.run.desired[approach:approach + rows],
+                                       first.run.desired[:rows], atol=1e-6)
 
     asyncio.run(scenario())
 
