@@ -4,7 +4,7 @@ limit (with hysteresis); "run the move again" only when a client-silent hold sto
 Log follows the newest entry unless scrolled back, End goes to the newest row with the time
 column in view, a move's start follows the end of the move before; the session's start and
 end, feed changes, taught positions, gain refusals and changes of command are logged; an
-observer is refused the E-stop's release before any dialog."""
+observer is refused the E-stop's release, and a go-to, before any dialog."""
 
 from __future__ import annotations
 
@@ -161,6 +161,12 @@ def test_banners_and_the_log_tell_the_story_of_a_session(controller_service, tui
             assert not isinstance(app.screen, ConfirmScreen)
             assert any("observing: nobody holds command" in text for text in refused), refused
             assert logged(app, "refused", "release the E-stop refused")
+            await pilot.press("f9")  # and a go-to (issue 26 item 7)
+            await tui.until(lambda: app.query_one("#positions-table").row_count >= 2)
+            await pilot.press("g")
+            assert not isinstance(app.screen, ConfirmScreen)
+            assert [e for e in logged(app, "refused", "refused: observing")
+                    if e.what.startswith("go to ")], app.query_one("#positions-state").text
             path = app.desk.events.path
         written = [json.loads(line) for line in path.read_text().splitlines()]
         assert written[-1]["what"] == "session ended: servodesk closed", written[-1]
