@@ -83,8 +83,8 @@ def read_run(json: Path, machine: Machine, error: type[ValueError], *,
     source = named or str(json)
     try:
         run = load_run(json)
-    except RecorderError as exc:
-        raise error(f"{source}: {exc}") from None
+    except RecorderError as exc:  # it names the run's file
+        raise error(str(exc) if source == str(json) else f"{source}: {exc}") from None
     _check_machine(run, machine, source, error)
     title = f"the {run.kind} run {RunFiles.from_json(json).stem}"
     if run.kind in STEP_KINDS:
