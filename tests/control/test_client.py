@@ -101,7 +101,8 @@ def test_a_path_that_starts_away_gets_an_approach_and_the_tuis_summary(
     assert saved["settling_time_s"] == pytest.approx(rows[0][1].settling_time_s, rel=1e-9)
 
 
-def test_a_jump_is_refused_as_a_path_and_runs_as_a_step(lockstep: ControlClient) -> None:
+def test_a_jump_is_refused_as_a_path_and_runs_as_a_step(lockstep: ControlClient,
+                                                         new_segments) -> None:
     """The acceptance rules by kind (control/motion/acceptance.py): Up/Down jumping 5° in one
     sample is refused as a smooth path, nothing sent, and accepted as a step."""
     start = np.array(lockstep.status().position)
@@ -111,7 +112,7 @@ def test_a_jump_is_refused_as_a_path_and_runs_as_a_step(lockstep: ControlClient)
                                          r"\(t = 0.300 s\): 5000 deg/s, 200 times its max_speed "
                                          r"25 deg/s .*send it as a step move \(kind 'step'\)"):
         lockstep.move(path)
-    assert our_segments(os.getpid()) == [lockstep.segment_name]
+    assert new_segments() == [lockstep.segment_name]
     assert lockstep.status().move_id == 0 and lockstep.status().mode == Mode.HOLD
     result = lockstep.wait(lockstep.move(path, kind="step"), timeout=60)
     assert result.complete, result.status
@@ -285,16 +286,18 @@ def test_a_set_is_judged_on_the_identified_models_the_client_was_given(
     assert applied(lockstep, "track").duty_limit == 80.0
 
 
-def test_two_clients_in_one_process_have_their_own_segments(tmp_path: Path) -> None:
+def test_two_clients_in_one_process_have_their_own_segments(tmp_path: Path, new_segments
+                                                             ) -> None:
     with ControlClient("rig", lockstep=True, data_dir=tmp_path, heartbeat_timeout_s=3.0) as one, \
             ControlClient("unimate2000b", lockstep=True, data_dir=tmp_path,
                           heartbeat_timeout_s=3.0) as two:
         assert one.segment_name != two.segment_name
         assert len(one.status().position) == 1 and len(two.status().position) == 6
-    assert our_segments(os.getpid()) == []
+    assert new_segments() == []
 
 
-def test_bad_paths_are_refused_before_anything_starts(lockstep: ControlClient) -> None:
+def test_bad_paths_are_refused_before_anything_starts(lockstep: ControlClient,
+                                                      new_segments) -> None:
     start = np.array(lockstep.status().position)
     path = np.tile(start, (100, 1))
     path[40, 2] = 35.0
@@ -306,7 +309,7 @@ def test_bad_paths_are_refused_before_anything_starts(lockstep: ControlClient) -
         lockstep.move(path)
     with pytest.raises(ValueError, match=r"a path is \(N, 6\)"):
         lockstep.move(path[:, :3])
-    assert our_segments(os.getpid()) == [lockstep.segment_name]
+    assert new_segments() == [lockstep.segment_name]
     assert lockstep.status().mode == Mode.HOLD
 
 
@@ -382,7 +385,8 @@ def test_killing_the_client_makes_the_controller_hold_then_clean_up(tmp_path: Pa
         script.wait(5)
 
 
-def test_the_rig_refuses_moves_until_initialised_then_steps(tmp_path: Path) -> None:
+def test_the_rig_refuses_moves_until_initialised_then_steps(tmp_path: Path, new_segments
+                                                            ) -> None:
     rig = load_machine("rig")
     with ControlClient(rig, lockstep=True, data_dir=tmp_path, heartbeat_timeout_s=3.0,
                        sim_options={"initial": [400.0]}) as client:
@@ -399,7 +403,7 @@ def test_the_rig_refuses_moves_until_initialised_then_steps(tmp_path: Path) -> N
                                                      machine=rig), kind="step"), 30)
         assert result.complete
         assert abs(result.run.actual[-1, 0] - 400.0) < 5.0
-    assert our_segments(os.getpid()) == []
+    assert new_segments() == []
 
 
 @pytest.mark.parametrize(("call", "args"), [

@@ -141,6 +141,7 @@ def test_unusable_data_is_refused() -> None:
 def runs(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Run, Run]]:
     """A training run and a fresh run of six simultaneous PRBS profiles, from one start."""
     data_dir: Path = tmp_path_factory.mktemp("sysid-runs")
+    before = set(shm.leftover_segments())
     client = ControlClient("unimate2000b", lockstep=True, data_dir=data_dir,
                            heartbeat_timeout_s=3.0)
     try:
@@ -160,7 +161,8 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Run, Run]]:
         yield recorded[0], recorded[1]
     finally:
         client.close()
-    assert [n for n in shm.leftover_segments() if shm.owner_pid(n) == os.getpid()] == []
+    assert [n for n in set(shm.leftover_segments()) - before
+            if shm.owner_pid(n) == os.getpid()] == []
 
 
 @pytest.fixture(scope="module")

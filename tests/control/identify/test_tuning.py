@@ -159,11 +159,13 @@ def test_simulate_closes_the_law_around_the_models() -> None:
 @pytest.fixture(scope="module")
 def robot(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ControlClient]:
     data_dir: Path = tmp_path_factory.mktemp("tuning-runs")
+    before = set(shm.leftover_segments())
     client = ControlClient("unimate2000b", lockstep=True, data_dir=data_dir,
                            heartbeat_timeout_s=3.0)
     yield client
     client.close()
-    assert [n for n in shm.leftover_segments() if shm.owner_pid(n) == os.getpid()] == []
+    assert [n for n in set(shm.leftover_segments()) - before
+            if shm.owner_pid(n) == os.getpid()] == []
 
 
 @pytest.fixture(scope="module")
