@@ -43,6 +43,7 @@ from app.tabs.tuning import TuningTab
 from app.widgets.dialogs import ConfirmScreen
 from app.widgets.header import FaultBanner, StatusHeader
 from app.widgets.key_bar import KeyBar
+from app.widgets.tab_bar import TabBar
 from control.client import ControlClient, ControllerError, Event
 from control.motion.robot_model import model_of
 from control.recorder import default_data_dir
@@ -186,7 +187,7 @@ class ServodeskApp(App[None]):
             backend += f"  ·  {self.timing_text}"
         yield StatusHeader(self.machine.title, backend, id="header")
         yield FaultBanner(id="fault")
-        with TabbedContent(id="tabs"):
+        with TabBar(id="tabs"):
             for i, (name, cls) in enumerate(TABS):
                 with TabPane(f"F{i + 1} {cls.TITLE}", id=f"pane-{name}"):
                     yield cls(self.desk, id=f"tab-{name}")
