@@ -15,6 +15,7 @@ from textual.reactive import reactive
 from textual.widgets import Static
 
 from app.event_log import LogEntry
+from app.widgets.fitting import clip_words, fit_parts
 from app.widgets.live_text import LiveText
 from control.rt.layout import Flag, Mode, Status
 
@@ -27,6 +28,7 @@ MODE_NAMES = {
 }
 STALE_S = 0.5  # a status older than this means the controller stopped publishing
 LATE_WARN_US = 100.0
+LATEST_ROOM = 24  # columns the latest event keeps before the machine's name is shortened
 
 
 @dataclass(frozen=True)
@@ -101,10 +103,11 @@ class StatusHeader(Horizontal):
         self.machine_title = machine_title
         self.backend = backend
         self._lines: tuple[LiveText, LiveText, EStopLamp] | None = None  # once mounted
+        self._identity_width = -1
 
     def compose(self) -> ComposeResult:
         with Vertical(id="header-text"):
-            yield Static(self._identity(), id="header-identity")
+            yield LiveText(id="header-identity")
             yield LiveText(id="header-health")
             yield LiveText(id="header-loop")
         yield EStopLamp(id="estop-lamp")
@@ -122,25 +125,41 @@ class StatusHeader(Horizontal):
 
     def watch_latest(self) -> None:
         if self.is_mounted:
-            self.query_one("#header-identity", Static).update(self._identity())
+            self._show_identity()
 
-    def _identity(self) -> Text:
-        text = Text.assemble(("servodesk", "bold"), f"  {self.machine_title}  ·  ",
+    def on_resize(self) -> None:
+        self._show()
+
+    def _show_identity(self) -> None:
+        line = self.query_one("#header-identity", LiveText)
+        self._identity_width = line.size.width
+        line.show(self._identity(line.size.width))
+
+    def _identity(self, width: int) -> Text:
+        """Machine and backend, then the latest event ended at a word (80 columns: the
+        machine's title and the backend shortened, so the event keeps room to be read)."""
+        full = Text.assemble(("servodesk", "bold"), f"  {self.machine_title}  ·  ",
                              ("backend ", "dim"), self.backend)
         entry = self.latest
-        if entry is not None:
-            text.append("   latest ", "dim")
-            text.append(entry.line(), "bold yellow" if entry.serious else "")
-        text.no_wrap, text.overflow = True, "ellipsis"
-        return text
+        if entry is None:
+            return clip_words(full, width)
+        if width - full.cell_len >= LATEST_ROOM:
+            text = full + Text("   latest ", "dim")
+        else:  # the backend's kind (sim, board) and as much of the title as a quarter holds
+            text = Text.assemble(clip_words(Text(self.machine_title), max(width // 4, 14)),
+                                 " · ", self.backend.split()[0], (" ▸ ", "dim"))
+        text.append(entry.line(), "bold yellow" if entry.serious else "")
+        return clip_words(text, width)
 
     def _show(self) -> None:
         if self._lines is None:
             return
         health, loop, lamp = self._lines
         status, link = self.status, self.link
-        health.show(self._health(status, link))
-        loop.show(self._loop(status))
+        if health.size.width != self._identity_width:  # the screen or the lamp resized
+            self._show_identity()
+        health.show(clip_words(self._health(status, link), health.size.width))
+        loop.show(self._loop(status, loop.size.width))
         self._lamp(lamp, status, link)
 
     def _lamp(self, lamp: EStopLamp, status: Status | None, link: Link) -> None:
@@ -204,19 +223,21 @@ class StatusHeader(Horizontal):
             text.append(f"   {link.command}", "bold magenta")
         return text
 
-    def _loop(self, status: Status | None) -> Text:
-        text = Text("loop ", style="dim")
+    def _loop(self, status: Status | None, width: int) -> Text:
+        """Lateness, compute and overruns first; the max, tick and clock as room allows."""
         if status is None:
-            return text
+            return Text("loop ", style="dim")
         late_style = "bold yellow" if status.late_max_us > LATE_WARN_US else ""
-        text.append(f"late {status.late_last_us:5.1f} µs", late_style)
-        text.append(f" (max {status.late_max_us:.0f})", "dim")
-        text.append(f"  compute {status.compute_last_us:5.1f} µs")
-        text.append(f"  overruns {status.overruns}", "bold red" if status.overruns else "")
-        text.append(f"  tick {status.tick}  t {status.time_s:8.2f} s", "dim")
+        parts = [(Text("loop ", style="dim"), 0),
+                 (Text(f"late {status.late_last_us:5.1f} µs", late_style), 0),
+                 (Text(f" (max {status.late_max_us:.0f})", "dim"), 2),
+                 (Text(f"  compute {status.compute_last_us:5.1f} µs"), 1),
+                 (Text(f"  overruns {status.overruns}", "bold red" if status.overruns else ""),
+                  0 if status.overruns else 3),
+                 (Text(f"  tick {status.tick}  t {status.time_s:8.2f} s", "dim"), 5)]
         if status.flags & Flag.REALTIME:
-            text.append("  SCHED_FIFO", "green")
-        return text
+            parts.append((Text("  SCHED_FIFO", "green"), 4))
+        return fit_parts(parts, width)
 
 
 class FaultBanner(Static):
