@@ -55,6 +55,7 @@ from control.motion.positions import (
 )
 
 SPEEDS = (0.05, 1.0)  # the speed fraction a go-to may ask for
+STACK_UNDER = 110  # columns under which the table stacks the pose under the joints
 
 
 class PositionsTab(TabPage):
@@ -110,6 +111,7 @@ class PositionsTab(TabPage):
         self.book = PositionBook(desk.machine)
         self.handle: MoveHandle | None = None
         self._file_lock = threading.Lock()  # one read-change-write at a time
+        self.stacked = False  # the table's rows two lines each, the pose under the joints
 
     def compose(self) -> ComposeResult:
         yield DataTable(id="positions-table", cursor_type="row", zebra_stripes=True)
@@ -125,14 +127,7 @@ class PositionsTab(TabPage):
 
     def on_mount(self) -> None:
         super().on_mount()
-        table = self.query_one("#positions-table", DataTable)
-        table.add_column("name", key="name")
-        table.add_column("from", key="from")
-        for joint in self.machine.joints:
-            table.add_column(f"{joint.name} {joint.symbol}", key=joint.key)
-        if self.model is not None:
-            for name, unit in POSE_LABELS:
-                table.add_column(f"{name} {unit}", key=f"pose-{name}")
+        self._columns()
         self._state(Text("t teaches where the joints are; g goes to the selected position",
                          "dim"))
         self.query_one("#positions-result", DataTable).display = False  # until a go-to ends
@@ -143,12 +138,43 @@ class PositionsTab(TabPage):
 
     # -- the list ------------------------------------------------------------------------------
 
+    def on_resize(self) -> None:
+        if self.stacked != self._stack_wanted():
+            self._columns()
+            self._show(self.book)
+
+    def _stack_wanted(self) -> bool:
+        return (self.size.width < STACK_UNDER and self.model is not None
+                and self.machine.n_joints == len(POSE_LABELS))
+
+    def _columns(self) -> None:
+        """One column each for the name, where it is from, the joints and the pose; on a
+        narrow screen two lines a row: the name over where it is from, each joint over one
+        coordinate of the pose, so the pose is on the screen with the joints."""
+        self.stacked = self._stack_wanted()
+        table = self.query_one("#positions-table", DataTable)
+        table.clear(columns=True)
+        table.header_height = 2 if self.stacked else 1
+        if self.stacked:
+            table.add_column(Text("name\nfrom"), key="name")
+            for joint, (name, unit) in zip(self.machine.joints, POSE_LABELS, strict=True):
+                table.add_column(Text(f"{joint.name} {joint.symbol}\n{name} {unit}",
+                                      justify="right"), key=joint.key)
+            return
+        table.add_column("name", key="name")
+        table.add_column("from", key="from")
+        for joint in self.machine.joints:
+            table.add_column(f"{joint.name} {joint.symbol}", key=joint.key)
+        if self.model is not None:
+            for name, unit in POSE_LABELS:
+                table.add_column(f"{name} {unit}", key=f"pose-{name}")
+
     def _show(self, book: PositionBook, select: str | None = None) -> None:
         table = self.query_one("#positions-table", DataTable)
         keep = select or self.selected_name()
         table.clear()
         for p in book.positions:
-            table.add_row(*self._cells(p), key=p.name)
+            table.add_row(*self._cells(p), key=p.name, height=2 if self.stacked else 1)
         names = [p.name for p in book.positions]
         if keep in names:
             table.move_cursor(row=names.index(keep))
@@ -160,6 +186,10 @@ class PositionsTab(TabPage):
         pose = ([f"{v:.1f}" for v in self.model.pose(np.array(p.joints))]
                 if self.model is not None else [])
         source = Text(p.source, "dim" if p.taught else "cyan")
+        if self.stacked:
+            return [Text.assemble((p.name, "bold"), "\n", source),
+                    *(Text(f"{q}\n{x}", justify="right") for q, x in zip(joints, pose,
+                                                                         strict=True))]
         return [Text(p.name, "bold"), source, *joints, *pose]
 
     def selected_name(self) -> str | None:
