@@ -94,8 +94,9 @@ class StatusHeader(Horizontal):
     }
     """
 
-    status: reactive[Status | None] = reactive(None, always_update=True)
-    link: reactive[Link] = reactive(Link)
+    # its lines repaint themselves when they change: the header itself never needs to
+    status: reactive[Status | None] = reactive(None, always_update=True, repaint=False)
+    link: reactive[Link] = reactive(Link, repaint=False)
     latest: reactive[LogEntry | None] = reactive(None)
 
     def __init__(self, machine_title: str, backend: str, *, id: str | None = None) -> None:
