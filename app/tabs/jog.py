@@ -516,6 +516,8 @@ class JogTab(TabPage):
     _servo: CartesianServo | None = None  # the held Cartesian jog, while it runs or brakes
     _unlogged: tuple[tuple[CartesianServo, JogPad.CartesianHeld], ...] = ()  # held jogs whose
     # ends are not in the event log yet, with what each was started with
+    _zone_asked: tuple[object, ...] = ()  # the last joints, frame and speed the zone was found for
+    _zone_said: tuple[str, ...] = ()  # and what was said of it
 
     def compose(self) -> ComposeResult:
         speed = self.machine.cartesian_jog_speed if self.model is not None else None
@@ -718,7 +720,6 @@ class JogTab(TabPage):
             if self._was_manual and not manual:  # E-stop, hold or a move ended manual mode
                 self.pad.forget_duties()
             self._was_manual = manual
-        self.pad.refresh()
         self.query_one("#jog-pose", LiveText).show(self._pose(status))
         note = self.cartesian_note
         if not note.plain and self.zone_note:  # nothing else to say: the whole warning
@@ -763,6 +764,12 @@ class JogTab(TabPage):
             q = np.array(status.position)
         frame = "world" if self.pad.frame == "joint" else self.pad.frame
         speed = self.pad.cartesian_speed if self.pad.mode == "hold-to-move" else 1.0
+        asked = (tuple(q), frame, speed)
+        if asked != self._zone_asked:  # the joints at rest: the same answer, ten times a second
+            self._zone_asked, self._zone_said = asked, tuple(self._zone_words(q, frame, speed))
+        return list(self._zone_said)
+
+    def _zone_words(self, q: np.ndarray, frame: str, speed: float) -> list[str]:
         near = zone(q, self.machine, frame, speed)
         slowed = np.flatnonzero(near.scale < ZONE_WARNING)
         if not len(slowed):

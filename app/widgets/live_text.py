@@ -2,33 +2,117 @@
 
 ``Static.update`` asks for a layout pass (its size may change), which re-flows
 every visible widget; at 10–25 updates a second that is most of the UI's CPU.
-A ``LiveText`` has its size fixed by its stylesheet and only repaints.
+A ``LiveText`` has its size fixed by its stylesheet and only repaints, and only
+when what it shows has changed: most of a live screen is the same from one tick to
+the next, and repainting it identical cost an idle tab a quarter of a core.
 """
 
 from __future__ import annotations
 
-from rich.console import RenderableType
+import math
+from collections.abc import Hashable
+
+from rich.console import Group, RenderableType
+from rich.segment import Segment, Segments
+from rich.table import Table
 from rich.text import Text
 from textual.widget import Widget
 
+from app.widgets.limit_bar import LimitBar
+
+BAR_STEPS = 10_000  # a limit bar's marks compared to a ten-thousandth of its range: finer
+# than any terminal draws it
+
 
 class LiveText(Widget):
-    """A renderable shown as is; ``show`` repaints it in place."""
+    """A renderable shown as is; ``show`` repaints it in place when it differs."""
 
     def __init__(self, renderable: RenderableType = "", *, id: str | None = None,
                  classes: str | None = None) -> None:
         super().__init__(id=id, classes=classes)
         self._renderable: RenderableType = renderable
+        self._shown: RenderableType = renderable  # what render() hands Textual
+        self._key: Hashable | None = fingerprint(renderable)  # what is shown, in brief
+        self._lines: list[list[Segment]] | None = None  # or the lines it drew, as last shown
+        self.repaints = 0  # how many times a change was shown (tests of the idle cost)
 
     def show(self, renderable: RenderableType) -> None:
         self._renderable = renderable
+        key = fingerprint(renderable)
+        if key is not None:  # compared by what it says: cheaper than drawing it
+            if key == self._key:
+                return
+            self._key, self._shown, self._lines = key, renderable, None
+        else:  # something else: compared as the lines it draws at this width
+            width = self.size.width
+            lines = (self.app.console.render_lines(
+                renderable, self.app.console.options.update_width(width), pad=False)
+                if width > 0 else None)
+            if lines is not None and lines == self._lines:
+                return
+            self._key, self._lines = None, lines
+            self._shown = renderable if lines is None else _segments(lines)
+        self.repaints += 1
         self.refresh()
 
+    def on_resize(self) -> None:
+        if self._lines is not None:  # drawn for the old width: draw it again
+            self._lines = None
+            self.show(self._renderable)
+
     def render(self) -> RenderableType:
-        return self._renderable
+        return self._shown
 
     @property
     def text(self) -> str:
         """The plain text shown (tests, screen readers of the smoke test)."""
         r = self._renderable
-        return r.plain if isinstance(r, Text) else str(r)
+        if isinstance(r, Text):
+            return r.plain
+        if self._lines is not None:
+            return "\n".join("".join(s.text for s in line) for line in self._lines)
+        return str(r)
+
+
+def _segments(lines: list[list[Segment]]) -> Segments:
+    """Lines already drawn, as one renderable."""
+    out: list[Segment] = []
+    for i, line in enumerate(lines):
+        if i:
+            out.append(Segment.line())
+        out.extend(line)
+    return Segments(out)
+
+
+def fingerprint(renderable: RenderableType) -> Hashable | None:
+    """What ``renderable`` says, as a value equal for two that draw the same at any width
+    (text, tables and groups of them, limit bars); None for anything else."""
+    if isinstance(renderable, str):
+        return renderable
+    if isinstance(renderable, Text):
+        return (renderable.plain, tuple(renderable.spans), renderable.style,
+                renderable.justify, renderable.no_wrap, renderable.overflow)
+    if isinstance(renderable, LimitBar):
+        return (_bar_step(renderable, renderable.position),
+                _bar_step(renderable, renderable.desired), renderable.width)
+    if isinstance(renderable, Group):
+        parts = tuple(fingerprint(r) for r in renderable.renderables)
+        return None if None in parts else ("group", parts)
+    if isinstance(renderable, Table):
+        columns = tuple((fingerprint(c.header), c.justify, c.ratio, c.width, c.min_width,
+                         tuple(fingerprint(cell) for cell in c._cells))
+                        for c in renderable.columns)
+        cells = [cell for column in columns for cell in column[5]]
+        if None in cells or any(c[0] is None for c in columns):
+            return None
+        title = renderable.title
+        return ("table", columns, None if title is None else fingerprint(title))
+    return None
+
+
+def _bar_step(bar: LimitBar, value: float) -> tuple[int, bool, bool] | None:
+    """Where ``value`` is on ``bar``, to ``BAR_STEPS``, and whether at or past either limit."""
+    if not math.isfinite(value):
+        return None
+    f = bar.fraction(value)
+    return (math.floor(f * BAR_STEPS), f <= 0, f >= 1)
