@@ -13,7 +13,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from rich.text import Text
+from rich.cells import cell_len
+from rich.text import Span, Text
 from textual.app import ComposeResult
 from textual.containers import Horizontal, VerticalScroll
 
@@ -150,16 +151,24 @@ def columns(rows: list[list[str | Text]], justify: tuple[str, ...], edge: str = 
             gap: int = GAP) -> list[Text]:
     """``rows`` as lines of aligned columns, ``gap`` apart, each line begun with ``edge``;
     the first row bold when it is a header (``edge`` given)."""
-    cells = [[c if isinstance(c, Text) else Text(c) for c in row] for row in rows]
-    widths = [max(row[k].cell_len for row in cells) for k in range(len(justify))]
+    plain = [[c.plain if isinstance(c, Text) else c for c in row] for row in rows]
+    widths = [max(cell_len(row[k]) for row in plain) for k in range(len(justify))]
     lines = []
-    for row in cells:
-        line = Text(edge)
-        for k, (cell, side) in enumerate(zip(row, justify, strict=True)):
-            pad = " " * (widths[k] - cell.cell_len)
-            line.append(" " * gap if k else "")
-            line.append_text(cell + Text(pad) if side == "left" else Text(pad) + cell)
-        lines.append(line)
+    for row, texts in zip(rows, plain, strict=True):
+        parts, spans, at = [edge], [], len(edge)
+        for k, (cell, text) in enumerate(zip(row, texts, strict=True)):
+            if k:
+                parts.append(" " * gap)
+                at += gap
+            pad = " " * (widths[k] - cell_len(text))
+            start = at if justify[k] == "left" else at + len(pad)
+            parts += [text, pad] if justify[k] == "left" else [pad, text]
+            at += len(pad) + len(text)
+            if isinstance(cell, Text):  # its styles, moved to where it now stands
+                if cell.style:
+                    spans.append(Span(start, start + len(text), cell.style))
+                spans += [span.move(start) for span in cell.spans]
+        lines.append(Text("".join(parts), spans=spans))
     if edge:
         lines[0].stylize("bold")
     return lines
