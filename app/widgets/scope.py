@@ -1,13 +1,13 @@
 """A live plot widget drawn with the braille raster: a title row, y labels, the traces and
-a time axis (``app.plotting.strips.plot_strips``). ``plot`` replaces what is shown; nothing
-is computed while the widget is hidden."""
+a time axis (``app.plotting.strips.plot_strips``). ``plot`` replaces what is shown and repaints
+only the rows that changed; nothing is computed while the widget is hidden."""
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 
 from rich.text import Text
-from textual.geometry import Size
+from textual.geometry import Region, Size
 from textual.strip import Strip
 from textual.widget import Widget
 
@@ -28,6 +28,7 @@ class ScopePlot(Widget):
         self._x_labels = ("", "", "")
         self._lines: list[Strip] = []
         self._drawn_for = Size(0, 0)
+        self.repaints = 0  # frames that changed what it shows (tests of the idle cost)
 
     def plot(self, traces: Sequence[Trace], x_range: tuple[float, float],
              y_range: tuple[float, float], title: Text, *, zero_line: bool = False,
@@ -39,8 +40,16 @@ class ScopePlot(Widget):
         self._title = title
         self._zero_line = zero_line
         self._x_labels = x_labels or (f"{x_range[0]:g}", "", f"{x_range[1]:g}")
+        before = self._lines
         self._draw()
-        self.refresh()
+        changed = [y for y, (old, new) in enumerate(zip(before, self._lines, strict=False))
+                   if old != new]
+        if len(before) != len(self._lines):
+            self.refresh()
+        elif changed:  # a plot at rest draws the same rows: only the rows that moved repaint
+            width = self.size.width
+            self.refresh(*(Region(0, y, width, 1) for y in changed))
+        self.repaints += bool(changed) or len(before) != len(self._lines)
 
     def on_resize(self) -> None:
         self._draw()
