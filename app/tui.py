@@ -9,6 +9,7 @@ held back by the terminal's escape-sequence timeout (~100 ms for a lone Escape).
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import gc
 import threading
@@ -45,6 +46,7 @@ from app.widgets.header import FaultBanner, StatusHeader
 from app.widgets.key_bar import KeyBar
 from app.widgets.tab_bar import TabBar
 from control.client import ControlClient, ControllerError, Event
+from control.motion.positions import Position
 from control.motion.robot_model import model_of
 from control.recorder import default_data_dir
 from control.rt.events import Commander, Died, EStop, Fault, Initialised, Notice, Refused
@@ -53,6 +55,8 @@ from control.timing import Timing
 from hw.machine import Machine, load_machine
 
 HEADER_HZ = 10.0
+FIRST_TAB = "jog"  # the tab shown at start: the only one built before the first frame
+BUILD_GAP_S = 0.02  # between two tabs built after it: the keys and the header's turn
 STALL_DUPLICATE_S = 2.0  # a stall the Latency tab sees this soon after the controller's notice
 SETTLE_S = 1.5  # after a tab's first frames its long-lived objects exist
 FREEZE_S = 5.0  # and every so often after: the widgets' line caches keep growing
@@ -170,6 +174,11 @@ class ServodeskApp(App[None]):
         self._estop_pending = False
         self._active: TabPage | None = None
         self._settled: set[str] = set()
+        self.tabs: dict[str, TabPage] = {}  # made in compose
+        self._building: set[str] = set()  # tabs being mounted for the first time
+        self._wanted = FIRST_TAB  # the tab last chosen (shown once it is built)
+        self._rest_started = False  # the tabs not shown are being built (once live)
+        self._positions: tuple[Position, ...] | None = None  # as the Positions tab last read
         self._early: list[ClientReady | ClientFailed | ControllerEvent] | None = []
         self.fault_kind = ""
         self.feed_tenths = 10  # the feed override as the operator set it, in tenths
@@ -187,10 +196,14 @@ class ServodeskApp(App[None]):
             backend += f"  ·  {self.timing_text}"
         yield StatusHeader(self.machine.title, backend, id="header")
         yield FaultBanner(id="fault")
+        # every tab is made now, but only the first is built (composed, styled, mounted)
+        # before the first frame: the others, when first shown (``_build``)
+        self.tabs = {name: cls(self.desk, id=f"tab-{name}") for name, cls in TABS}
         with TabBar(id="tabs"):
             for i, (name, cls) in enumerate(TABS):
                 with TabPane(f"F{i + 1} {cls.TITLE}", id=f"pane-{name}"):
-                    yield cls(self.desk, id=f"tab-{name}")
+                    if name == FIRST_TAB:
+                        yield self.tabs[name]
         yield KeyBar()
 
     def on_mount(self) -> None:
@@ -198,11 +211,10 @@ class ServodeskApp(App[None]):
         self.header = self.query_one(StatusHeader)
         self.banner = self.query_one(FaultBanner)
         self.banner.display = False
-        self.tabs = {name: self.query_one(f"#tab-{name}", TabPage) for name, _ in TABS}
         gc.freeze()  # see _freeze_long_lived; no collection: the controller may be up already
         self.set_interval(1.0 / HEADER_HZ, self._refresh_header)
         self.set_interval(FREEZE_S, self._freeze_long_lived)
-        self._activate("jog")
+        self._activate(FIRST_TAB)
         if self.priority is not None and self.priority.notice:
             self.notify(self.priority.notice, title="UI", severity="warning", timeout=10)
         early, self._early = self._early or [], None
@@ -246,6 +258,53 @@ class ServodeskApp(App[None]):
 
     def tab(self, name: str) -> TabPage:
         return self.tabs[name]
+
+    def built_tabs(self) -> list[TabPage]:
+        """The tabs built so far (shown at least once): the others have no widgets yet."""
+        return [tab for tab in self.tabs.values() if tab.is_attached]
+
+    async def _build(self, name: str) -> TabPage:
+        """Mount tab ``name`` in its pane (hidden until chosen) and tell it what the others
+        were told while it was not built: the client, its death, a latched E-stop."""
+        tab = self.tab(name)
+        if not tab.is_attached and name not in self._building:
+            self._building.add(name)
+            try:
+                await self.query_one(f"#pane-{name}", TabPane).mount(tab)
+            finally:
+                self._building.discard(name)
+            if self.client is not None:
+                tab.client_ready(self.client)
+            if self.client_problem:
+                tab.client_down(self.client_problem)
+            if self.estop_latched:
+                tab.estop(latched=True)
+            if self._positions is not None:
+                for form in tab.query(ViaPointsForm):
+                    form.offer(self._positions)
+            if isinstance(tab, MovesTab) and self._positions is None:
+                await self._build("positions")  # it reads the named positions the forms offer
+        return tab
+
+    def _start_building(self) -> None:
+        if not self._rest_started:
+            self._rest_started = True
+            self.call_after_refresh(self._build_the_rest)
+
+    async def _build_the_rest(self) -> None:
+        """Build the tabs not shown yet, one at a time, keys and frames served between: a
+        tab is then ready when first chosen, and neither the first frame nor the first live
+        one waited for them."""
+        for name, _ in TABS:
+            if not self.is_running:
+                return
+            await self._build(name)
+            await asyncio.sleep(BUILD_GAP_S)
+
+    async def _build_and_show(self, name: str) -> None:
+        await self._build(name)
+        if self._wanted == name and self.is_running:
+            self._activate(name)
 
     # -- the client's life ---------------------------------------------------------------------
 
@@ -302,7 +361,7 @@ class ServodeskApp(App[None]):
             self.notify(client.notice, title="controller", timeout=6)
         if self._take_at_start:
             self.action_take_command()
-        for tab in self.tabs.values():
+        for tab in self.built_tabs():
             tab.client_ready(client)
         if self._active is not None:
             self._active.refresh_live()
@@ -312,6 +371,7 @@ class ServodeskApp(App[None]):
             return
         self._client_down(message.reason)
         self._link(state="failed", reason="controller did not start")
+        self._start_building()
         self.record_event(LogEntry(time.time(), "fault", f"start: {message.reason}"))
         self._fault("start", f"The controller did not start: {message.reason}")
 
@@ -377,7 +437,8 @@ class ServodeskApp(App[None]):
             case Initialised(status=status):
                 moves = self.tab("moves")
                 assert isinstance(moves, MovesTab)
-                moves.initialised(status)
+                if moves.is_attached:
+                    moves.initialised(status)
                 self.notify(f"initialise: {status}")
 
     def _fault(self, kind: str, message: str) -> None:
@@ -410,6 +471,7 @@ class ServodeskApp(App[None]):
         runs.keep_unsaved(message.run)
 
     def on_positions_tab_changed(self, message: PositionsTab.Changed) -> None:
+        self._positions = message.positions  # for the forms of a Moves tab built later
         for form in self.query(ViaPointsForm):
             form.offer(message.positions)
 
@@ -449,7 +511,7 @@ class ServodeskApp(App[None]):
 
     def _client_down(self, problem: str) -> None:
         self.client_problem = problem
-        for tab in self.tabs.values():
+        for tab in self.built_tabs():
             tab.client_down(problem)
 
     def _link(self, **changes: object) -> None:
@@ -463,6 +525,7 @@ class ServodeskApp(App[None]):
             self._died()
         if self.sampler is not None and self.sampler.latest is not None:
             self.header.status = self.sampler.latest
+            self._start_building()  # the screen is live: the rest may take their turns
             if self.desk.story.update(self.sampler.latest) and self.fault_kind == "limit":
                 self.action_dismiss_fault()  # the joint has left its limit
         self.header.latest = self.desk.events.latest  # a tab's refusal logs without the app
@@ -478,10 +541,15 @@ class ServodeskApp(App[None]):
 
     def _activate(self, name: str) -> None:
         tab = self.tab(name)
+        self._wanted = name
         if tab is self._active:
             return
         if self._active is not None:
             self._active.hidden()
+            self._active = None
+        if not tab.is_attached:  # first shown: built now, shown once mounted
+            self.call_next(self._build_and_show, name)
+            return
         self._active = tab
         tab.shown()
         self.refresh_bindings()
@@ -517,7 +585,7 @@ class ServodeskApp(App[None]):
             self.pop_screen()
 
     def _estop_tabs(self, latched: bool) -> None:
-        for tab in self.tabs.values():
+        for tab in self.built_tabs():
             tab.estop(latched)
 
     def _send_estop(self) -> None:
@@ -656,10 +724,12 @@ class ServodeskApp(App[None]):
         self.banner.message = ""
         self.refresh_bindings()
 
-    def action_teach(self) -> None:
+    async def action_teach(self) -> None:
         """Teach where the joints are under a name, from any tab."""
-        positions = self.tab("positions")
-        if isinstance(positions, PositionsTab) and not isinstance(self.screen, ModalScreen):
+        if isinstance(self.screen, ModalScreen):
+            return
+        positions = await self._build("positions")
+        if isinstance(positions, PositionsTab):
             positions.action_teach()
 
     def action_run_move(self) -> None:

@@ -41,11 +41,12 @@ class Tui:
 
     @staticmethod
     async def ready(app: ServodeskApp, pilot: Pilot) -> Status:
-        """Wait until the controller runs, the first status was sampled and the first tab
-        has the focus (its keys work); return the status."""
+        """Wait until the controller runs, the first status was sampled, the first tab
+        has the focus (its keys work) and every tab is built; return the status."""
         deadline = time.monotonic() + START_S
         while (app.client is None or app.sampler is None or app.sampler.latest is None
-               or app.focused is None or app.tab("jog") not in app.focused.ancestors_with_self):
+               or app.focused is None or app.tab("jog") not in app.focused.ancestors_with_self
+               or len(app.built_tabs()) < len(app.tabs)):  # the others build once it is live
             if app.client_problem:
                 pytest.fail(f"the controller did not start: {app.client_problem}")
             if time.monotonic() > deadline:
