@@ -32,8 +32,8 @@ MAX_M = 9.9e17  # an m past this could have 19 digits, more than POW10 and an in
 SHORTEST_RANGE = (1.0001e-4, 1e15)  # where repr writes no exponent (a margin at the low end)
 ZERO, POINT, MINUS, NEWLINE = (ord(c) for c in "0.-\n")
 # the four ASCII digits of 0 … 9999, as one little-endian word each (text order in memory)
-_FOURS = (np.array([[ord(c) for c in f"{i:04d}"] for i in range(10_000)], dtype=np.uint8)
-          .view("<u4").ravel())
+_FOURS = ((np.arange(10_000)[:, None] // np.array([1000, 100, 10, 1]) % 10 + ZERO)
+          .astype(np.uint8).view("<u4").ravel())  # in numpy: the list took 25 ms at import
 _KEEP = np.array([0, 0xFF000000, 0xFFFF0000, 0xFFFFFF00, 0xFFFFFFFF], dtype="<u4")  # last k
 Spell = Callable[[float, int], str]  # the text of an odd value of a column, as Python writes it
 
