@@ -27,6 +27,7 @@ from control.rt.commands import Hold
 from control.rt.events import Refused
 from control.rt.layout import Mode
 from control.rt.wire import Broken, Wire
+from tests.control.doomed_client import DOOMED
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -104,19 +105,6 @@ def test_an_estop_from_an_observer_latches(controller_service) -> None:
     finally:
         commander.close()
         observer.close()
-
-
-DOOMED = """
-import sys
-from control.client import ControlClient
-client = ControlClient.attach(sys.argv[1], name="doomed")
-client.take_command()
-q = list(client.status().position)
-q[0] += 40.0
-client.go_to(q, speed=0.1)
-print(client.name, flush=True)
-sys.stdin.read()
-"""
 
 
 def test_the_commander_killed_mid_move_leaves_a_holding_controller_another_can_take(

@@ -29,6 +29,7 @@ from control.rt import shm
 from control.rt.layout import Mode
 from hw.machine import load_machine
 from tests.conftest import ROOT, ServiceProcess
+from tests.control.doomed_client import DOOMED
 
 UNIMATE = load_machine("unimate2000b")
 ROTATE = UNIMATE.joint_index("rotate")
@@ -258,23 +259,10 @@ def tempfile_dir() -> str:
     return tempfile.mkdtemp(prefix="sd-")  # short: a socket's path has at most 107 bytes
 
 
-KILLED = """
-import sys
-from control.client import ControlClient
-client = ControlClient.attach(sys.argv[1], name="doomed")
-client.take_command()
-q = list(client.status().position)
-q[0] += 40.0
-client.go_to(q, speed=0.1)
-print(client.name, flush=True)
-sys.stdin.read()
-"""
-
-
 def test_a_killed_commanders_run_is_saved_as_such(service) -> None:
     """Before: the run of a commander killed mid-move was saved as "aborted by operator"."""
     watcher = ControlClient.attach(service.socket, name="watcher")
-    doomed = subprocess.Popen([sys.executable, "-c", KILLED, str(service.socket)], cwd=ROOT,
+    doomed = subprocess.Popen([sys.executable, "-c", DOOMED, str(service.socket)], cwd=ROOT,
                               stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
                               env={**os.environ, "PYTHONPATH": str(ROOT)})
     try:

@@ -19,18 +19,7 @@ from control.client import ControlClient, Event
 from control.rt.events import Commander, EStop, MoveDone
 from control.rt.layout import Mode
 from tests.conftest import ROOT
-
-DOOMED = """
-import sys
-from control.client import ControlClient
-client = ControlClient.attach(sys.argv[1], name="doomed")
-client.take_command()
-q = list(client.status().position)
-q[0] += 40.0
-client.go_to(q, speed=0.1)
-print(client.name, flush=True)
-sys.stdin.read()
-"""
+from tests.control.doomed_client import DOOMED
 
 
 def until(condition: Callable[[], object], timeout: float = 10.0, what: str = "") -> None:
