@@ -15,7 +15,8 @@ Unimate 2000B. Parts:
 3. the controller's lateness over a few seconds with the Scope hidden and shown;
 4. key to duty: a Jog key posted to the app as the terminal driver posts it, until
    the controller publishes the new valve duty (watched from another process);
-5. startup: ``python -m app`` in a tmux window until the live screen shows;
+5. startup: ``python -m app`` in a tmux window until the live screen shows (quiet, and
+   beside a CPU burner with ``--tmux``);
 6. UI pauses (``--pauses``; ``--no-burner`` without the burner): every tab opened for the
    first time (and End point in Moves) beside a CPU burner; the event loop's longest
    pause per tab (a task that wakes every 5 ms records how late it woke), the client's
@@ -28,13 +29,21 @@ Unimate 2000B. Parts:
 8. browser (``--browser`` alone; also in the full run when Chromium is installed):
    ``servodesk serve`` started (its own controller), then three times a fresh headless
    Chromium opened on it (tests/app/browser.py): the time from asking for the page to the
-   first bytes of the TUI's output, and to its first live frame (the header's tick count).
+   first bytes of the TUI's output, and to its first live frame (the header's tick count);
+9. idle UI CPU (``--tmux``): ``python -m app`` in tmux, its own process's CPU time (/proc)
+   over 10 s on each of Jog, Scope (drawing at its rate) and Status, nothing pressed;
+10. key to the screen (``--tmux``): an increment key sent with ``tmux send-keys`` on the Jog
+   tab until the screen shows the new increment, quiet and beside a CPU burner.
+
+``--tmux [ROOT ...]`` runs only 9, 5 and 10, for each ROOT given (a worktree of an older
+commit: ``git worktree add /tmp/old HASH``) and then this tree, one after the other in one run.
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import multiprocessing as mp
 import os
 import shlex
@@ -453,36 +462,145 @@ def soak(seconds: float) -> bool:
     return not failed
 
 
-def startup(repeats: int) -> None:
+class TmuxApp:
+    """``python -m app`` (from ``root``) in a 160 × 48 tmux window of its own tmux server."""
+
+    def __init__(self, root: Path, data_dir: str, name: str) -> None:
+        self.tmux = [shutil.which("tmux") or "tmux", "-L", f"servodesk-bench-{os.getpid()}",
+                     "-f", os.devnull]
+        self.name = name
+        # exec: the pane's process is the app itself, whose CPU time /proc gives
+        command = (f"cd {shlex.quote(str(root))} && PYTHONPATH={shlex.quote(str(root))} exec "
+                   f"{shlex.quote(sys.executable)} -m app --data-dir {data_dir}")
+        self.started = time.monotonic()
+        subprocess.run([*self.tmux, "new-session", "-d", "-s", name, "-x", str(SIZE[0]),
+                        "-y", str(SIZE[1]), command], check=True)
+        self.pid = int(subprocess.run([*self.tmux, "display", "-p", "-t", name, "#{pane_pid}"],
+                                      capture_output=True, text=True, check=True).stdout)
+
+    def screen(self) -> str:
+        return subprocess.run([*self.tmux, "capture-pane", "-p", "-t", self.name],
+                              capture_output=True, text=True).stdout
+
+    def wait_for(self, *texts: str, timeout: float = 30.0) -> float:
+        """Seconds since start until every one of ``texts`` is on the screen."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            screen = self.screen()
+            if all(text in screen for text in texts):
+                return time.monotonic() - self.started
+            time.sleep(0.005)
+        raise RuntimeError(f"{texts} not on the screen after {timeout:g} s:\n{self.screen()}")
+
+    def keys(self, *keys: str) -> None:
+        subprocess.run([*self.tmux, "send-keys", "-t", self.name, *keys], check=True)
+
+    def cpu_s(self) -> float:
+        """The app's CPU time so far (user + system), its own process only."""
+        fields = Path(f"/proc/{self.pid}/stat").read_text().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+    def close(self) -> None:
+        self.keys("C-q")
+        with contextlib.suppress(RuntimeError):
+            deadline = time.monotonic() + 5
+            while Path(f"/proc/{self.pid}").exists() and time.monotonic() < deadline:
+                time.sleep(0.05)
+        subprocess.run([*self.tmux, "kill-server"], capture_output=True)
+
+
+LIVE = (" RUN", "mode HOLD")  # the header once the controller's status is shown
+IDLE_TABS = (("jog", "F1"), ("scope", "F3"), ("status", "F4"))
+IDLE_S = 10.0  # each tab's idle CPU is measured over this long, after IDLE_SETTLE_S
+IDLE_SETTLE_S = 2.0
+
+
+@contextlib.contextmanager
+def burning(burn: bool):
+    burner = start_burner() if burn else None
+    try:
+        yield
+    finally:
+        if burner is not None:
+            burner.kill()
+            burner.wait()
+
+
+def startup(repeats: int, root: Path = ROOT, burn: bool = False) -> list[float]:
     """Seconds from starting ``python -m app`` in a 160 × 48 tmux window to a live screen."""
-    tmux = shutil.which("tmux")
-    if tmux is None:
+    if shutil.which("tmux") is None:
         print("\n5. startup: skipped (no tmux)")
-        return
-    socket = f"servodesk-bench-{os.getpid()}"
+        return []
     times = []
-    with tempfile.TemporaryDirectory() as data_dir:
+    with tempfile.TemporaryDirectory() as data_dir, burning(burn):
         for k in range(repeats):
-            command = (f"cd {shlex.quote(str(ROOT))} && PYTHONPATH={shlex.quote(str(ROOT))} "
-                       f"{shlex.quote(sys.executable)} -m app --data-dir {data_dir}")
-            run = [tmux, "-L", socket, "-f", os.devnull]
-            started = time.monotonic()
-            subprocess.run([*run, "new-session", "-d", "-s", f"s{k}", "-x", "160", "-y", "48",
-                            command], check=True)
+            app = TmuxApp(root, data_dir, f"s{k}")
             try:
-                while time.monotonic() - started < 30:
-                    screen = subprocess.run([*run, "capture-pane", "-p", "-t", f"s{k}"],
-                                            capture_output=True, text=True).stdout
-                    if " RUN" in screen and "mode HOLD" in screen:
-                        times.append(time.monotonic() - started)
-                        break
-                    time.sleep(0.02)
-                subprocess.run([*run, "send-keys", "-t", f"s{k}", "C-q"])
-                time.sleep(1.0)
+                times.append(app.wait_for(*LIVE))
             finally:
-                subprocess.run([*run, "kill-server"], capture_output=True)
-    print(f"\n5. startup to a live screen (tmux 160×48, {len(times)} starts): median "
+                app.close()
+    print(f"\n5. startup to a live screen (tmux 160×48, {len(times)} starts, "
+          f"{'beside a CPU burner' if burn else 'no burner'}, {root}): median "
           f"{statistics.median(times):.2f} s, max {max(times):.2f} s")
+    return times
+
+
+def idle_cpu(root: Path = ROOT) -> dict[str, float]:
+    """The app's CPU, % of one core, idle on each of Jog, Scope (drawing at its rate) and
+    Status, in tmux; nothing else pressed."""
+    cost = {}
+    with tempfile.TemporaryDirectory() as data_dir:
+        app = TmuxApp(root, data_dir, "idle")
+        try:
+            app.wait_for(*LIVE)
+            for name, key in IDLE_TABS:
+                app.keys(key)
+                time.sleep(IDLE_SETTLE_S)
+                cpu, wall = app.cpu_s(), time.monotonic()
+                time.sleep(IDLE_S)
+                cost[name] = 100 * (app.cpu_s() - cpu) / (time.monotonic() - wall)
+        finally:
+            app.close()
+    print(f"\n9. idle UI CPU (tmux 160×48, {IDLE_S:g} s a tab, {root}): "
+          + ", ".join(f"{name} {pct:.1f} %" for name, pct in cost.items()) + " of a core")
+    return cost
+
+
+def key_to_screen(presses: int, root: Path = ROOT, burn: bool = False) -> list[float]:
+    """Jog tab in tmux: an increment key (3 or 7, by turns) sent with ``tmux send-keys`` until
+    the Jog line shows the new increment, ms (the capture polled every ~5 ms: its own cost
+    is in the figure)."""
+    samples = []
+    with tempfile.TemporaryDirectory() as data_dir, burning(burn):
+        app = TmuxApp(root, data_dir, "keys")
+        try:
+            app.wait_for(*LIVE)
+            time.sleep(1.0)
+            for i in range(presses):
+                k = "3" if i % 2 == 0 else "7"
+                sent = time.monotonic()
+                app.keys(k)
+                app.wait_for(f"increment {k} %", timeout=5)
+                samples.append((time.monotonic() - sent) * 1e3)
+                time.sleep(0.1)
+        finally:
+            app.close()
+    print(f"\n10. key to the screen (Jog tab, tmux 160×48, {presses} keys, "
+          f"{'beside a CPU burner' if burn else 'no burner'}, {root}): median "
+          f"{statistics.median(samples):.0f} ms, p95 {np.percentile(samples, 95):.0f} ms, "
+          f"max {max(samples):.0f} ms")
+    return samples
+
+
+def tmux_figures(roots: list[Path], repeats: int, presses: int) -> None:
+    """Items 2 and 3 of issue 26 for each of ``roots`` (a worktree of an older commit beside
+    this one), one after the other in one run: idle CPU, start quiet and beside a burner,
+    key to the screen quiet and beside a burner."""
+    for root in roots:
+        idle_cpu(root)
+        for burn in (False, True):
+            startup(repeats, root, burn)
+            key_to_screen(presses, root, burn)
 
 
 def browser_first_render(repeats: int = 3) -> None:
@@ -530,9 +648,15 @@ def main() -> None:
     parser.add_argument("--no-burner", action="store_true", help="part 6 without the burner")
     parser.add_argument("--soak", type=float, metavar="SECONDS",
                         help="only part 7: switch every tab in tmux beside a burner this long")
+    parser.add_argument("--tmux", nargs="*", type=Path, metavar="ROOT",
+                        help="only parts 5, 9 and 10 (idle CPU, start and key to screen, "
+                        "quiet and beside a burner) for this tree and each ROOT given")
     parser.add_argument("--browser", action="store_true",
                         help="only part 8: servodesk serve's first render in headless Chromium")
     args = parser.parse_args()
+    if args.tmux is not None:
+        tmux_figures([*args.tmux, ROOT], 5, 10 if args.quick else 40)
+        return
     if args.browser:
         browser_first_render()
         return

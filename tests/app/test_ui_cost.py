@@ -1,0 +1,122 @@
+"""What the idle TUI costs, as behaviour: a widget whose content did not change is not drawn
+again, the status is drawn at most ten times a second, and the tabs not shown are not built
+before the first frame. (Its CPU and times are figures: ``benchmarks/ui.py --tmux``.)"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import ClassVar
+
+from textual.widget import Widget
+
+import app.tui
+from app.tui import ServodeskApp
+from app.widgets.live_text import LiveText
+
+APP_DIR = Path(app.tui.__file__).parent
+
+STATUS_HZ = 10.0
+OBSERVED_TICKS = 20  # header refreshes watched: two seconds at 10 Hz
+
+
+def count_renders(widget: Widget) -> list[int]:
+    """Count each time Textual draws ``widget`` (it calls ``render`` only after a refresh)."""
+    drawn = [0]
+    render: Callable[[], object] = widget.render
+
+    def counted() -> object:
+        drawn[0] += 1
+        return render()
+
+    widget.render = counted  # type: ignore[method-assign]
+    return drawn
+
+
+async def watch_ticks(app: ServodeskApp, ticks: int) -> float:
+    """Wait until the header has shown ``ticks`` new statuses; the seconds that took."""
+    started = time.monotonic()
+    seen, last = 0, app.header.status
+    deadline = started + 30
+    while seen < ticks:
+        assert time.monotonic() < deadline, "the header stopped showing new statuses"
+        await asyncio.sleep(0.01)
+        if app.header.status is not last:
+            seen, last = seen + 1, app.header.status
+    return time.monotonic() - started
+
+
+def test_idle_jog_draws_only_what_changed(tui) -> None:
+    async def scenario() -> None:
+        app = tui.app(lockstep=False)
+        async with app.run_test(size=(160, 48)) as pilot:
+            await tui.ready(app, pilot)
+            await watch_ticks(app, 5)  # the first frames of every line are drawn
+            pad = app.query_one("#jog-pad")
+            note = app.query_one("#jog-dead-band", LiveText)
+            loop = app.query_one("#header-loop", LiveText)
+            shown = (pad.render().plain, note.text)
+            pad_drawn, note_drawn, loop_drawn = (count_renders(w) for w in (pad, note, loop))
+            elapsed = await watch_ticks(app, OBSERVED_TICKS)
+            drawn = pad_drawn[0], note_drawn[0], loop_drawn[0]
+            assert (pad.render().plain, note.text) == shown  # nothing pressed: the same
+            assert drawn[0] == 0, f"the jog pad drawn {drawn[0]} times unchanged"
+            assert drawn[1] == 0, f"the min-PWM note drawn {drawn[1]} times unchanged"
+            # the loop line changes every status (its tick count): drawn, at most at 10 Hz
+            assert 0 < drawn[2] <= STATUS_HZ * elapsed + 2, (drawn[2], elapsed)
+
+    asyncio.run(scenario())
+
+
+def test_status_is_drawn_at_most_ten_times_a_second_and_only_what_changed(tui) -> None:
+    async def scenario() -> None:
+        app = tui.app(lockstep=False)
+        async with app.run_test(size=(160, 48)) as pilot:
+            await tui.ready(app, pilot)
+            await pilot.press("f4")
+            joints = app.query_one("#status-joints", LiveText)
+            await tui.until(lambda: "Swivel" in tui.text(joints), what="the joints' table")
+            link = app.query_one("#status-link", LiveText)
+            shown = tui.text(link)
+            drawn = {name: count_renders(app.query_one(f"#status-{name}", LiveText))
+                     for name in ("joints", "loop", "link")}
+            elapsed = await watch_ticks(app, OBSERVED_TICKS)
+            counts = {name: count[0] for name, count in drawn.items()}
+            for name in ("joints", "loop"):  # the sample count, the raw words: every status
+                assert 0 < counts[name] <= STATUS_HZ * elapsed + 2, (name, counts, elapsed)
+            assert tui.text(link) == shown  # the simulator's link counters stay at zero
+            assert counts["link"] == 0, f"the link block drawn {counts['link']} times unchanged"
+
+    asyncio.run(scenario())
+
+
+class FirstFrame(ServodeskApp):
+    """Notes which tabs are built when the first frame has been drawn."""
+
+    # the stylesheets are beside app/tui.py, not beside this file
+    CSS_PATH: ClassVar = [str(APP_DIR / path) for path in ServodeskApp.CSS_PATH]
+    built_at_first_frame: list[str] | None = None
+
+    def on_mount(self) -> None:  # before ServodeskApp's own on_mount
+        self.call_after_refresh(self._first_frame)
+
+    def _first_frame(self) -> None:
+        self.built_at_first_frame = [name for name, tab in self.tabs.items()
+                                     if tab.is_attached]
+
+
+def test_tabs_not_shown_are_not_built_before_the_first_frame(tui) -> None:
+    async def scenario() -> None:
+        app = FirstFrame("unimate2000b", "sim", None, tui.data_dir,
+                         client_options={"heartbeat_timeout_s": 2.0})
+        async with app.run_test(size=(160, 48)) as pilot:
+            await tui.until(lambda: app.built_at_first_frame is not None, what="a first frame")
+            assert app.built_at_first_frame == ["jog"]
+            await tui.ready(app, pilot)  # live, then every tab built, one at a time
+            tui.post_key(app, "f3")
+            scope = app.tab("scope")
+            await tui.until(lambda: scope.visible_now, what="the Scope tab shown")
+
+    asyncio.run(scenario())
