@@ -21,7 +21,7 @@ from textual.containers import Horizontal, VerticalScroll
 from app.tabs.tab import TabPage
 from app.widgets.header import MODE_NAMES
 from app.widgets.limit_bar import LimitBar
-from app.widgets.live_text import LiveText
+from app.widgets.live_text import LiveLines, LiveText
 from control.rt.layout import Flag, Status
 from hw.machine import Machine
 
@@ -38,12 +38,12 @@ class StatusTab(TabPage):
     LATER = ("#status-lower",)
 
     def compose(self) -> ComposeResult:
-        with VerticalScroll(id="status-scroll"):
-            yield LiveText(id="status-joints")
+        with VerticalScroll(id="status-scroll"):  # a few lines change a tick: drawn alone
+            yield LiveLines(id="status-joints")
             with Horizontal(id="status-lower"):
-                yield LiveText(id="status-pose")
-                yield LiveText(id="status-loop")
-                yield LiveText(id="status-link")
+                yield LiveLines(id="status-pose")
+                yield LiveLines(id="status-loop")
+                yield LiveLines(id="status-link")
 
     def on_mount(self) -> None:
         self.query_one("#status-joints").styles.height = self.machine.n_joints + 2

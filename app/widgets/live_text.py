@@ -16,6 +16,8 @@ from rich.console import Group, RenderableType
 from rich.segment import Segment, Segments
 from rich.table import Table
 from rich.text import Text
+from textual.geometry import Region
+from textual.strip import Strip
 from textual.widget import Widget
 
 from app.widgets.limit_bar import LimitBar
@@ -82,6 +84,59 @@ def _segments(lines: list[list[Segment]]) -> Segments:
             out.append(Segment.line())
         out.extend(line)
     return Segments(out)
+
+
+class LiveLines(LiveText):
+    """A ``LiveText`` of many lines of which a few change each time (Status' blocks): a
+    ``Text`` shown is compared line by line, and only the lines that changed are drawn again
+    (each one line, cut at the widget's width; other renderables are drawn whole)."""
+
+    def __init__(self, renderable: RenderableType = "", *, id: str | None = None,
+                 classes: str | None = None) -> None:
+        super().__init__(renderable, id=id, classes=classes)
+        self._rows: list[Text] | None = None  # the Text shown, line by line
+        self._strips: list[Strip | None] = []  # each line drawn, None until it is again
+
+    def show(self, renderable: RenderableType) -> None:
+        if not isinstance(renderable, Text):
+            self._rows = None
+            super().show(renderable)
+            return
+        self._renderable = renderable
+        rows = renderable.split("\n", allow_blank=True)
+        before = self._rows
+        self._rows, self._key, self._lines = rows, None, None
+        if before is None or len(before) != len(rows):
+            self._strips = [None] * len(rows)
+            self.repaints += 1
+            self.refresh()
+            return
+        changed = [y for y, (old, new) in enumerate(zip(before, rows, strict=True))
+                   if fingerprint(old) != fingerprint(new)]
+        for y in changed:
+            self._strips[y] = None
+        if changed:
+            self.repaints += 1
+            width = self.size.width
+            self.refresh(*(Region(0, y, width, 1) for y in changed))
+
+    def on_resize(self) -> None:
+        self._strips = [None] * len(self._strips)
+        super().on_resize()
+
+    def render_line(self, y: int) -> Strip:
+        if self._rows is None:
+            return super().render_line(y)
+        width = self.size.width
+        if y >= len(self._rows):
+            return Strip.blank(width, self.rich_style)
+        strip = self._strips[y]
+        if strip is None or strip.cell_length != width:
+            line = self._rows[y]
+            strip = (Strip(list(line.render(self.app.console)))
+                     .crop(0, width).adjust_cell_length(width).apply_style(self.rich_style))
+            self._strips[y] = strip
+        return strip
 
 
 def fingerprint(renderable: RenderableType) -> Hashable | None:
