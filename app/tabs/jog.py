@@ -518,6 +518,8 @@ class JogTab(TabPage):
     # ends are not in the event log yet, with what each was started with
     _zone_asked: tuple[object, ...] = ()  # the last joints, frame and speed the zone was found for
     _zone_said: tuple[str, ...] = ()  # and what was said of it
+    _pose_at: tuple[float, ...] = ()  # the joints the tool's pose was last found for
+    _pose_was: tuple[float, ...] = ()  # and that pose
 
     def compose(self) -> ComposeResult:
         speed = self.machine.cartesian_jog_speed if self.model is not None else None
@@ -735,7 +737,10 @@ class JogTab(TabPage):
                         "kinematics)", "dim")
         if status is None:
             return Text("tool pose  –", "dim")
-        x, y, z, g, b, a = self.model.pose(status.position)
+        at = tuple(status.position)
+        if at != self._pose_at:  # at rest: the same pose, ten times a second
+            self._pose_at, self._pose_was = at, tuple(self.model.pose(status.position))
+        x, y, z, g, b, a = self._pose_was
         if self.size.width < NARROW:  # every number whole at 80 columns
             position = f"x {x:.1f}  y {y:.1f}  z {z:.1f} mm  "
             angles = f"γ {g:.2f}°  β {b:.2f}°  α {a:.2f}°"
