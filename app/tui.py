@@ -22,7 +22,7 @@ from typing import ClassVar
 from textual.app import App, ComposeResult
 from textual.binding import Binding
 from textual.screen import ModalScreen
-from textual.widgets import TabbedContent, TabPane
+from textual.widgets import Select, TabbedContent, TabPane
 
 from app.desk import Desk
 from app.event_log import LogEntry, entries_of
@@ -128,7 +128,8 @@ class ServodeskApp(App[None]):
                 "(Positions tab)"),
         *[Binding(f"f{i + 1}", f"show_tab('{name}')", f"{cls.TITLE} tab", show=False,
                   priority=True) for i, (name, cls) in enumerate(TABS)],
-        Binding("ctrl+k", "take_command", "take command", priority=True,
+        # not priority: in a text field ^K is the field's (delete to the end), not a command
+        Binding("ctrl+k", "take_command", "take command",
                 tooltip="command the controller servodesk controller runs (the others observe)"),
         Binding("ctrl+o", "release_command", "release command", priority=True,
                 tooltip="the controller holds; another client may take command"),
@@ -583,6 +584,8 @@ class ServodeskApp(App[None]):
         self._estop_tabs(latched=True)
         while isinstance(self.screen, ModalScreen):
             self.pop_screen()
+        for select in self.screen.query(Select).results(Select):
+            select.expanded = False  # the Esc that latched would have closed an open list
 
     def _estop_tabs(self, latched: bool) -> None:
         for tab in self.built_tabs():
