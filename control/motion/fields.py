@@ -80,6 +80,9 @@ class NumberRule:
         too_high = high is not None and value > high
         if not (too_low or too_high):
             return
+        if low is not None and high is not None and self.strict_low:  # low itself is out too
+            raise FieldError(f"{self.what} {value:g}{u} is out of range: it must be more than "
+                             f"{low:g}{u} and at most {high:g}{u}{ctx}")
         if low is not None and high is not None:
             rng = f"{low:g}…{high:g}{u}"
             raise FieldError(f"{self.what} {value:g}{u} is outside {rng}{ctx}; enter a value in "
