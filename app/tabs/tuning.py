@@ -38,6 +38,7 @@ from app.coefficient_files import (
     save_coefficients,
 )
 from app.desk import Desk
+from app.refusal_text import in_tui_words
 from app.tabs.tab import TabPage
 from app.widgets.dialogs import ConfirmScreen, EditValueScreen, ReviewScreen
 from control.client import ControlClient, ControllerError
@@ -211,6 +212,15 @@ class TuningTab(TabPage):
         event.stop()
         self.which = "hold" if event.pressed.id == "which-hold" else "track"
         self._fill()
+        self._preset_of_set()
+
+    def _preset_of_set(self) -> None:
+        """The preset list on the set chosen: its preset by name, else the machine's own (the
+        list said "track" with the hold set chosen)."""
+        name = self.current.name
+        name = name if name in self.presets else self.which
+        if name in self.presets:
+            self.query_one("#tuning-preset", Select).value = name
 
     def on_button_pressed(self, event: Button.Pressed) -> None:
         event.stop()
@@ -254,9 +264,10 @@ class TuningTab(TabPage):
                 applied.append(before)
         except (ControllerError, ValueError, OSError) as exc:
             self.undo_stack.extend(applied)  # only a dying controller stops after the first
-            self.desk.log_refusal(f"apply {what}", str(exc))
-            self._outcome(Text.assemble((f"{what}: ", "bold"), (str(exc), "bold red")))
-            self.notify(f"apply {what}: {exc}", severity="error", timeout=10)
+            reason = in_tui_words(exc)
+            self.desk.log_refusal(f"apply {what}", reason)
+            self._outcome(Text.assemble((f"{what}: ", "bold"), (reason, "bold red")))
+            self.notify(f"apply {what}: {reason}", severity="error", timeout=10)
             self._fill()
             return False
         self.undo_stack.extend(applied)
@@ -300,8 +311,8 @@ class TuningTab(TabPage):
             client.set_coefficients(last.which, last.before, override=override)
         except (ControllerError, ValueError, OSError) as exc:
             self.undo_stack.append(last)
-            self._outcome(Text.assemble(("undo: ", "bold"), (str(exc), "bold red")))
-            self.notify(f"undo: {exc}", severity="error", timeout=10)
+            self._outcome(Text.assemble(("undo: ", "bold"), (in_tui_words(exc), "bold red")))
+            self.notify(f"undo: {in_tui_words(exc)}", severity="error", timeout=10)
             return
         self._outcome(Text(f"undone: {last.what}; the {last.which} set is "
                            f"{last.before.name!r} again", "yellow"))

@@ -58,7 +58,13 @@ MS_ROUNDING = 1e-6  # a design at exactly the bound passes
 
 
 class GainError(ValueError):
-    """A coefficient set the gain check refuses; the message names each joint and why."""
+    """A coefficient set the gain check refuses; the message names each joint and why (and
+    the API's ways out); ``problems``, each joint's ``"Joint: what is wrong"``, let a caller
+    such as the TUI word its own advice."""
+
+    def __init__(self, message: str, problems: Sequence[str] = ()) -> None:
+        super().__init__(message)
+        self.problems = tuple(problems)
 
 
 @dataclass(frozen=True)
@@ -147,7 +153,8 @@ def check(coefficients: Coefficients, machine: Machine,
             f"coefficient set {coefficients.name!r} refused, nothing applied: "
             f"{'; '.join(result.problems)}. Lower the gains (or fix their sign), check the "
             "set on the joint's identified model (Identify tab; set_coefficients(..., "
-            "models=...)), or override with a reason (set_coefficients(..., override=...))")
+            "models=...)), or override with a reason (set_coefficients(..., override=...))",
+            result.problems)
     return result
 
 
