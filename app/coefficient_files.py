@@ -3,8 +3,8 @@
 A coefficient file holds only ``[coefficients.NAME]`` tables, exactly as in a
 machine description (``docs/machines.md``), so a set tuned in the TUI can be
 pasted into a machine file and a machine file's sets can be loaded here. It is
-read with the machine loader's own reader, so every error names the file and
-the key, and checked against the shared-memory layout (at most ``MAX_TAPS``
+read with the machine loader's own reader, so every error names the file, the
+line and the key, and checked against the shared-memory layout (at most ``MAX_TAPS``
 taps).
 """
 
@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import tempfile
 from collections.abc import Mapping
 from pathlib import Path
@@ -27,6 +28,10 @@ from hw.machine import (
 )
 
 SUFFIX = ".toml"
+# the machine loader's "FILE: coefficients.SET[.KEY]: what", to name the line it is on
+_AT_KEY = re.compile(r"coefficients\.(?P<set>[\w-]+)(?:\.(?P<key>[\w-]+)(?:\[\d+\])*)?: "
+                     r"(?P<what>.*)", re.S)
+_UNKNOWN = re.compile(r"unknown key\(s\) (?P<key>[\w-]+)")
 
 
 class CoefficientFileError(ValueError):
@@ -38,9 +43,42 @@ def parse_coefficients(text: str, machine: Machine, filename: str = "<text>"
     """Every ``[coefficients.NAME]`` set in ``text`` for ``machine``'s joints, in file order."""
     try:
         doc = parse_toml(text, filename)
-        return dict(parse_coefficient_tables(doc, filename, machine.n_joints))
     except MachineError as exc:
         raise CoefficientFileError(str(exc)) from None
+    try:
+        return dict(parse_coefficient_tables(doc, filename, machine.n_joints))
+    except MachineError as exc:
+        raise CoefficientFileError(_with_line(str(exc), text, filename)) from None
+
+
+def _with_line(message: str, text: str, filename: str) -> str:
+    """The loader's message naming a set's key, with the line that key is on, as tomllib
+    says it ("FILE: coefficients.hold.ki: … (at line 12)"); as it was when the key is not
+    found on a line of its own."""
+    found = _AT_KEY.match(message.removeprefix(f"{filename}: "))
+    if found is None:
+        return message
+    unknown = _UNKNOWN.match(found["what"])
+    key = found["key"] or (unknown["key"] if unknown else None)
+    line = _line_of(text, found["set"], key)
+    return message if line is None else f"{message} (at line {line})"
+
+
+def _line_of(text: str, name: str, key: str | None) -> int | None:
+    """The line of ``key`` in the ``[coefficients.NAME]`` table (of the table, without a key)."""
+    header = re.compile(rf"^\s*\[\s*coefficients\s*\.\s*\"?{re.escape(name)}\"?\s*\]")
+    at_key = re.compile(rf"^\s*\"?{re.escape(key or '')}\"?\s*=")
+    inside = None
+    for n, line in enumerate(text.splitlines(), 1):
+        if header.match(line):
+            if key is None:
+                return n
+            inside = n
+        elif inside is not None and line.lstrip().startswith("["):
+            inside = None
+        elif inside is not None and at_key.match(line):
+            return n
+    return None
 
 
 def load_coefficients(path: str | Path, machine: Machine) -> dict[str, Coefficients]:

@@ -39,7 +39,7 @@ MAX_POSITIONS = 1000  # taught positions a file may hold
 DECIMALS = 3  # a reading is taught to 0.001 mm or degree, finer than any encoder's count
 SUFFIX = ".toml"
 _HEADER = re.compile(r"^\s*\[\[\s*position\s*\]\]")  # an entry of the file
-_TABLE = re.compile(r"^\s*\[\[?\s*[\w.\"' -]+\s*\]\]?\s*(#.*)?$")  # any table header
+_TABLE = re.compile(r"^\s*\[\[?\s*([\w.\"' -]+)\s*\]\]?\s*(#.*)?$")  # any table header
 _KEY = re.compile(r"^\s*([\w-]+|\"[^\"]*\")\s*=")
 _TOML_AT = re.compile(r"\s*\(at line (\d+), column (\d+)\)")
 
@@ -290,7 +290,8 @@ class _Lines:
             if _HEADER.match(line):
                 self.entries.append({"": n})
                 section = self.entries[-1]
-            elif _TABLE.match(line):
+            elif table := _TABLE.match(line):  # a table of its own: its name's line is this
+                self.top.setdefault(table.group(1).strip('"\' ').split(".")[0].strip(), n)
                 section = None
             elif section is not None and (key := _KEY.match(line)):
                 section.setdefault(key.group(1).strip('"'), n)
