@@ -308,6 +308,9 @@ class MovesTab(TabPage):
         if plan.kind == "initialise":
             if self.command("initialise", ControlClient.initialise):
                 self.initialising = True
+                self._result_table([])  # a step's columns say nothing of an initialise
+                # no steps to count: the bar pulses until the controller says it is done
+                self.query_one("#move-progress", ProgressBar).update(total=None, progress=0)
                 self._state(Text("initialising: driving down to the bottom stop…", "cyan"))
             return
         try:
@@ -358,6 +361,8 @@ class MovesTab(TabPage):
 
     def initialised(self, status: str) -> None:
         self.initialising = False
+        done = 100 if "complete" in status else 0
+        self.query_one("#move-progress", ProgressBar).update(total=100, progress=done)
         self._state(Text(f"initialise: {status}", "green" if "complete" in status else "yellow"))
 
     def _result_table(self, summaries: list[tuple[str, Summary]],
@@ -366,6 +371,7 @@ class MovesTab(TabPage):
         table = self.query_one("#move-result", DataTable)
         table.clear(columns=True)
         table.add_columns(*summary_columns(summaries), SETTLE_COLUMNS[1])
+        table.show_header = bool(summaries)  # no move's columns over no rows
         for label, s in summaries:
             table.add_row(*summary_cells(label, s),
                           settle_cell(label, settle or {}, self.machine))
