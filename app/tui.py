@@ -176,7 +176,7 @@ class ServodeskApp(App[None]):
         self._active: TabPage | None = None
         self._settled: set[str] = set()
         self.tabs: dict[str, TabPage] = {}  # made in compose
-        self._building: set[str] = set()  # tabs being mounted for the first time
+        self._building: dict[str, asyncio.Event] = {}  # tabs being mounted: set once mounted
         self._wanted = FIRST_TAB  # the tab last chosen (shown once it is built)
         self._rest_started = False  # the tabs not shown are being built (once live)
         self._positions: tuple[Position, ...] | None = None  # as the Positions tab last read
@@ -268,12 +268,15 @@ class ServodeskApp(App[None]):
         """Mount tab ``name`` in its pane (hidden until chosen) and tell it what the others
         were told while it was not built: the client, its death, a latched E-stop."""
         tab = self.tab(name)
-        if not tab.is_attached and name not in self._building:
-            self._building.add(name)
+        if name in self._building:  # chosen while the background mounts it: once it is
+            await self._building[name].wait()
+        elif not tab.is_attached:
+            done = self._building[name] = asyncio.Event()
             try:
                 await self.query_one(f"#pane-{name}", TabPane).mount(tab)
             finally:
-                self._building.discard(name)
+                del self._building[name]
+                done.set()
             if self.client is not None:
                 tab.client_ready(self.client)
             if self.client_problem:
@@ -548,7 +551,7 @@ class ServodeskApp(App[None]):
         if self._active is not None:
             self._active.hidden()
             self._active = None
-        if not tab.is_attached:  # first shown: built now, shown once mounted
+        if not tab.is_attached or name in self._building:  # first shown: once mounted
             self.call_next(self._build_and_show, name)
             return
         self._active = tab

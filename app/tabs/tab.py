@@ -77,6 +77,8 @@ class TabPage(Staged, Container):
         if self.REFRESH_HZ > 0:
             self._timer = self.set_interval(1.0 / self.REFRESH_HZ, self.refresh_live, pause=True)
         self.hide_later()
+        if self.visible_now:  # shown before it was mounted: its showing revealed nothing
+            self.reveal_later()
 
     def shown(self) -> None:
         """The tab became the visible one."""

@@ -124,3 +124,29 @@ def test_tabs_not_shown_are_not_built_before_the_first_frame(tui) -> None:
             await tui.until(lambda: scope.visible_now, what="the Scope tab shown")
 
     asyncio.run(scenario())
+
+
+def test_a_tab_chosen_while_it_is_being_built_shows_whole(tui) -> None:
+    """The background's build of the Moves tab under way (mounting) when F2 chooses it: the
+    tab is shown once it is mounted, with its staged parts (the forms, the preview). It was
+    shown at once, before its mount hid those parts, so nothing revealed them: in tmux the
+    Moves tab stayed a bare menu for good when F2 came right after the screen went live."""
+
+    async def scenario() -> None:
+        app = FirstFrame("rig", "sim", None, tui.data_dir,
+                         client_options={"heartbeat_timeout_s": 2.0})
+        async with app.run_test(size=(160, 48)) as pilot:
+            await tui.until(lambda: app.built_at_first_frame is not None, what="a first frame")
+            moves = app.tab("moves")
+            assert not moves.is_attached
+            building = asyncio.create_task(app._build("moves"))  # as the background does
+            await tui.until(lambda: moves.is_attached, what="Moves being mounted")
+            app._activate("moves")  # F2 meanwhile
+            await building
+            parts = [moves.query_one(s) for s in type(moves).LATER]
+            await tui.until(lambda: moves.visible_now
+                            and all(p.styles.visibility == "visible" for p in parts),
+                            what=lambda: f"Moves' parts: {[p.styles.visibility for p in parts]}")
+            await pilot.pause()
+
+    asyncio.run(scenario())
