@@ -17,6 +17,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+from textual.errors import NoWidget
 from textual.geometry import Region
 from textual.widget import Widget
 from textual.widgets import DataTable, OptionList
@@ -68,6 +69,16 @@ def a_saved_run(data_dir: Path) -> None:
     actual[:, 2] = np.where(t >= 0.1, 5.0 * (1 - np.exp(-(t - 0.1) / 0.1)), 0.0)
     save_run(Run.from_machine(machine, "step", "complete", {}, t, desired, actual,
                               np.zeros_like(desired)), data_dir)
+
+
+async def in_view(widget: Widget, pilot) -> Region:
+    """``on_screen``, scrolled into view first if it is not whole on the screen already."""
+    try:
+        return on_screen(widget)
+    except (AssertionError, NoWidget):
+        widget.scroll_visible(animate=False, immediate=True)
+        await pilot.pause()
+        return on_screen(widget)
 
 
 def on_screen(widget: Widget) -> Region:
@@ -185,9 +196,7 @@ def pose_shown(tui, app: ServodeskApp) -> None:
 async def scope_plots_tall(app: ServodeskApp, pilot) -> None:
     """Every joint's Scope plots with rows to read (at 80×24 six joints shared 17 rows)."""
     for plot in app.tab("scope").query(ScopePlot):
-        plot.scroll_visible(animate=False, immediate=True)
-        await pilot.pause()
-        region = on_screen(plot)
+        region = await in_view(plot, pilot)
         rows = next(n for cls, n in PLOT_ROWS.items() if plot.has_class(cls))
         assert region.height >= rows + 2, f"{plot.parent.id} {plot.classes}: {region}"
 
@@ -227,10 +236,7 @@ async def every_tab(tui, app: ServodeskApp, pilot) -> None:
             runs.draw()
         await pilot.pause()
         for selector in ESSENTIAL[name]:
-            widget = tab.query_one(selector)
-            widget.scroll_visible(animate=False, immediate=True)
-            await pilot.pause()
-            on_screen(widget)
+            await in_view(tab.query_one(selector), pilot)
         if name == "jog":
             await joints_whole(tui, app, "#jog-table")
             pose = tui.text(app.query_one("#jog-pose", LiveText))
