@@ -96,14 +96,18 @@ class Terminal:
                                 f"shows:\n{self.screen()}")
 
 
-def launch(socket: str, session: str, tmp_path: Path) -> Terminal:
-    """``python -m app`` in a new detached tmux session of WIDTH × HEIGHT, saving under
-    ``tmp_path/data``; remain-on-exit keeps the last screen for a failure message if the app
-    exits early."""
+def launch(socket: str, session: str, tmp_path: Path, *options: str) -> Terminal:
+    """``python -m app`` (with ``options``) in a new detached tmux session of WIDTH ×
+    HEIGHT, saving under ``tmp_path/data``; remain-on-exit keeps the last screen for a
+    failure message if the app exits early."""
     status = tmp_path / "exit-status"
-    command = (f"cd {shlex.quote(str(REPO))} && PYTHONPATH={shlex.quote(str(REPO))} "
+    # pytest's COLUMNS=80 LINES=24 would reach the app through the tmux server, and Textual
+    # takes them over the pane's size: the app gets the pane's
+    command = (f"cd {shlex.quote(str(REPO))} && env -u COLUMNS -u LINES "
+               f"PYTHONPATH={shlex.quote(str(REPO))} "
                f"{shlex.quote(sys.executable)} -m app --data-dir "
-               f"{shlex.quote(str(tmp_path / 'data'))}; echo $? > {shlex.quote(str(status))}")
+               f"{shlex.quote(str(tmp_path / 'data'))} {shlex.join(options)}; "
+               f"echo $? > {shlex.quote(str(status))}")
     tmux(socket, "start-server", ";", "set-option", "-g", "remain-on-exit", "on", ";",
          "new-session", "-d", "-s", session, "-x", str(WIDTH), "-y", str(HEIGHT), command)
     return Terminal(socket, session, status)

@@ -1,7 +1,8 @@
 """Typing fast in a real terminal never leaves a wrong value (issue 26 item 1).
 
-``python -m app`` in tmux (terminal.py); on the Moves tab every numeric field of the Unimate
-2000B's forms is typed into in turn, 200 times in all, as an operator types fast
+``python -m app`` in tmux (terminal.py): every numeric field of each machine's Moves forms
+(the Unimate 2000B's and the rig's, each in its own app) and of the Unimate's Identify and
+Positions tabs is typed into in turn, 200 times in all, as an operator types fast
 (typist.py): 10 backspaces then a number, a key every 5 ms, each a ``tmux send-keys`` through
 the terminal and Textual's input parser. The field must then show that number. Each try
 waits for it; a wrong value never comes right, and the wait fails showing the screen. A
@@ -16,16 +17,19 @@ from __future__ import annotations
 
 import os
 from collections.abc import Iterator
+from contextlib import contextmanager
 from functools import partial
 from pathlib import Path
 
 import pytest
 
-from tests.app.terminal import HEIGHT, START_S, TMUX, WIDTH, Terminal, kill_server, launch
+from tests.app.terminal import START_S, TMUX, Terminal, kill_server, launch
 from tests.app.typist import (
     CLEAR,
     FORMS,
     IN_OUT,
+    RIG_FORMS,
+    TAB_FIELDS,
     Field,
     Typist,
     find_field,
@@ -43,14 +47,14 @@ pytestmark = pytest.mark.skipif(
                          "(apt-get install tmux; .ci/run installs it)")
 
 
-@pytest.fixture
-def term(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Terminal]:
-    """The app in tmux, live; E-stopped and quit after the test."""
-    # Under pytest the process environment (not os.environ) carries COLUMNS=80 LINES=24, the
-    # tmux server hands them to the app, and Textual takes them over the pane's size
-    monkeypatch.setenv("COLUMNS", str(WIDTH))
-    monkeypatch.setenv("LINES", str(HEIGHT))
-    term = launch(SOCKET, "typing", tmp_path)
+# the 200 tries shared by the two machines' apps in proportion to their fields
+TRIES_OF = {"unimate2000b": 130, "rig": TRIES - 130}
+
+
+@contextmanager
+def app_in_tmux(tmp_path: Path, machine: str) -> Iterator[Terminal]:
+    """The machine's app in tmux, live; E-stopped and quit after."""
+    term = launch(SOCKET, "typing", tmp_path, "--machine", machine)
     try:
         term.wait(lambda s: " RUN" in s and "mode HOLD" in s, "a live screen", START_S)
         yield term
@@ -61,19 +65,35 @@ def term(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Terminal]:
         kill_server(SOCKET)
 
 
-def test_fast_typing_leaves_the_value_typed_in_every_field(term: Terminal) -> None:
-    typist = Typist(term, GAP_S)
-    typist.open_moves()
-    fields = [(form, help_starts, field) for form, help_starts, spec in FORMS
-              for field in spec]
-    for i, (form, help_starts, (label, unit, (low, high))) in enumerate(fields):
-        typist.open_form(form, help_starts)
-        field = typist.focus(label, unit)
-        for k in range(i, TRIES, len(fields)):  # the field's tries one after another
-            value = number(k, low, high)
-            typist.type(value)
-            term.wait(lambda s, f=field, v=value: shown_text(s, f) == v,
-                      f"{value} typed in the {form} form's {label} field (try {k + 1})")
+@pytest.fixture
+def term(tmp_path: Path) -> Iterator[Terminal]:
+    with app_in_tmux(tmp_path, "unimate2000b") as term:
+        yield term
+
+
+@pytest.mark.parametrize("machine", list(TRIES_OF))
+def test_fast_typing_leaves_the_value_typed_in_every_field(
+        tmp_path: Path, machine: str) -> None:
+    """Every numeric field of the machine's Moves forms, then of its other tabs."""
+    unimate = machine == "unimate2000b"
+    fields = [(form, help_starts, field) for form, help_starts, spec
+              in (FORMS if unimate else RIG_FORMS) for field in spec]
+    fields += [(key, None, field) for key, spec in (TAB_FIELDS if unimate else ())
+               for field in spec]
+    with app_in_tmux(tmp_path, machine) as term:
+        typist = Typist(term, GAP_S)
+        typist.open_moves()
+        for i, (where, help_starts, (label, unit, (low, high))) in enumerate(fields):
+            if help_starts is None:
+                typist.open_tab(where, label, unit)
+            else:
+                typist.open_form(where, help_starts)
+            field = typist.focus(label, unit)
+            for k in range(i, TRIES_OF[machine], len(fields)):  # one field's tries in a row
+                value = number(k, low, high)
+                typist.type(value)
+                term.wait(lambda s, f=field, v=value: shown_text(s, f) == v,
+                          f"{value} typed in {where}'s {label} field (try {k + 1})")
 
 
 def test_keys_typed_after_tab_go_to_the_next_field(term: Terminal) -> None:

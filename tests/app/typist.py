@@ -43,7 +43,28 @@ FORMS: tuple[tuple[str, str, tuple[tuple[str, str, tuple[float, float]], ...]], 
       ("γ", "°", ANGLE), ("β", "°", ANGLE), ("α", "°", ANGLE), ("ramp time", "s", SECONDS))),
     ("Via points", "A smooth path from here", (("speed fraction", "", (0.05, 1.0)),)),
 )
-LABEL_WIDTH = 24  # a field's label, then its box (fields.tcss)
+# The rig's Moves forms, as FORMS (its one joint, the Ram; whole numbers for a count).
+RAM = (100.0, 1100.0)
+RIG_FORMS: tuple[tuple[str, str, tuple[tuple[str, str, tuple[float, float]], ...]], ...] = (
+    ("Step", "One joint steps",
+     (("start", "mm", RAM), ("target", "mm", RAM), ("duration", "s", SECONDS))),
+    ("Multi-step", "Step to each position",
+     (("steps", "", (1, 10)), ("1. position", "mm", RAM), ("dwell", "s", SECONDS))),
+    ("Ramp", "From a start to an end",
+     (("start", "mm", RAM), ("end", "mm", RAM), ("ramp time", "s", SECONDS),
+      ("total", "s", (61.0, 120.0)))),
+    ("Sine", "start + (end",
+     (("start", "mm", RAM), ("end", "mm", RAM), ("period T", "s", SECONDS),
+      ("duration", "s", SECONDS))),
+    ("Set pulse", "Open loop",
+     (("duty", "%", (5.0, 100.0)), ("duration", "s", SECONDS))),
+)
+# The numeric fields of the Unimate's other tabs: the tab's key, and its fields as above.
+TAB_FIELDS: tuple[tuple[str, tuple[tuple[str, str, tuple[float, float]], ...]], ...] = (
+    ("F8", (("amplitude", "%", (1.0, 100.0)), ("duration", "s", SECONDS))),
+    ("F9", (("speed fraction", "", (0.05, 1.0)),)),
+)
+CLICK_INTO = 8  # a value typed here has at most this many characters (with the probe)
 MENU_WIDTH = 24  # the Moves menu's column: a form's name left of it is the menu's
 CLICK_S = 5.0  # a click's probe on the screen: well under a second unloaded; else click again
 PROBE = "0"  # typed after a click, slowly: the field that shows it has the focus
@@ -52,7 +73,9 @@ CLEAR = 10  # backspaces before each number: more than any number typed here has
 
 @dataclass(frozen=True)
 class Field:
-    """Where a field's input box starts on the screen (0-based cells)."""
+    """Where to click a field's box on the screen (0-based cells): just past a value of up to
+    ``CLICK_INTO`` characters (the cursor then at its end), inside a longer placeholder (an
+    empty field's cursor is at its end wherever clicked), or in an empty box."""
 
     label: str
     unit: str
@@ -73,7 +96,10 @@ def find_field(screen: str, label: str, unit: str) -> Field | None:
     for row, line in enumerate(screen.splitlines()):
         match = pattern.search(line)
         if match:
-            return Field(label, unit, row, match.start() + LABEL_WIDTH)
+            text = match.group("text") or ""
+            if not text:  # an empty box ends where its unit begins
+                return Field(label, unit, row, match.end() - len(unit) - 2)
+            return Field(label, unit, row, match.start("text") + min(len(text), CLICK_INTO))
     return None
 
 
@@ -93,7 +119,12 @@ class Typist:
 
     def open_moves(self) -> None:
         self.term.keys("F2")
-        self.term.wait(lambda s: "One joint steps to a target" in s, "the Moves tab")
+        self.term.wait(lambda s: " Via points " in s, "the Moves tab's menu")
+
+    def open_tab(self, key: str, label: str, unit: str) -> None:
+        """Press the tab's key and wait for one of its fields."""
+        self.term.keys(key)
+        self.term.wait(lambda s: find_field(s, label, unit) is not None, f"{label} on {key}")
 
     def open_form(self, label: str, help_starts: str) -> None:
         """Click the form's entry in the Moves menu (the left column) and wait for it. A
@@ -120,8 +151,7 @@ class Typist:
             field = find_field(screen, label, unit)
             assert field is not None
             before = shown_text(screen, field)
-            self.click(field.row, field.column + 14)
-            self._send("End")
+            self.click(field.row, field.column)
             self._send(PROBE)
             try:
                 self.term.wait(partial(self.probed, field, before), f"{PROBE} in {label}",
@@ -163,7 +193,10 @@ class Typist:
 
 def number(k: int, low: float, high: float) -> str:
     """The ``k``-th number typed into a field of range ``low``…``high``: a different one
-    each time, with one, two or no decimals, as an operator types them."""
+    each time, with one, two or no decimals, as an operator types them (whole numbers for
+    whole bounds, a count)."""
     value = low + (high - low) * ((k * 0.618034) % 1.0)
+    if isinstance(low, int) and isinstance(high, int):
+        return str(round(value))
     decimals = 2 if high - low < 5 else k % 3 % 2
     return f"{value:.{decimals}f}"
