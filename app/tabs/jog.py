@@ -45,8 +45,10 @@ controller.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import ClassVar
 
@@ -64,7 +66,7 @@ from app.event_log import LogEntry
 from app.tabs.tab import TabPage
 from app.widgets.limit_bar import LimitBar
 from app.widgets.live_text import LiveText
-from control.client import ControlClient, MoveHandle
+from control.client import ControlClient, ControllerError, MoveHandle
 from control.motion.cartesian_jog import AXES, Step, StepQueue, zone
 from control.rt.layout import Mode, Status
 from control.servo import CartesianServo, ServoReport
@@ -511,6 +513,8 @@ class JogTab(TabPage):
     cartesian_note = Text("")  # why the last Cartesian jog was refused or ends early
     zone_note = ""  # the singularity zone's warning in full, when the arm is near one
     _jog: MoveHandle | None = None  # the last Cartesian jog sent
+    _sending: tuple[JogPad.CartesianJogged, ...] | None = None  # while a step is being sent
+    # (it waits for a move in progress, in a worker), the steps pressed meanwhile
     _steps: StepQueue | None = None  # steps pressed while it ran (made with the client)
     _refused = 0  # queued steps refused since the queue began: the reason is told once
     _servo: CartesianServo | None = None  # the held Cartesian jog, while it runs or brakes
@@ -577,6 +581,9 @@ class JogTab(TabPage):
     def on_jog_pad_cartesian_jogged(self, message: JogPad.CartesianJogged) -> None:
         if not self.visible_now or self.pad.latched:
             return
+        if self._sending is not None:  # queued once the step being sent has its path
+            self._sending += (message,)
+            return
         running = self._jog is not None and not self._jog.done.is_set()
         if running or (self._steps is not None and self._steps.steps):
             self._queue(message)  # a new move now would start from rest while the arm moves
@@ -633,7 +640,7 @@ class JogTab(TabPage):
         if not self.visible_now or self.pad.latched:
             return
         self._release_servo("another key")
-        if self._jog is not None and not self._jog.done.is_set():
+        if self._sending is not None or (self._jog is not None and not self._jog.done.is_set()):
             self.cartesian_note = Text.assemble(("hold-to-move waits: ", "bold yellow"),
                                                 "a step is running; press again when it ends")
             return
@@ -678,20 +685,46 @@ class JogTab(TabPage):
             self.notify(f"Cartesian jog stopped: {report.stopped}", severity="warning")
 
     def _send_jog(self, message: JogPad.CartesianJogged) -> None:
+        """Send the step from a worker: it waits for a move in progress (another tab's, the
+        API's) to end and settle, seconds in which the keys must still work."""
         self.cartesian_note = Text("")
-        self.command("Cartesian jog", lambda client: self._jog_tool(client, message))
+        client = self.client
+        if client is None:
+            self.command("Cartesian jog", lambda client: None)  # says why it cannot
+            return
+        self._sending = ()
+        self.run_worker(lambda: self._jog_tool(client, message), thread=True,
+                        group="cartesian-step")
 
     def _jog_tool(self, client: ControlClient, message: JogPad.CartesianJogged) -> None:
-        """Send the jog; a jog the arm cannot make (or a held one that ends early) says why
-        under the pad and in a notification (its message names the jog: no prefix)."""
+        """The worker: send the jog, and hand its handle or why it was refused to the tab."""
         try:
             handle = client.jog_cartesian(message.displacement, message.frame, message.speed)
-        except ValueError as exc:
-            self.cartesian_note = Text.assemble(("jog refused: ", "bold yellow"), str(exc))
-            self.notify(str(exc), severity="error")
-            self._forget_steps()  # they were to follow it
-            return
+        except (ValueError, ControllerError, OSError) as exc:
+            self._from_worker(self._step_refused, exc)
+        else:
+            self._from_worker(self._step_sent, handle)
+
+    def _from_worker(self, call: Callable[[object], None], arg: object) -> None:
+        with contextlib.suppress(RuntimeError):  # the app closed while the step waited
+            self.app.call_from_thread(call, arg)
+
+    def _step_sent(self, handle: MoveHandle) -> None:
         self._jog = handle
+        pressed, self._sending = self._sending or (), None
+        for message in pressed:
+            self._queue(message)
+        self.refresh_live()
+
+    def _step_refused(self, exc: Exception) -> None:
+        """A jog the arm cannot make says why under the pad and in a notification (its
+        message names the jog: no prefix); the steps pressed to follow it are dropped."""
+        self._sending = None
+        text = str(exc) if isinstance(exc, ValueError) else f"Cartesian jog: {exc}"
+        self.cartesian_note = Text.assemble(("jog refused: ", "bold yellow"), text)
+        self.notify(text, severity="error")
+        self._forget_steps()
+        self.refresh_live()
 
     def on_jog_pad_stopped(self, message: JogPad.Stopped) -> None:
         if message.tool:  # the servo brakes along its line; the arm then holds there
@@ -708,7 +741,8 @@ class JogTab(TabPage):
     def refresh_live(self) -> None:
         self._servo_ended()
         steps = self._steps
-        if steps is not None and steps.steps and (self._jog is None or self._jog.done.is_set()):
+        if (steps is not None and steps.steps and self._sending is None
+                and (self._jog is None or self._jog.done.is_set())):
             step = steps.next()
             if step is not None and self.visible_now and not self.pad.latched:
                 self._send_jog(JogPad.CartesianJogged(step.displacement, step.frame, step.speed))

@@ -9,6 +9,7 @@ import re
 import time
 
 import numpy as np
+import pytest
 
 from app.tabs.jog import JogPad, JogTab
 from app.widgets.live_text import LiveText
@@ -256,5 +257,33 @@ def test_the_rig_has_no_cartesian_mode_and_says_so(tui) -> None:
             assert app.query_one(JogPad).frame == "joint"
             assert any("no Cartesian jog on this machine" in m for m in seen), seen
             assert "no tool pose" in app.query_one("#jog-pose", LiveText).text
+
+    asyncio.run(scenario())
+
+
+def test_a_step_pressed_while_another_move_runs_waits_and_the_keys_still_work(tui) -> None:
+    """A Cartesian step waits for a move in progress (here the API's slow go_to) to end and
+    settle, then runs from where it ended; meanwhile the keys work: F3 shows the Scope while
+    the go_to still runs. The step waited in the UI's thread before: F3 came only after."""
+    async def scenario() -> None:
+        app = tui.app(lockstep=False)
+        async with app.run_test(size=SIZE) as pilot:
+            before = await tui.ready(app, pilot)
+            client = app.client
+            target = list(before.desired)
+            target[1] += 20.0  # Rotate, slowly: seconds
+            going = client.go_to(target, speed=0.1)
+            await tui.until(lambda: client.status().moving, timeout=10, what="the go_to")
+            await pilot.press("w", "9", "s")  # world frame, y +20 mm: waits for the go_to
+            await pilot.press("f3")
+            scope = app.tab("scope")
+            await tui.until(lambda: scope.visible_now, timeout=30, what="the Scope shown")
+            assert not going.done.is_set(), "F3 was taken only once the go_to had ended"
+            assert client.wait(going, timeout=60).complete
+            jog = app.tab("jog")
+            await tui.until(lambda: jog._jog is not None and jog._jog.done.is_set(),
+                            timeout=30, what="the step run after the go_to")
+            moved = MODEL.pose(np.array(client.status().desired)) - MODEL.pose(np.array(target))
+            assert moved[1] == pytest.approx(20.0, abs=0.5) and abs(moved[0]) < 0.5, moved
 
     asyncio.run(scenario())
