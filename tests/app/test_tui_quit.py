@@ -13,7 +13,7 @@ SIZE = (160, 48)
 
 def test_quitting_mid_move_asks_and_no_keeps_the_move_running(tui) -> None:
     async def scenario() -> None:
-        app = tui.app()
+        app = tui.app(lockstep=False)  # a lockstep 20 s step ends in a second or two
         async with app.run_test(size=SIZE) as pilot:
             start = await tui.ready(app, pilot)
             client = app.client
