@@ -9,10 +9,7 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from collections.abc import Callable
-
-import pytest
 
 from app.event_log import entries_of
 from control.client import ControlClient, Event
@@ -20,14 +17,11 @@ from control.rt.events import Commander, EStop, MoveDone
 from control.rt.layout import Mode
 from tests.conftest import ROOT
 from tests.control.doomed_client import DOOMED
+from tests.control.waiting import wait_until
 
 
-def until(condition: Callable[[], object], timeout: float = 10.0, what: str = "") -> None:
-    deadline = time.monotonic() + timeout
-    while not condition():
-        if time.monotonic() > deadline:
-            pytest.fail(f"timed out after {timeout:g} s waiting for {what or condition}")
-        time.sleep(0.01)
+def until(condition: Callable[[], object], what: str, timeout: float = 10.0) -> None:
+    wait_until(lambda: bool(condition()), timeout, what)
 
 
 def attached(socket, name: str) -> tuple[ControlClient, list[Event]]:
