@@ -193,16 +193,22 @@ class Browser:
         wait_until(seen, timeout_s, f"{needle!r} in the browser")
         return found[0]
 
+    def _focus_terminal(self) -> None:
+        """Focus xterm's input by script: moving the pointer to it (``send_keys_to_element``)
+        fails, "move target out of bounds", when xterm has put it at a cursor off the page."""
+        terminal = self.driver.find_element(By.CSS_SELECTOR, ".xterm-helper-textarea")
+        self.driver.execute_script("arguments[0].focus();", terminal)
+
     def press(self, *keys: str) -> None:
         """Type ``keys`` (selenium ``Keys`` or text) into the terminal."""
-        terminal = self.driver.find_element(By.CSS_SELECTOR, ".xterm-helper-textarea")
-        ActionChains(self.driver).send_keys_to_element(terminal, *keys).perform()
+        self._focus_terminal()
+        ActionChains(self.driver).send_keys(*keys).perform()
 
     def press_ctrl(self, key: str) -> None:
         """Ctrl and ``key`` together."""
-        terminal = self.driver.find_element(By.CSS_SELECTOR, ".xterm-helper-textarea")
-        (ActionChains(self.driver).send_keys_to_element(terminal).key_down(Keys.CONTROL)
-         .send_keys(key).key_up(Keys.CONTROL).perform())
+        self._focus_terminal()
+        ActionChains(self.driver).key_down(Keys.CONTROL).send_keys(key).key_up(Keys.CONTROL
+                                                                              ).perform()
 
     def close(self) -> None:
         with contextlib.suppress(Exception):
