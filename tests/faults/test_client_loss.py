@@ -32,6 +32,7 @@ from control.rt.layout import ControlLayout, LatencyHistogram, Status
 from control.rt.seqlock import SeqlockReader
 
 PR_SET_CHILD_SUBREAPER = 36
+MISSED_AT_MOST = 100  # ticks around a client's death: a third of what saving 10 s in it cost
 ROOT = Path(__file__).resolve().parents[2]
 
 CLIENT_SCRIPT = textwrap.dedent("""
@@ -253,8 +254,8 @@ def test_a_client_killed_10_s_into_a_20_s_move_costs_the_loop_no_stall(
         tmp_path: Path, until, leftovers, measured) -> None:
     """The case that stalled the loop for a second when the controller saved the run inside
     its tick (a 30 s run: ~900 ticks): the client dies 10 s into a 20 s move. The loop holds
-    and goes on ticking with no stall (no more than a few ticks missed, where saving these
-    10 s inside the tick cost ~300; the latest wake-up around the kill measured: 110 µs on a
+    and goes on ticking with no stall (fewer than ``MISSED_AT_MOST`` ticks missed, where
+    saving these 10 s inside the tick cost ~300; the latest wake-up around the kill: 110 µs on a
     quiet machine, the target is under 2 ms), and after its orphan timeout, its loop ended,
     the controller's saver saves the 10 s run."""
     runs = tmp_path / "runs"
@@ -273,7 +274,8 @@ def test_a_client_killed_10_s_into_a_20_s_move_costs_the_loop_no_stall(
             grew = np.flatnonzero(h1.counts - h0.counts)
             measured("latest_wakeup_around_the_kill_us", (grew[-1] + 1) * h1.bin_us, "µs")
             missed = measured("ticks_missed_around_the_kill", s1.overruns - s0.overruns)
-            assert missed < 20, "the loop stalled when its client died"
+            # a save in the tick missed ~300; a CPU burner beside costs up to 24 (seen)
+            assert missed < MISSED_AT_MOST, "the loop stalled when its client died"
         finally:
             watch.close()
         _, code = os.waitpid(script.controller, 0)
