@@ -46,7 +46,9 @@ class Tui:
         deadline = time.monotonic() + START_S
         while (app.client is None or app.sampler is None or app.sampler.latest is None
                or app.focused is None or app.tab("jog") not in app.focused.ancestors_with_self
-               or len(app.built_tabs()) < len(app.tabs)):  # the others build once it is live
+               or not all(tab.is_mounted for tab in app.tabs.values())):  # the others build
+            # once it is live; a tab attached is not yet mounted, and one mounting may take
+            # the focus from the keys a test presses next
             if app.client_problem:
                 pytest.fail(f"the controller did not start: {app.client_problem}")
             if time.monotonic() > deadline:

@@ -75,9 +75,14 @@ def test_steps_pressed_while_a_step_runs_are_added_and_run_after_it(tui) -> None
             before = await tui.ready(app, pilot)
             client = app.client
             start = MODEL.pose(np.array(before.desired))
-            await pilot.press("w", "9", "s")  # world frame, y +20 mm: about a second
+            pad = app.query_one(JogPad)
+            await pilot.press("w")
+            await tui.until(lambda: pad.frame == "world",
+                            what=lambda: f"the world frame; {pad.frame}, focus {app.focused}")
+            await pilot.press("9", "s")  # y +20 mm: about a second
             await tui.until(lambda: client.status().mode == Mode.FOLLOW_TRACK, timeout=5,
-                            what="the first step running")
+                            what=lambda: f"the first step running; {pad.frame}, "
+                                         f"focus {app.focused}, mode {client.status().mode}")
             await pilot.press("s", "s")
             # both wait for the first step (+40 mm), or, on a loaded machine where it ended
             # before the second press, the last waits for the second (+20 mm); on one loaded
