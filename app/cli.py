@@ -21,6 +21,7 @@ from app import (
     cli_kinematics,
     cli_machine,
     cli_move,
+    cli_program,
     cli_runs,
     cli_serve,
 )
@@ -46,7 +47,7 @@ def build_parser() -> argparse.ArgumentParser:
                              "if another client does)")
     sub = parser.add_subparsers(title="commands (none: open the TUI)", metavar="COMMAND")
     for module in (cli_kinematics, cli_machine, cli_emulate, cli_controller, cli_serve, cli_move,
-                   cli_runs):
+                   cli_program, cli_runs):
         module.add_parsers(sub)
     return parser
 
