@@ -6,6 +6,10 @@ A subcommand whose reader goes away (``servodesk ik … --json | head``) stops
 quietly, without a BrokenPipeError traceback, and exits 141: 128 + SIGPIPE, the
 status the shell reports for a command SIGPIPE killed (``yes | head``), so a
 pipeline under ``set -o pipefail`` still sees that the output was cut short.
+
+The TUI starts its controller as soon as its options are read, before the screen's code is
+imported (``app.controller_start``), and takes the UI's priority (``app.priority``) before
+anything else: its imports are most of its start, and a busy machine slowed them threefold.
 """
 
 from __future__ import annotations
@@ -14,22 +18,33 @@ import argparse
 import os
 import signal
 import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import TYPE_CHECKING
 
-from app import (
-    cli_controller,
-    cli_emulate,
-    cli_kinematics,
-    cli_machine,
-    cli_move,
-    cli_program,
-    cli_runs,
-    cli_serve,
-)
-from app.cli_options import ALL, global_options, machine_for
-from control.timing import Timing
+from app.priority import raise_priority, restore
+
+if TYPE_CHECKING:
+    from textual.app import App
+
+    from app.controller_start import ControllerStart
+    from control.timing import Timing
+    from hw.machine import Machine
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from app import (
+        cli_controller,
+        cli_emulate,
+        cli_kinematics,
+        cli_machine,
+        cli_move,
+        cli_program,
+        cli_runs,
+        cli_serve,
+    )
+    from app.cli_options import ALL, global_options
+
     parser = argparse.ArgumentParser(
         prog="servodesk",
         description="Terminal workstation for real-time control of hydraulic manipulators "
@@ -53,10 +68,23 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    if hasattr(args, "func"):
-        return run_command(args)
+    priority = raise_priority()  # the TUI's from its first import; a command's own below
+    try:
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        if hasattr(args, "func"):
+            restore(priority)
+            return run_command(args)
+        return tui(parser, args)
+    finally:
+        restore(priority)
+
+
+def tui(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
+    """Open the TUI as ``args`` ask; its exit code."""
+    from app.cli_options import machine_for
+    from control.timing import Timing
+
     if args.backend == "serial" and not args.port:
         parser.error("--backend serial needs --port URL (a device, the emulator's pty path or "
                      "socket://HOST:PORT)")
@@ -65,19 +93,53 @@ def main(argv: list[str] | None = None) -> int:
                      "add --attach")
     if args.observe_only and args.take_command:
         parser.error("--observe-only and --take-command exclude each other")
-    from app.tui import ServodeskApp, attached_app
-    from control.client import ControllerError
-    from hw.machine import MachineError
-
     try:
         timing = Timing(args.timing, args.interrupt_ms, tuple(args.slip))
     except ValueError as exc:
         parser.error(str(exc))
+    if args.attach is not None:
+        return run_tui(lambda: _attached(args))
+    from app.controller_start import ControllerStart
+    from control.recorder import default_data_dir
+    from hw.machine import MachineError
+
     try:
-        app = (attached_app(args.attach, observe_only=args.observe_only,
-                            take_command=args.take_command) if args.attach is not None else
-               ServodeskApp(machine_for(args), args.backend, args.port, args.data_dir,
-                            seed=args.seed, client_options={"timing": timing}))
+        machine = machine_for(args)
+    except MachineError as exc:
+        print(f"servodesk: {exc}", file=sys.stderr)
+        return 2
+    data_dir = Path(args.data_dir) if args.data_dir is not None else default_data_dir()
+    # the controller starts now, on the other core, while the screen's code is imported
+    starting = ControllerStart(machine, args.backend, args.port, data_dir, args.seed,
+                               {"timing": timing})
+    try:
+        return run_tui(lambda: _own(args, machine, data_dir, timing, starting))
+    finally:
+        starting.close()
+
+
+def _attached(args: argparse.Namespace) -> App:
+    from app.tui import attached_app
+
+    return attached_app(args.attach, observe_only=args.observe_only,
+                        take_command=args.take_command)
+
+
+def _own(args: argparse.Namespace, machine: Machine, data_dir: Path, timing: Timing,
+         starting: ControllerStart) -> App:
+    from app.tui import ServodeskApp
+
+    return ServodeskApp(machine, args.backend, args.port, data_dir, seed=args.seed,
+                        client_options={"timing": timing}, starting=starting)
+
+
+def run_tui(make: Callable[[], App]) -> int:
+    """Make the TUI and run it until it quits; its exit code."""
+    from control.client import ControllerError
+    from hw.machine import MachineError
+
+    try:
+        app = make()
     except (MachineError, ConnectionError, ControllerError, OSError) as exc:
         print(f"servodesk: {exc}", file=sys.stderr)
         return 2

@@ -12,35 +12,26 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import gc
+import importlib
 import threading
 import time
-from collections.abc import Callable
-from dataclasses import replace
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar, cast
 
 from textual.app import App, ComposeResult
 from textual.binding import Binding
 from textual.screen import ModalScreen
 from textual.widgets import Select, TabbedContent, TabPane
 
+from app.controller_start import ControllerStart
 from app.desk import Desk
 from app.event_log import LogEntry, entries_of
 from app.history import History, Sampler
 from app.messages import ClientFailed, ClientReady, ControllerEvent, RunsChanged
 from app.priority import Priority, raise_priority, raise_priority_under, restore
-from app.tabs.identify import IdentifyTab
-from app.tabs.jog import JogTab
-from app.tabs.latency import LatencyTab
-from app.tabs.log import LogTab
-from app.tabs.moves import MovesTab
-from app.tabs.path_forms import ViaPointsForm
-from app.tabs.positions import PositionsTab
-from app.tabs.runs import RunsTab
-from app.tabs.scope import ScopeTab
-from app.tabs.status import StatusTab
 from app.tabs.tab import TabPage
-from app.tabs.tuning import TuningTab
 from app.widgets.dialogs import ConfirmScreen
 from app.widgets.header import FaultBanner, StatusHeader
 from app.widgets.key_bar import KeyBar
@@ -54,6 +45,12 @@ from control.rt.layout import Mode
 from control.timing import Timing
 from hw.machine import Machine, load_machine
 
+if TYPE_CHECKING:
+    from app.tabs.latency import LatencyTab
+    from app.tabs.moves import MovesTab
+    from app.tabs.positions import PositionsTab
+    from app.tabs.runs import RunsTab
+
 HEADER_HZ = 10.0
 FIRST_TAB = "jog"  # the tab shown at start: the only one built before the first frame
 BUILD_GAP_S = 0.02  # between two tabs built after it: the keys and the header's turn
@@ -62,10 +59,32 @@ SETTLE_S = 1.5  # after a tab's first frames its long-lived objects exist
 FREEZE_S = 5.0  # and every so often after: the widgets' line caches keep growing
 OBSERVE_ONLY = ("this view observes only; it cannot take command (--observe-only: servodesk "
                 "serve without --command)")
-TABS: tuple[tuple[str, type[TabPage]], ...] = (
-    ("jog", JogTab), ("moves", MovesTab), ("scope", ScopeTab), ("status", StatusTab),
-    ("tuning", TuningTab), ("runs", RunsTab), ("latency", LatencyTab),
-    ("identify", IdentifyTab), ("positions", PositionsTab), ("log", LogTab),
+
+
+@dataclass(frozen=True)
+class TabKind:
+    """A tab's title (its class's ``TITLE``) and where its class is, imported only when the
+    tab is first made: the first frame waits for the first tab's code alone."""
+
+    title: str
+    module: str
+    name: str
+
+    def load(self) -> type[TabPage]:
+        return getattr(importlib.import_module(self.module), self.name)
+
+
+TABS: tuple[tuple[str, TabKind], ...] = (
+    ("jog", TabKind("Jog", "app.tabs.jog", "JogTab")),
+    ("moves", TabKind("Moves", "app.tabs.moves", "MovesTab")),
+    ("scope", TabKind("Scope", "app.tabs.scope", "ScopeTab")),
+    ("status", TabKind("Status", "app.tabs.status", "StatusTab")),
+    ("tuning", TabKind("Tuning", "app.tabs.tuning", "TuningTab")),
+    ("runs", TabKind("Runs", "app.tabs.runs", "RunsTab")),
+    ("latency", TabKind("Latency", "app.tabs.latency", "LatencyTab")),
+    ("identify", TabKind("Identify", "app.tabs.identify", "IdentifyTab")),
+    ("positions", TabKind("Positions", "app.tabs.positions", "PositionsTab")),
+    ("log", TabKind("Log", "app.tabs.log", "LogTab")),
 )
 FAULT_ADVICE = {
     "limit": "Drive it back with the opposite jog key, or run a move that stays inside the "
@@ -98,6 +117,35 @@ def estop_advice(reason: str, port: str | None) -> str:
     return "Every valve is closed. When it is safe, press ^R to release (the joints then hold)."
 
 
+class Tabs(Mapping[str, TabPage]):
+    """The app's tabs by name, in the order of ``TABS``; each is made (its module imported)
+    when first asked for."""
+
+    def __init__(self, desk: Desk) -> None:
+        self._desk = desk
+        self._kinds = dict(TABS)
+        self._made: dict[str, TabPage] = {}
+
+    def __getitem__(self, name: str) -> TabPage:
+        tab = self._made.get(name)
+        if tab is None:
+            tab = self._made[name] = self._kinds[name].load()(self._desk, id=f"tab-{name}")
+        return tab
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._kinds)
+
+    def __len__(self) -> int:
+        return len(self._kinds)
+
+    def made(self) -> list[TabPage]:
+        """The tabs made so far (the others' code may not be imported yet)."""
+        return list(self._made.values())
+
+    def made_tab(self, name: str) -> TabPage | None:
+        return self._made.get(name)
+
+
 class QuitScreen(ConfirmScreen):
     """The question before quitting mid-move or latched (one at a time)."""
 
@@ -126,8 +174,8 @@ class ServodeskApp(App[None]):
         Binding("ctrl+up", "feed(1)", "feed +10 %", priority=True, key_display="^↑"),
         Binding("ctrl+t", "teach", "teach", tooltip="name where the joints are now "
                 "(Positions tab)"),
-        *[Binding(f"f{i + 1}", f"show_tab('{name}')", f"{cls.TITLE} tab", show=False,
-                  priority=True) for i, (name, cls) in enumerate(TABS)],
+        *[Binding(f"f{i + 1}", f"show_tab('{name}')", f"{kind.title} tab", show=False,
+                  priority=True) for i, (name, kind) in enumerate(TABS)],
         # not priority: in a text field ^K is the field's (delete to the end), not a command
         Binding("ctrl+k", "take_command", "take command",
                 tooltip="command the controller servodesk controller runs (the others observe)"),
@@ -144,12 +192,15 @@ class ServodeskApp(App[None]):
                  port: str | None = None, data_dir: str | Path | None = None,
                  lockstep: bool = False, *, seed: int = 0, sim_options: dict | None = None,
                  client_options: dict | None = None, client: ControlClient | None = None,
-                 observe_only: bool = False, take_command: bool = False) -> None:
+                 observe_only: bool = False, take_command: bool = False,
+                 starting: ControllerStart | None = None) -> None:
         """``client``: one already attached to a controller service (``attached_app``),
         used instead of starting a controller; ``observe_only``: this TUI never takes command
-        (^K says why); ``take_command``: it takes command as soon as it is attached."""
+        (^K says why); ``take_command``: it takes command as soon as it is attached;
+        ``starting``: the controller already being started for this app (``servodesk``)."""
         super().__init__()
         self._attached = client
+        self._starting = starting
         self.observe_only = observe_only
         self._take_at_start = take_command
         self.machine = machine if isinstance(machine, Machine) else load_machine(machine)
@@ -175,7 +226,7 @@ class ServodeskApp(App[None]):
         self._estop_pending = False
         self._active: TabPage | None = None
         self._settled: set[str] = set()
-        self.tabs: dict[str, TabPage] = {}  # made in compose
+        self.tabs = Tabs(self.desk)
         self._building: dict[str, asyncio.Event] = {}  # tabs being mounted: set once mounted
         self._wanted = FIRST_TAB  # the tab last chosen (shown once it is built)
         self._rest_started = False  # the tabs not shown are being built (once live)
@@ -197,12 +248,11 @@ class ServodeskApp(App[None]):
             backend += f"  ·  {self.timing_text}"
         yield StatusHeader(self.machine.title, backend, id="header")
         yield FaultBanner(id="fault")
-        # every tab is made now, but only the first is built (composed, styled, mounted)
-        # before the first frame: the others, when first shown (``_build``)
-        self.tabs = {name: cls(self.desk, id=f"tab-{name}") for name, cls in TABS}
+        # only the first tab is made and built (composed, styled, mounted) before the first
+        # frame: the others once the screen is live, or when first shown (``_build``)
         with TabBar(id="tabs"):
-            for i, (name, cls) in enumerate(TABS):
-                with TabPane(f"F{i + 1} {cls.TITLE}", id=f"pane-{name}"):
+            for i, (name, kind) in enumerate(TABS):
+                with TabPane(f"F{i + 1} {kind.title}", id=f"pane-{name}"):
                     if name == FIRST_TAB:
                         yield self.tabs[name]
         yield KeyBar()
@@ -262,7 +312,7 @@ class ServodeskApp(App[None]):
 
     def built_tabs(self) -> list[TabPage]:
         """The tabs built so far (shown at least once): the others have no widgets yet."""
-        return [tab for tab in self.tabs.values() if tab.is_attached]
+        return [tab for tab in self.tabs.made() if tab.is_attached]
 
     async def _build(self, name: str) -> TabPage:
         """Mount tab ``name`` in its pane (hidden until chosen) and tell it what the others
@@ -284,9 +334,8 @@ class ServodeskApp(App[None]):
             if self.estop_latched:
                 tab.estop(latched=True)
             if self._positions is not None:
-                for form in tab.query(ViaPointsForm):
-                    form.offer(self._positions)
-            if isinstance(tab, MovesTab) and self._positions is None:
+                self._offer_positions(tab, self._positions)
+            if name == "moves" and self._positions is None:
                 await self._build("positions")  # it reads the named positions the forms offer
         return tab
 
@@ -324,7 +373,14 @@ class ServodeskApp(App[None]):
                 lockstep=self.lockstep, data_dir=self.data_dir, sim_options=self.sim_options,
                 on_event=self._event_from_thread, **self.client_options)
         except Exception as exc:  # ControllerError, a bad port, no shared memory…
-            self._post(ClientFailed(self._startup_advice(exc)))
+            self._client_started(exc)
+            return
+        self._client_started(client)
+
+    def _client_started(self, client: ControlClient | Exception) -> None:
+        """The controller is up, or why it is not (from the thread that started it)."""
+        if isinstance(client, Exception):
+            self._post(ClientFailed(self._startup_advice(client)))
             return
         with self._client_lock:
             if self._client_closing:
@@ -334,6 +390,9 @@ class ServodeskApp(App[None]):
         self._post(ClientReady(client))
 
     def start_client(self) -> None:
+        if self._starting is not None:  # started before the screen was imported
+            self._starting.hand_over(self._client_started, self._event_from_thread)
+            return
         self.run_worker(self._start_client_blocking, thread=True, group="client",
                         name="start controller")
 
@@ -439,8 +498,7 @@ class ServodeskApp(App[None]):
                 self._link(command=_role(self.client))
                 self.notify(reason, title="command", timeout=6)
             case Initialised(status=status):
-                moves = self.tab("moves")
-                assert isinstance(moves, MovesTab)
+                moves = cast("MovesTab", self.tab("moves"))
                 if moves.is_attached:
                     moves.initialised(status)
                 self.notify(f"initialise: {status}")
@@ -465,19 +523,23 @@ class ServodeskApp(App[None]):
                                    data={"late_max_us": message.late_max_us}))
 
     def on_runs_changed(self, message: RunsChanged) -> None:
-        runs = self.tab("runs")
-        assert isinstance(runs, RunsTab)
-        runs.mark_stale()
+        cast("RunsTab", self.tab("runs")).mark_stale()
 
     def on_moves_tab_run_unsaved(self, message: MovesTab.RunUnsaved) -> None:
-        runs = self.tab("runs")
-        assert isinstance(runs, RunsTab)
-        runs.keep_unsaved(message.run)
+        cast("RunsTab", self.tab("runs")).keep_unsaved(message.run)
 
     def on_positions_tab_changed(self, message: PositionsTab.Changed) -> None:
         self._positions = message.positions  # for the forms of a Moves tab built later
-        for form in self.query(ViaPointsForm):
-            form.offer(message.positions)
+        self._offer_positions(self, message.positions)
+
+    @staticmethod
+    def _offer_positions(where: ServodeskApp | TabPage, positions: tuple[Position, ...]
+                         ) -> None:
+        """Offer the named positions to the via-points forms in ``where``."""
+        from app.tabs.path_forms import ViaPointsForm  # the Moves tab's: loaded with it
+
+        for form in where.query(ViaPointsForm):
+            form.offer(positions)
 
     def on_moves_tab_hold_requested(self, message: MovesTab.HoldRequested) -> None:
         self.action_hold()
@@ -572,6 +634,10 @@ class ServodeskApp(App[None]):
         if self._active is not None and not isinstance(self.screen, ModalScreen):
             with self.prevent(TabPane.Focused):
                 self._active.focus_main()
+
+    def _shown(self, name: str) -> bool:
+        """Whether tab ``name`` is the one shown."""
+        return self._active is not None and self._active is self.tabs.made_tab(name)
 
     def action_show_tab(self, name: str) -> None:
         self.query_one("#tabs", TabbedContent).active = f"pane-{name}"
@@ -734,13 +800,12 @@ class ServodeskApp(App[None]):
         """Teach where the joints are under a name, from any tab."""
         if isinstance(self.screen, ModalScreen):
             return
-        positions = await self._build("positions")
-        if isinstance(positions, PositionsTab):
-            positions.action_teach()
+        positions = cast("PositionsTab", await self._build("positions"))
+        positions.action_teach()
 
     def action_run_move(self) -> None:
         """Run the move filled in on the Moves tab (whichever widget has the focus)."""
-        if isinstance(self._active, MovesTab) and not isinstance(self.screen, ModalScreen):
+        if self._shown("moves") and not isinstance(self.screen, ModalScreen):
             # behind the keys typed before ^S, still in the focused field's queue: run what
             # the operator typed, not what the field had taken when ^S came
             (self.focused or self).call_later(self._active.action_run)
@@ -749,7 +814,7 @@ class ServodeskApp(App[None]):
         if action == "dismiss_fault":
             return bool(self.fault_kind)
         if action == "run_move":
-            return isinstance(self._active, MovesTab)
+            return self._shown("moves")
         if action in ("take_command", "release_command"):
             return self._attached is not None
         return True
