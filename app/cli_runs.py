@@ -21,6 +21,7 @@ from control.recorder import (
     RecorderError,
     Run,
     RunFiles,
+    RunInfo,
     csv_text,
     default_data_dir,
     list_runs,
@@ -43,6 +44,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     common = argparse.ArgumentParser(add_help=False, parents=[global_options("data_dir")])
     common.add_argument("--json", action="store_true", help="machine-readable output")
     listing = actions.add_parser("list", parents=[common], help="one line per run, newest first")
+    listing.add_argument("--program", metavar="RUN_ID|NAME",
+                         help="only the runs of a program run (its id, as `servodesk run` "
+                              "prints it) or of every run of a program (its name), in step order")
     listing.set_defaults(func=run, action=_list)
     show = actions.add_parser("show", parents=[common],
                               help="a run's fields, status and result metrics")
@@ -79,6 +83,8 @@ def run(args: argparse.Namespace) -> int:
 
 def _list(args: argparse.Namespace, data_dir: Path) -> int:
     infos = list_runs(data_dir)
+    if args.program:
+        infos = _of_program(infos, args.program)
     if args.json:
         print(json.dumps([{"stem": i.files.stem, "json": str(i.files.json),
                            "machine": i.machine or None, "kind": i.kind or None,
@@ -95,6 +101,20 @@ def _list(args: argparse.Namespace, data_dir: Path) -> int:
             print(f"{i.files.stem}  {local_time(i.start_time)}  {i.kind}  {i.status}  "
                   f"{i.samples} samples")
     return 0
+
+
+def _of_program(infos: list[RunInfo], spec: str) -> list[RunInfo]:
+    """The runs a program made (``meta.program``: control/program/runner.py) whose run id or
+    name is ``spec``, oldest first: in the order the program made them."""
+    found = []
+    for info in infos:
+        try:
+            program = json.loads(info.files.json.read_text(encoding="utf-8"))["meta"]["program"]
+        except (OSError, ValueError, KeyError, TypeError):
+            continue  # not a program's run, or damaged (listed as such without --program)
+        if isinstance(program, dict) and spec in (program.get("run_id"), program.get("name")):
+            found.append(info)
+    return found[::-1]
 
 
 def _find(spec: str, data_dir: Path) -> RunFiles:

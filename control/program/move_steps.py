@@ -37,7 +37,7 @@ from control.motion.fields import (
 )
 from control.motion.plan import MovePlan
 from control.program.model import GoTo, Line, Move, Step
-from control.program.parse import parse_number
+from control.program.parse import keyed, parse_number
 from hw.machine import Machine
 
 POSE_KEYS = (("x", "mm"), ("y", "mm"), ("z", "mm"), ("gamma", "°"), ("beta", "°"),
@@ -60,7 +60,7 @@ def plan(step: Step, machine: Machine, here: np.ndarray, dt: float, positions: P
     ``base`` (the program's folder)."""
     if isinstance(step, GoTo):
         target = _position(positions, step.position, "go")
-        return _go_to(machine, here, target, step.speed, dt, "speed")
+        return _go_to(machine, here, target, step.speed, dt, "")
     if isinstance(step, Line):
         from control.program.tool_line import tool_line
 
@@ -103,6 +103,8 @@ def _position(positions: Positions, name: str, key: str) -> tuple[float, ...]:
 def _planned(key: str, make: Callable[[], MovePlan]) -> MovePlan:
     try:
         return make()
+    except StepProblem:
+        raise
     except ValueError as exc:
         raise StepProblem(key, str(exc)) from None
 
@@ -121,7 +123,7 @@ class _Fields:
                 return rule.parse(default)
             return parse_number(self.fields[key], rule)
         except FieldError as exc:
-            raise StepProblem(key, f"{key}: {exc}") from None
+            raise StepProblem(key, keyed(key, exc)) from None
 
     def joint(self) -> int:
         value = self.fields.get("joint")
@@ -149,7 +151,7 @@ class _Fields:
         try:
             out = parse_number(value, rule)
         except FieldError as exc:
-            raise StepProblem(key, f"{key}: {exc}") from None
+            raise StepProblem(key, keyed(key, exc)) from None
         assert out is not None
         return out
 
@@ -164,7 +166,7 @@ def _step(f: _Fields, machine: Machine, here: np.ndarray, dt: float, base: Path)
     target = f.number("target", position_rule(joint, machine, "target"))
     duration = f.number("duration", seconds_rule("duration", optional=True))
     assert target is not None
-    return _planned("target", lambda: form_plans.step(machine, here, j, target, start, duration,
+    return _planned("", lambda: form_plans.step(machine, here, j, target, start, duration,
                                                       dt=dt))
 
 
@@ -176,7 +178,7 @@ def _ramp(f: _Fields, machine: Machine, here: np.ndarray, dt: float, base: Path)
     ramp_time = f.number("ramp_time", seconds_rule("ramp time"), f"{RAMP_TIME_S:g}")
     total = f.number("total", seconds_rule("total duration", optional=True))
     assert end is not None and ramp_time is not None
-    return _planned("end", lambda: form_plans.ramp(machine, here, j, end, ramp_time, start,
+    return _planned("", lambda: form_plans.ramp(machine, here, j, end, ramp_time, start,
                                                    total, dt=dt))
 
 
@@ -188,7 +190,7 @@ def _sine(f: _Fields, machine: Machine, here: np.ndarray, dt: float, base: Path)
     period = f.number("period", seconds_rule("period"), f"{SINE_PERIOD_S:g}")
     duration = f.number("duration", seconds_rule("duration"), f"{SINE_DURATION_S:g}")
     assert end is not None and period is not None and duration is not None
-    return _planned("end", lambda: form_plans.sine(machine, here, j, end, period, duration,
+    return _planned("", lambda: form_plans.sine(machine, here, j, end, period, duration,
                                                    start, dt=dt))
 
 
@@ -204,7 +206,7 @@ def _multistep(f: _Fields, machine: Machine, here: np.ndarray, dt: float, base: 
                                       "give targets = [one per joint]")
     targets = f.vector("targets", "target")
     duration = f.number("duration", seconds_rule("duration", optional=True))
-    return _planned("targets", lambda: form_plans.multi_step(machine, here, targets, duration,
+    return _planned("", lambda: form_plans.multi_step(machine, here, targets, duration,
                                                              dt=dt))
 
 
@@ -222,7 +224,7 @@ def _sequence(f: _Fields, machine: Machine, here: np.ndarray, dt: float) -> Move
         steps.append((f.number_of("sequence", position,
                                   position_rule(joint, machine, f"step {i} position")),
                       f.number_of("sequence", dwell, seconds_rule(f"step {i} dwell"))))
-    return _planned("sequence", lambda: form_plans.sequence(machine, here, steps, dt=dt))
+    return _planned("", lambda: form_plans.sequence(machine, here, steps, dt=dt))
 
 
 def _endpoint(f: _Fields, machine: Machine, here: np.ndarray, dt: float, base: Path
@@ -243,7 +245,7 @@ def _endpoint(f: _Fields, machine: Machine, here: np.ndarray, dt: float, base: P
         raise StepProblem("x", f"x … alpha: {exc}") from None
     k = int(f.number("solution", count_rule("solution", len(solutions)), "1") or 1) - 1
     ramp_time = f.number("ramp_time", seconds_rule("ramp time", optional=True))
-    return _planned("x", lambda: form_plans.end_point(machine, here, pose, solutions, k,
+    return _planned("", lambda: form_plans.end_point(machine, here, pose, solutions, k,
                                                       ramp_time, dt=dt))
 
 
@@ -258,7 +260,7 @@ def _path(f: _Fields, machine: Machine, here: np.ndarray, dt: float, base: Path)
         points = read_path(path, machine, tuple(here))
     except PathFileError as exc:
         raise StepProblem("file", f"file: {exc}") from None
-    return _planned("file", lambda: form_plans.path_file(machine, here, points, str(path),
+    return _planned("", lambda: form_plans.path_file(machine, here, points, str(path),
                                                          dt=dt))
 
 
@@ -281,7 +283,7 @@ def _via(f: _Fields, machine: Machine, here: np.ndarray, dt: float, base: Path) 
     except ValueError as exc:
         raise StepProblem("points", f"points: {exc}") from None
     assert fraction is not None
-    return _planned("points", lambda: form_plans.via_points(machine, here, points, fraction,
+    return _planned("", lambda: form_plans.via_points(machine, here, points, fraction,
                                                             cartesian, dt=dt))
 
 
@@ -290,7 +292,7 @@ def _goto(f: _Fields, machine: Machine, here: np.ndarray, dt: float, base: Path
     target = f.vector("targets", "target")
     speed = f.number("speed", fraction_rule("speed fraction"), f"{VIA_SPEED:g}")
     assert speed is not None
-    return _go_to(machine, here, target, speed, dt, "targets")
+    return _go_to(machine, here, target, speed, dt, "")
 
 
 def _pulse(f: _Fields, machine: Machine, here: np.ndarray, dt: float, base: Path) -> MovePlan:

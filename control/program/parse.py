@@ -313,8 +313,14 @@ class _Reader:
         try:
             return parse_number(table[key], rule)
         except FieldError as exc:
-            self.fail(base.key_line(key), f"{key}: {exc}", base)
+            self.fail(base.key_line(key), keyed(key, exc), base)
             return None
+
+
+def keyed(key: str, exc: Exception) -> str:
+    """``exc``'s message, led by ``key`` unless it names it first already."""
+    text = str(exc)
+    return text if text.startswith(key) else f"{key}: {text}"
 
 
 def parse_number(value: object, rule: NumberRule) -> float | None:
