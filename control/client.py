@@ -52,6 +52,7 @@ from control.rt.commands import (
     Reset,
     Resume,
     SetCoefficients,
+    SetSpeedMode,
     StartMove,
     finite,
     joint_index,
@@ -70,6 +71,7 @@ from control.rt.events import (
 from control.rt.law import start_sets
 from control.rt.layout import ESTOP_WORD, HEARTBEAT_WORD, LatencyHistogram, Mode, MoveLayout, Status
 from control.rt.seqlock import SeqlockReader
+from control.rt.speed_cap import MODES
 from control.rt.wire import Broken, Message, Unreadable
 from control.run_keeper import FinishedMove, RunKeeper, RunKept
 from control.runs import encode_meta, segment_meta
@@ -173,8 +175,10 @@ class ControlClient:
 
     ``machine`` is a built-in name, a TOML path or a loaded ``Machine``;
     ``backend`` is ``sim`` or ``serial`` (with ``port``). ``lockstep`` runs the
-    simulator as fast as it computes (tests). ``on_event`` is called from the
-    client's monitor thread for every event (a TUI marshals it to its loop).
+    simulator as fast as it computes (tests). ``speed_mode`` is the controller's speed at
+    the start: ``automatic`` (full speed) or ``reduced`` (ISO 10218-1's T1: the tool at most
+    250 mm/s, each joint at most its jog_speed; ``set_speed_mode``). ``on_event`` is called
+    from the client's monitor thread for every event (a TUI marshals it to its loop).
     ``ControlClient.attach`` gives a client of a controller run apart, with this API.
 
     A client is made of parts: its ``link`` to the controller (``control/link.py``: one it
@@ -189,7 +193,8 @@ class ControlClient:
                  heartbeat_timeout_s: float = DEATH_S, orphan_timeout_s: float = 5.0,
                  start_timeout_s: float = 30.0, sim_options: dict | None = None,
                  on_event: Callable[[Event], None] | None = None,
-                 timing: Timing | None = None) -> None:
+                 timing: Timing | None = None, speed_mode: str = "automatic") -> None:
+        _check_speed_mode(speed_mode)
         machine = machine if isinstance(machine, Machine) else load_machine(machine)
         if backend == "sim":
             check_plant(machine)  # a MachineError naming the key, before anything starts
@@ -206,6 +211,12 @@ class ControlClient:
             orphan_timeout_s=orphan_timeout_s, start_timeout_s=start_timeout_s,
             sim_options=sim_options or {}, early=early.append)
         self._join(link, on_event, [*map(Notice, notices), *early])
+        if speed_mode != self.speed_mode:
+            try:
+                self.set_speed_mode(speed_mode)
+            except BaseException:
+                self.close()
+                raise
 
     @classmethod
     def attach(cls, path: str | Path | None = None, *, name: str = "",
@@ -613,6 +624,35 @@ class ControlClient:
         """End a feed hold: the move goes on from where it stopped, with no jump."""
         self._send(Resume())
 
+    @property
+    def speed_mode(self) -> str:
+        """The controller's speed mode, from its status: ``reduced`` (T1) or ``automatic``."""
+        return self.status().speed_mode
+
+    def set_speed_mode(self, mode: str, timeout_s: float = 2.0) -> None:
+        """Reduced speed (ISO 10218-1's T1: every motion the controller makes keeps the tool at
+        most 250 mm/s and each joint at most its jog_speed; open-loop duty is refused) or
+        automatic (full speed). To reduced takes effect at once: a running path slows to it
+        along its path, a jog at the joints' acceleration, open-loop duty ends in a hold. To
+        automatic only at rest: ValueError (nothing sent) while a motion runs. Returns once
+        the status shows the mode; ``NotCommanding`` for an observer, ``ControllerError`` if
+        the controller did not switch within ``timeout_s``."""
+        _check_speed_mode(mode)
+        command = SetSpeedMode(mode)
+        self.link.may_send(command)
+        status = self.status()
+        if mode == "automatic" and status.speed_mode != mode and status.moving:
+            raise ValueError("automatic (full speed) is set only at rest: hold, or wait for "
+                             "the motion to end, first")
+        self._send(command)
+        deadline = time.monotonic() + timeout_s
+        while self.status().speed_mode != mode:
+            self.check()
+            if time.monotonic() > deadline:
+                raise ControllerError(f"the controller did not switch to {mode} speed within "
+                                      f"{timeout_s:g} s (refused: see the events)")
+            time.sleep(0.002)
+
     def set_coefficients(self, which: str, coefficients: Coefficients,
                          models: Sequence[DeadbandModel | None] | None = None, *,
                          override: str | None = None) -> GainCheck:
@@ -858,3 +898,8 @@ class ControlClient:
         """Raise ``ControllerError`` if the controller has died."""
         if self.dead:
             raise ControllerError(self.dead)
+
+
+def _check_speed_mode(mode: object) -> None:
+    if mode not in MODES:
+        raise ValueError(f"speed mode {mode!r} is not one of {', '.join(MODES)}")

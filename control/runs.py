@@ -62,8 +62,10 @@ def decode_meta(data: bytes) -> dict[str, Any]:
 def run_from_segment(buf: memoryview, layout: MoveLayout, meta: dict[str, Any], status: str,
                      timeline: Mapping[str, Sequence[tuple[float, float]]] | None = None) -> Run:
     """The run recorded so far in a move segment (its path's rows, then its settle's);
-    ``timeline`` (the controller's ``gaps``, ``feed``, ``pauses``, ``supply`` and ``settle``:
-    ``ActiveMove.timeline``) goes into its metadata."""
+    ``timeline`` (the controller's ``gaps``, ``feed``, ``pauses``, ``supply``, ``settle`` and
+    ``speed_mode``: ``ActiveMove.timeline``) goes into its metadata: ``speed_mode`` as the
+    mode the move started in (``reduced`` or ``automatic``), and ``speed_mode_changes``
+    ``[t s, mode]`` if it changed during the move."""
     joints = [(str(name), str(unit)) for name, unit, *_ in meta["joints"]]
     resolutions = tuple(float(j[2]) for j in meta["joints"] if len(j) > 2)
     accels = tuple(float(j[3]) for j in meta["joints"] if len(j) > 3)
@@ -72,7 +74,11 @@ def run_from_segment(buf: memoryview, layout: MoveLayout, meta: dict[str, Any], 
     extra = {k: v for k, v in meta.items() if k not in STANDARD or k == "run_id"}
     extra["path_samples"] = layout.samples  # the rows of the path; the settle's follow them
     for key, entries in (timeline or {}).items():
-        if key == "settle" and entries:  # a record of its own (control/rt/settle.py)
+        if key == "speed_mode" and entries:  # the controller's, as the move started and changed
+            extra[key] = str(entries[0][1])
+            if len(entries) > 1:
+                extra["speed_mode_changes"] = [list(entry) for entry in entries[1:]]
+        elif key == "settle" and entries:  # a record of its own (control/rt/settle.py)
             extra[key] = {k: list(v) if isinstance(v, list | tuple) else v
                           for k, v in dict(entries).items()}
         elif entries:

@@ -60,6 +60,7 @@ SLOW_PATHS = (
     "tests/control/test_settle_and_rest.py",  # fast moves and rest on both machines
     "tests/control/identify/test_proposal_settles.py",  # identify, apply, move: both machines
     "tests/control/test_feed.py",      # feed override and hold on the control subprocess
+    "tests/control/test_speed_mode.py",  # reduced speed (T1) on the control subprocess
     "tests/control/test_client_cartesian_jog.py",  # Cartesian jogs on it
     "tests/control/test_servo.py",     # the Cartesian servo on a real-time one
     "tests/control/rt/test_process.py",   # the control subprocess's imports

@@ -16,6 +16,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import ClassVar
 
+from control.rt.speed_cap import MODES, TOOL_SPEED
 from hw.machine import Coefficients, Machine
 
 COEFFICIENT_SETS = ("hold", "track")
@@ -145,6 +146,21 @@ class Resume(Command):
     """End a feed hold: the path goes on from where it stopped, with no jump."""
 
     NAME: ClassVar[str] = "resume"
+
+
+@dataclass(frozen=True)
+class SetSpeedMode(Command):
+    """Reduced speed (ISO 10218-1's T1: the tool at most 250 mm/s, each joint at most its
+    jog_speed, open-loop duty refused) or automatic (full speed). To reduced takes effect at
+    once (a running path slows to it along the path); to automatic only at rest."""
+
+    NAME: ClassVar[str] = "speed mode"
+    mode: str
+
+    def __post_init__(self) -> None:
+        if self.mode not in MODES:
+            raise CommandError(f"speed mode {self.mode!r} is not one of {', '.join(MODES)} "
+                               f"(reduced: the tool at most {TOOL_SPEED:g} mm/s)")
 
 
 @dataclass(frozen=True)
@@ -311,4 +327,5 @@ def check_coefficients(coefficients: Coefficients, n_joints: int) -> None:
 
 
 COMMANDS = (Shutdown, Hold, EmergencyStop, Reset, FeedOverride, Pause, Resume, Initialise, Manual,
-            JogPosition, JogVelocity, SetCoefficients, StartMove, Inject)  # what a channel carries
+            JogPosition, JogVelocity, SetCoefficients, StartMove, Inject,
+            SetSpeedMode)  # what a channel carries

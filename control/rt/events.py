@@ -68,11 +68,13 @@ class MoveDone(ControllerEvent):
     # a closed-loop move's settle after its path (control/rt/settle.py): path_end_s, goal_time_s,
     # settle_s per joint (s after the path's end; None: never in position), goal_error per joint
     settle: dict[str, object] = field(default_factory=dict)
+    # (t s, mode): the speed mode the move started in, then a change during it (to reduced)
+    speed_mode: tuple[tuple[float, str], ...] = ()
 
     @property
     def timeline(self) -> dict[str, object]:
         return {"gaps": self.gaps, "feed": self.feed, "pauses": self.pauses,
-                "supply": self.supply, "settle": self.settle}
+                "supply": self.supply, "settle": self.settle, "speed_mode": self.speed_mode}
 
     @property
     def message(self) -> str:

@@ -8,6 +8,13 @@ and velocity stay continuous whatever the override. ``rate`` follows its target
 the acceleration ``rate′·v`` stays within half of each joint's ``max_accel`` (the
 other half is the path's own), so a pause decelerates along the path to a stop.
 
+Reduced speed (``control/rt/speed_cap.py``): the rate is also capped, each tick, at the
+fraction of the path's velocity the reduced limits allow at the current phase. A move
+started in reduced speed is clamped to the cap from its first tick (the path starts at rest,
+and the cap moves continuously along it, so the desired velocity stays continuous); a move
+that is switched to reduced speed on its way decelerates to the cap as a pause does, then is
+clamped to it.
+
 Inputs: the operator's override and pause, the path's velocity per joint at the
 current phase. Outputs: ``rate``; ``held_since``, since when the move has been held (a
 pause, or the override at 0: the controller ends a move held longer than ``max_pause_s``);
@@ -71,6 +78,8 @@ class FeedRate:
         self.pauses = Timeline(spans=True)  # the move's: (move time s, length s)
         self.paused_at = 0.0
         self.stopped_at: float | None = None  # move time the override went to 0; None: it is not
+        self.reduced = False  # reduced speed: the rate is capped (``advance``'s ``cap``)
+        self.capping = False  # the rate has come down to the cap and is clamped to it
 
     @property
     def target(self) -> float:
@@ -79,8 +88,8 @@ class FeedRate:
     @property
     def steady(self) -> bool:
         """Following the path at full speed, and meant to: the loop's fast path (an override
-        or a hold set mid-move leaves it, to ramp the rate down)."""
-        return self.rate == 1.0 and self.target == 1.0
+        or a hold set mid-move leaves it, to ramp the rate down; reduced speed never takes it)."""
+        return self.rate == 1.0 and self.target == 1.0 and not self.reduced
 
     @property
     def held_since(self) -> float | None:
@@ -103,6 +112,7 @@ class FeedRate:
         the override (from rest, as every path), held from its start if that is 0."""
         self.paused = False
         self.rate = self.override
+        self.capping = self.reduced
         self.changes, self.pauses = Timeline(changes), Timeline(pauses, spans=True)
         self.stopped_at = 0.0 if self.override == 0.0 else None
         if self.override != 1.0:
@@ -130,10 +140,23 @@ class FeedRate:
             self.paused = False
             self.pauses.add(round(self.paused_at, 4), round(t - self.paused_at, 4))
 
-    def advance(self, path_velocity: list[float]) -> None:
+    def reduce(self, on: bool) -> None:
+        """Reduced speed on or off; switched on during a move, the rate comes down to the cap
+        at the joints' acceleration before it is clamped to it."""
+        self.reduced = on
+        self.capping = False
+
+    def advance(self, path_velocity: list[float], cap: float = 1.0) -> None:
         """Move ``rate`` toward its target, as fast as the path's velocity ``(J,)`` (units/s
-        at rate 1, at the current phase) lets the joints decelerate or accelerate."""
+        at rate 1, at the current phase) lets the joints decelerate or accelerate; in reduced
+        speed never above ``cap`` once it has come down to it."""
         target, rate = self.target, self.rate
+        if self.reduced:
+            target = min(target, cap)
+            if self.capping and rate > cap:
+                rate = self.rate = cap
+            elif rate <= cap:
+                self.capping = True
         if rate == target:
             return
         step = 1.0

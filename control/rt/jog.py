@@ -21,6 +21,10 @@ within their braking distance of that edge, never past it: a target on the limit
 itself would press the arm on the hard stop, its integrator winding the valve open
 against it (issue 25: a 1° step onto 30° latched a feedback fault).
 
+In reduced speed (``control/rt/speed_cap.py``) each sample's wanted velocities (every
+joint at its jog speed toward its goal, or at its streamed velocity) are scaled together so
+that the tool stays within 250 mm/s; a joint already faster slows at its ``max_accel``.
+
 Inputs: the goal per joint (``move_goal``) or its streamed velocity (``stream``), the
 hold target (moved in place). Outputs: the target each tick and the jog velocity per
 joint (for the supervisor's following-error limit).
@@ -31,6 +35,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
+from control.rt.speed_cap import SpeedCap
 from hw.machine import Joint, Machine
 
 DEADMAN_S = 0.150  # a streamed velocity not renewed within this brakes to 0
@@ -50,9 +55,12 @@ def rest_range(joint: Joint) -> tuple[float, float]:
 
 
 class PositionJog:
-    def __init__(self, machine: Machine, dt: float) -> None:
+    def __init__(self, machine: Machine, dt: float, cap: SpeedCap | None = None) -> None:
         n = self.n = machine.n_joints
         self.dt = dt
+        self.cap = cap or SpeedCap(machine)
+        self.scale = 1.0  # this sample's fraction of the jog speeds (reduced speed)
+        self.unscaled = [0.0] * n  # the velocities wanted before it (units/s)
         self.speed = [j.jog_speed for j in machine.joints]
         self.accel = [j.max_accel for j in machine.joints]
         ranges = [rest_range(j) for j in machine.joints]
@@ -109,6 +117,7 @@ class PositionJog:
             self.renew_left -= 1
             if not self.renew_left:  # the deadman: the stream stopped arriving
                 self.wanted[:] = [0.0] * self.n
+        self.scale = self.reduced_scale(target) if self.cap.reduced else 1.0
         moving = False
         for j in range(self.n):
             if self.streamed[j]:
@@ -116,6 +125,17 @@ class PositionJog:
             else:
                 moving |= self.follow_goal(j, target)
         self.moving = moving
+
+    def reduced_scale(self, target: list[float]) -> float:
+        """The fraction of every joint's wanted velocity (its jog speed toward its goal, or its
+        streamed velocity) that keeps the tool within the reduced speed at ``target``."""
+        unscaled = self.unscaled
+        for j in range(self.n):
+            if self.streamed[j]:
+                unscaled[j] = self.wanted[j]
+            else:
+                unscaled[j] = self.speed[j] if self.goal[j] != target[j] else 0.0
+        return self.cap.fraction(unscaled, target)
 
     def braking_speed(self, j: int, distance: float) -> float:
         """The fastest joint ``j`` may go with ``distance`` left to stop in."""
@@ -128,8 +148,8 @@ class PositionJog:
         if remaining == 0.0 and v == 0.0:
             return False
         dv = self.accel[j] * self.dt
-        wanted = math.copysign(min(self.speed[j], self.braking_speed(j, abs(remaining))),
-                               remaining)
+        wanted = math.copysign(min(self.scale * self.speed[j],
+                                   self.braking_speed(j, abs(remaining))), remaining)
         v += max(-dv, min(dv, wanted - v))
         step = v * self.dt
         if step * remaining >= remaining * remaining:  # this sample reaches the goal
@@ -142,7 +162,7 @@ class PositionJog:
     def follow_stream(self, j: int, target: list[float]) -> bool:
         q, v, lower, upper = target[j], self.velocity[j], self.lower[j], self.upper[j]
         wanted = max(-self.braking_speed(j, q - lower),
-                     min(self.braking_speed(j, upper - q), self.wanted[j]))
+                     min(self.braking_speed(j, upper - q), self.scale * self.wanted[j]))
         dv = self.accel[j] * self.dt
         v += max(-dv, min(dv, wanted - v))
         moved = q + v * self.dt

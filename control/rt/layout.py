@@ -28,7 +28,7 @@ from hw.machine import MAX_TAPS, Coefficients
 if TYPE_CHECKING:
     from control.rt.latency import LatencyStats
 
-LAYOUT_VERSION = 6
+LAYOUT_VERSION = 7
 CONTROL_MAGIC = b"SDSK"
 MOVE_MAGIC = b"SDMV"
 HIST_BIN_NS = 5_000  # 5 µs bins, Table 2.1
@@ -60,6 +60,7 @@ class Flag(IntFlag):
     FAULT = 128
     PAUSED = 256  # feed hold on the move
     SETTLING = 512  # the move's path is over: it holds the end until in position (settle.py)
+    REDUCED = 1024  # reduced speed, ISO 10218-1's T1 (control/rt/speed_cap.py); else automatic
 
 
 def _align(n: int) -> int:
@@ -119,6 +120,12 @@ class Status:
     @property
     def paused(self) -> bool:
         return bool(self.flags & Flag.PAUSED)
+
+    @property
+    def speed_mode(self) -> str:
+        """``reduced`` (T1: the tool at most 250 mm/s, each joint its jog_speed) or
+        ``automatic`` (full speed): the controller's (``control/rt/speed_cap.py``)."""
+        return "reduced" if self.flags & Flag.REDUCED else "automatic"
 
     @property
     def settling(self) -> bool:

@@ -39,6 +39,8 @@ from hw.transmission import Transmission
 
 MS = 1_000_000
 SETTLE_NS = 2_000 * MS  # after motion, a lockstep clock steps this long before pacing (idle)
+OPEN_LOOP_REDUCED = ("reduced speed (T1): open-loop duty cannot be held to 250 mm/s; jog in "
+                     "position or velocity, or switch to automatic (full speed) first")
 NOT_HOMED = ("not initialised: the encoder is not zeroed: run Initialise first (drives the ram "
              "to the bottom and zeroes the encoder)")
 
@@ -101,6 +103,7 @@ class Controller:
             cmd.SetCoefficients: self.on_coefficients,
             cmd.StartMove: self.on_move, cmd.Inject: self.on_inject,
             cmd.FeedOverride: self.on_feed, cmd.Pause: self.on_feed, cmd.Resume: self.on_feed,
+            cmd.SetSpeedMode: self.on_speed_mode,
         })
 
     # -- the loop ---------------------------------------------------------------
@@ -237,6 +240,9 @@ class Controller:
     def on_manual(self, command: cmd.Manual) -> None:
         if self.refused(command):
             return
+        if self.modes.reduced and any(command.duty):
+            self.outbox.put(Refused(command.NAME, OPEN_LOOP_REDUCED))
+            return
         if self.modes.mode != Mode.MANUAL_ACTUATE:
             self.end_move("aborted: manual actuation")
             self.modes.start_manual()
@@ -291,6 +297,9 @@ class Controller:
         move segment: a path that is not sealed is refused, so nobody can change it once sent."""
         if self.refused(command, closed_loop=not command.tracking):
             return
+        if command.tracking and self.modes.reduced:
+            self.outbox.put(MoveDone(command.move_id, f"refused: {OPEN_LOOP_REDUCED}", 0))
+            return
         move = ActiveMove.attach(command, open_sealed(path_fd, 8 * command.samples * self.n),
                                  self.clock.now_ns())
         self.end_move("superseded by a new move")
@@ -299,6 +308,32 @@ class Controller:
 
     def on_feed(self, command: cmd.FeedOverride | cmd.Pause | cmd.Resume) -> None:
         self.modes.feed_command(command, self.clock.now_ns())
+
+    def on_speed_mode(self, command: cmd.SetSpeedMode) -> None:
+        """Reduced speed (T1) or automatic: to reduced at once (a path slows to its cap along
+        the path, a jog at the joints' acceleration; open-loop duty, which cannot be held to
+        it, ends in a hold); to automatic only at rest, so no motion speeds up unasked."""
+        modes, reduced = self.modes, command.mode == "reduced"
+        if reduced == modes.reduced:
+            return
+        if not reduced and self.moving_by_command():
+            self.outbox.put(Refused(command.NAME, "automatic (full speed) is set only at rest: "
+                                                  "hold, or wait for the motion to end, first"))
+            return
+        if reduced and (modes.mode == Mode.MANUAL_ACTUATE
+                        or (modes.move is not None and modes.move.tracking)):
+            self.end_move("aborted: reduced speed set")
+            self.hold_here()
+        modes.set_reduced(reduced, self.clock.now_ns())
+        self.outbox.put(Notice("speed: reduced (T1): the tool at most 250 mm/s, each joint at "
+                               "most its jog speed" if reduced else
+                               "speed: automatic (full speed)"))
+
+    def moving_by_command(self) -> bool:
+        """A move (or its settle), a jog travelling, manual duty or an initialise running."""
+        modes = self.modes
+        return (modes.move is not None or modes.jog.moving or modes.mode == Mode.INITIALISE
+                or (modes.mode == Mode.MANUAL_ACTUATE and any(modes.manual)))
 
     def on_inject(self, command: cmd.Inject) -> None:
         """Drive a simulator-only input (``press_estop``) from a test; refused on real hardware."""

@@ -11,7 +11,9 @@ and that client may be wrong): a desired row must be finite,
 inside the limits and, for a smooth kind, no farther from the previous one
 than the joint can move in a tick (step kinds jump, as the thesis's did); a
 duty row must be finite and within ±100 %. Until the rig's encoder is zeroed
-open-loop duty is limited to the initialise duty (section 3.5).
+open-loop duty is limited to the initialise duty (section 3.5). In reduced speed
+(``control/rt/speed_cap.py``) a path advances no faster than the reduced limits allow
+(``feed.py``) and a jog no faster either (``jog.py``).
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ from control.rt.law import DifferenceLaw, start_sets
 from control.rt.layout import Mode, MoveLayout
 from control.rt.outbox import Outbox
 from control.rt.settle import GoalCheck
+from control.rt.speed_cap import SpeedCap
 from hw.machine import Coefficients, Machine
 from hw.transmission import Transmission
 
@@ -62,6 +65,7 @@ class ActiveMove:
     pauses: list[tuple[float, float]] = field(default_factory=list)  # (t s, length s) holds
     supply: list[tuple[float, float]] = field(default_factory=list)  # (t s, MPa) every 0.1 s
     supply_every: float = SUPPLY_EVERY_S  # doubled, the list thinned, when it is full
+    speed_mode: list[tuple[float, str]] = field(default_factory=list)  # (t s, mode): start, change
     settle: GoalCheck | None = None  # after the path's last row: holding its end (settle.py)
 
     @classmethod
@@ -91,7 +95,8 @@ class ActiveMove:
             settle = {"path_end_s": round((self.settle.start_ns - self.start_ns) / 1e9, 4),
                       **self.settle.record()}
         return {"gaps": tuple(self.gaps), "feed": tuple(self.feed), "pauses": tuple(self.pauses),
-                "supply": tuple(self.supply), "settle": settle}
+                "supply": tuple(self.supply), "settle": settle,
+                "speed_mode": tuple(self.speed_mode)}
 
 
 @dataclass(frozen=True)
@@ -131,7 +136,8 @@ class ModeMachine:
         self.serviced: range = range(n)  # the joints this tick runs eq. 5.1 for
         self.slot_joints = [range(j, j + 1) for j in range(n)]
         self.sample_start = self.sample_end = True  # this tick begins / ends a sample
-        self.jog = PositionJog(self.machine, self.dt)
+        self.speed = SpeedCap(self.machine)  # reduced speed (T1): control/rt/speed_cap.py
+        self.jog = PositionJog(self.machine, self.dt, self.speed)
         self.feed = FeedRate(self.machine, self.dt)
         self.path_velocity = [0.0] * self.machine.n_joints
         self.position = self.encoders.position  # the same list: read once a tick, shared
@@ -232,6 +238,20 @@ class ModeMachine:
         return (move is not None and since is not None
                 and (now - move.start_ns) / 1e9 - since > self.max_pause_s)
 
+    @property
+    def reduced(self) -> bool:
+        return self.speed.reduced
+
+    def set_reduced(self, on: bool, now: int) -> None:
+        """Reduced speed on or off: a running path comes down to its cap along the path, a
+        jog slows at the joints' acceleration (``feed.py``, ``jog.py``); the move's run lists
+        the change."""
+        self.speed.reduced = on
+        self.feed.reduce(on)
+        if self.move is not None:
+            self.move.speed_mode.append((round((now - self.move.start_ns) / 1e9, 4),
+                                         self.speed.mode))
+
     def start_manual(self) -> None:
         self.mode = Mode.MANUAL_ACTUATE
 
@@ -243,6 +263,7 @@ class ModeMachine:
 
     def start_move(self, move: ActiveMove) -> None:
         self.move = move
+        move.speed_mode.append((0.0, self.speed.mode))
         self.feed.start_move(move.feed, move.pauses)
         self.mode = Mode.TRACKING_ACTUATE if move.tracking else Mode.FOLLOW_TRACK
         self.law.set_coefficients(self.coefficients["track"])
@@ -264,10 +285,16 @@ class ModeMachine:
         if latched:
             self.zero_duty()
         elif mode == Mode.HOLD:
-            if self.jog.moving and self.sample_start:
+            if not self.jog.moving:
+                self.closed_loop(self.hold_target, None)
+                return
+            if self.sample_start:
                 self.jog.advance(self.hold_target)
                 self.velocity[:] = self.jog.velocity
-            self.closed_loop(self.hold_target, None)
+            # the jog's velocity fed forward, as a path's: without it the law rests inside its
+            # deadband as the target creeps away, and the joint moves in stick-slip jerks
+            self.transmission.actuators_from_joints(self.velocity, self.actuator_velocity)
+            self.closed_loop(self.hold_target, self.actuator_velocity)
         elif mode == Mode.FOLLOW_TRACK:
             self.follow_track()
         elif mode == Mode.MANUAL_ACTUATE:
@@ -327,7 +354,9 @@ class ModeMachine:
             path_velocity[j] = (b - a) / self.dt
             desired[j] = a + frac * (b - a)
         if self.sample_start:
-            self.feed.advance(path_velocity)
+            reduced = self.speed.reduced
+            self.feed.advance(path_velocity, self.speed.fraction(path_velocity, desired)
+                              if reduced else 1.0)
         rate = self.feed.rate
         for j in range(n):
             velocity[j] = rate * path_velocity[j]

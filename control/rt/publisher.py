@@ -19,7 +19,7 @@ from control.rt.seqlock import SeqlockWriter
 from hw.backend import Backend
 
 (ESTOP_LATCHED, ESTOP_INPUT, HOMED, UI_LOST, LINK_FAULT, REALTIME, MOVING, FAULT, PAUSED,
- SETTLING) = (int(f) for f in Flag)  # in Flag's order; plain ints, as enum ORs cost µs
+ SETTLING, REDUCED) = (int(f) for f in Flag)  # in Flag's order; plain ints, as enum ORs cost µs
 
 
 class Publisher:
@@ -43,7 +43,8 @@ class Publisher:
                  | (MOVING if move is not None else 0)
                  | (FAULT if guards.reason else 0)
                  | (PAUSED if move is not None and modes.feed.paused else 0)
-                 | (SETTLING if settle is not None else 0))
+                 | (SETTLING if settle is not None else 0)
+                 | (REDUCED if modes.speed.reduced else 0))
         feed = modes.feed
         self.writer.write(*self.encode(
             tick, now - self.started_ns, time.monotonic_ns(), modes.mode, flags,
