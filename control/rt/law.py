@@ -155,10 +155,12 @@ class DifferenceLaw:
         s = self._states[j]
         return LawState(tuple(s.e), tuple(s.u), s.integral)
 
-    def update(self, j: int, error: float, velocity: float = 0.0) -> float:
+    def update(self, j: int, error: float, velocity: float = 0.0,
+               feed_forward: bool = True) -> float:
         """u(k+1) in % for joint ``j`` from e(k) = desired − actual in mm or degrees.
 
-        ``velocity`` is the desired velocity (units/s) for the feed-forward ``kv``.
+        ``velocity`` is the desired velocity (units/s) for the feed-forward ``kv``; with
+        ``feed_forward`` false it only says the target moves (a jog's), so no rest begins.
         """
         g = self._gains[j]
         s = self._states[j]
@@ -185,7 +187,8 @@ class DifferenceLaw:
         if g.separation and ((step > 0.0 and u + s.integral > g.separation)
                              or (step < 0.0 and u + s.integral < -g.separation)):
             step = 0.0  # conditional integration: the feedback asks for much, this way already
-        u += g.kv * velocity  # velocity feed-forward (chapter 6)
+        if feed_forward:
+            u += g.kv * velocity  # velocity feed-forward (chapter 6)
         integral = s.integral + step
         if integral > g.integral_limit:
             integral = g.integral_limit

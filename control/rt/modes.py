@@ -291,10 +291,7 @@ class ModeMachine:
             if self.sample_start:
                 self.jog.advance(self.hold_target)
                 self.velocity[:] = self.jog.velocity
-            # the jog's velocity fed forward, as a path's: without it the law rests inside its
-            # deadband as the target creeps away, and the joint moves in stick-slip jerks
-            self.transmission.actuators_from_joints(self.velocity, self.actuator_velocity)
-            self.closed_loop(self.hold_target, self.actuator_velocity)
+            self.jogging()
         elif mode == Mode.FOLLOW_TRACK:
             self.follow_track()
         elif mode == Mode.MANUAL_ACTUATE:
@@ -311,6 +308,19 @@ class ModeMachine:
         for j in self.serviced:
             desired[j] = target[j]
             duty[j] = update(j, target[j] - position[j], velocity[j] if velocity else 0.0)
+
+    def jogging(self) -> None:
+        """The hold law on a jog's moving target: no rest in the deadband for a joint whose
+        target moves (resting while it crept away, the joint moved in stick-slip jerks), and
+        no feed-forward (a jog is the hold law's, as before)."""
+        update, position, target, duty = (self.law.update, self.position, self.hold_target,
+                                          self.duty)
+        velocity, desired = self.velocity, self.desired
+        if self.slots > 1:
+            desired[:] = target
+        for j in self.serviced:
+            desired[j] = target[j]
+            duty[j] = update(j, target[j] - position[j], velocity[j], False)
 
     def open_loop(self, source: list[float]) -> None:
         desired, duty = self.desired, self.duty
