@@ -2,6 +2,8 @@
 its run on disk (listed by ``servodesk runs list``); a bad field exits 2 naming it, with
 nothing started or saved; Ctrl+C during the move, or the board's E-stop, exits 1 with the
 run recorded so far saved; the serial backend against ``servodesk emulate`` on a pty.
+The bad-input cases call the CLI's ``main`` in this process (the code ``python -m app``
+exits with), two processes fewer each; one of them, and bad usage, run as processes too.
 
 The moves run with ``--lockstep`` (the simulator as fast as the controller computes) but
 for the end-to-end ones that are about real time: a step on the simulator, Ctrl+C during a
@@ -23,6 +25,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from app.cli import main
 from control.motion.robot_model import unimate_model
 from control.recorder import json_numbers
 from hw.machine import load_machine
@@ -43,6 +46,17 @@ def servodesk(*args: str, data_dir: Path) -> subprocess.CompletedProcess[str]:
 def move(*args: str, data_dir: Path, lockstep: bool = True) -> subprocess.CompletedProcess[str]:
     """``servodesk move ARGS``, in lockstep unless the test is about real time."""
     return servodesk("move", *args, *(["--lockstep"] if lockstep else []), data_dir=data_dir)
+
+
+def in_process(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str, str]:
+    """``servodesk ARGS`` run by the CLI's ``main`` here: its exit code, stdout and stderr."""
+    capsys.readouterr()
+    try:
+        code = main(list(args))
+    except SystemExit as exited:  # argparse's usage errors
+        code = exited.code if isinstance(exited.code, int) else 1
+    out, err = capsys.readouterr()
+    return code, out, err
 
 
 def listed(data_dir: Path) -> list[dict]:
@@ -204,11 +218,21 @@ BAD = [
 
 @pytest.mark.parametrize("args, message", BAD, ids=[" ".join(a)[:40] for a, _ in BAD])
 def test_bad_input_exits_2_naming_the_field_and_moves_nothing(
-        args: list[str], message: str, tmp_path: Path) -> None:
+        args: list[str], message: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    code, out, err = in_process(capsys, "move", *args, "--lockstep", "--data-dir", str(tmp_path))
+    assert (code, out) == (2, ""), err
+    assert err.startswith("servodesk: ") and message in err, err
+    assert "Traceback" not in err
+    code, out, err = in_process(capsys, "runs", "list", "--json", "--data-dir", str(tmp_path))
+    assert (code, json.loads(out)) == (0, []), err
+
+
+def test_bad_input_in_a_process_exits_2_and_lists_no_run(tmp_path: Path) -> None:
+    args, message = BAD[0]
     done = move(*args, data_dir=tmp_path)
     assert (done.returncode, done.stdout) == (2, ""), done.stderr
     assert done.stderr.startswith("servodesk: ") and message in done.stderr, done.stderr
-    assert "Traceback" not in done.stderr
     assert listed(tmp_path) == []
 
 
