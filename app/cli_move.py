@@ -111,6 +111,10 @@ def _common_options() -> argparse.ArgumentParser:
     common.add_argument("--lockstep", action="store_true",
                         help="simulator only: run the controller as fast as it computes, not in "
                              "real time (scripts, tests)")
+    common.add_argument("--reduced", action="store_true",
+                        help="reduced speed (ISO 10218-1's T1): the controller keeps the tool at "
+                             "most 250 mm/s and each joint at most its jog speed (default: "
+                             "automatic, full speed); a pulse, open-loop duty, is refused")
     common.add_argument("--plot", action="store_true",
                         help="after the move, draw desired, actual and duty of each joint that "
                              "moved, sized to the terminal (on stderr with --json)")
@@ -449,6 +453,9 @@ def _run(args: argparse.Namespace) -> int:
         raise BadInput("--lockstep: an I/O board runs in real time; leave --lockstep out, or "
                        "run the simulator (--backend sim)")
     _check_fields(args, kind, machine)
+    if args.reduced and kind.name == "pulse":
+        raise BadInput("--reduced: a pulse is open-loop duty, which reduced speed cannot hold "
+                       "to 250 mm/s; leave --reduced out to run it at full speed")
     data_dir = Path(args.data_dir).expanduser() if args.data_dir else default_data_dir()
     _check_writable(data_dir)
     pace = ({"lockstep": True, "heartbeat_timeout_s": LOCKSTEP_HEARTBEAT_S} if args.lockstep
@@ -456,7 +463,8 @@ def _run(args: argparse.Namespace) -> int:
     try:
         client = ControlClient(machine, args.backend, port=args.port, seed=args.seed,
                                data_dir=data_dir, timing=Timing(args.timing, args.interrupt_ms,
-                                                                tuple(args.slip)), **pace)
+                                                                tuple(args.slip)),
+                               speed_mode="reduced" if args.reduced else "automatic", **pace)
     except (ControllerError, OSError, ValueError) as exc:
         raise BadInput(f"cannot start the controller: {exc}") from None
     try:
@@ -586,6 +594,7 @@ def _report(args: argparse.Namespace, result: MoveResult, machine: Machine) -> N
             "status": result.status, "complete": result.complete,
             "unsettled": result.unsettled, "settle": result.settle or None, "kind": plan.kind,
             "title": plan.title, "machine": machine.name, "backend": args.backend,
+            "speed_mode": result.run.meta.get("speed_mode"),
             "samples": result.run.samples, "path_samples": plan.samples,
             "duration_s": result.run.samples * result.run.sample_time_s,
             "approach_s": plan.approach * result.run.sample_time_s,

@@ -31,7 +31,7 @@ from app.event_log import LogEntry, entries_of
 from app.history import History, Sampler
 from app.messages import ClientFailed, ClientReady, ControllerEvent, RunsChanged
 from app.priority import Priority, raise_priority, raise_priority_under, restore
-from app.tabs.tab import TabPage
+from app.tabs.tab import STATUS_HZ, TabPage
 from app.widgets.dialogs import ConfirmScreen
 from app.widgets.header import FaultBanner, StatusHeader
 from app.widgets.key_bar import KeyBar
@@ -51,7 +51,7 @@ if TYPE_CHECKING:
     from app.tabs.positions import PositionsTab
     from app.tabs.runs import RunsTab
 
-HEADER_HZ = 10.0
+HEADER_HZ = STATUS_HZ
 FIRST_TAB = "jog"  # the tab shown at start: the only one built before the first frame
 BUILD_GAP_S = 0.02  # between two tabs built after it: the keys and the header's turn
 STALL_DUPLICATE_S = 2.0  # a stall the Latency tab sees this soon after the controller's notice
@@ -174,6 +174,9 @@ class ServodeskApp(App[None]):
         Binding("ctrl+up", "feed(1)", "feed +10 %", priority=True, key_display="^↑"),
         Binding("ctrl+t", "teach", "teach", tooltip="name where the joints are now "
                 "(Positions tab)"),
+        Binding("ctrl+y", "speed_mode", "T1/AUTO", priority=True, key_display="^Y",
+                tooltip="reduced speed (T1: the tool at most 250 mm/s) at once, or automatic "
+                "(full speed) after asking"),
         *[Binding(f"f{i + 1}", f"show_tab('{name}')", f"{kind.title} tab", show=False,
                   priority=True) for i, (name, kind) in enumerate(TABS)],
         # not priority: in a text field ^K is the field's (delete to the end), not a command
@@ -371,7 +374,8 @@ class ServodeskApp(App[None]):
             client = ControlClient(
                 self.machine, self.backend, port=self.port, seed=self.seed,
                 lockstep=self.lockstep, data_dir=self.data_dir, sim_options=self.sim_options,
-                on_event=self._event_from_thread, **self.client_options)
+                on_event=self._event_from_thread,
+                **{"speed_mode": "reduced", **self.client_options})  # T1 until asked
         except Exception as exc:  # ControllerError, a bad port, no shared memory…
             self._client_started(exc)
             return
@@ -595,6 +599,9 @@ class ServodeskApp(App[None]):
             if self.desk.story.update(self.sampler.latest) and self.fault_kind == "limit":
                 self.action_dismiss_fault()  # the joint has left its limit
         self.header.latest = self.desk.events.latest  # a tab's refusal logs without the app
+        tab = self._active
+        if tab is not None and tab.paced_by_status():  # one screen update for both
+            tab.refresh_live()
 
     # -- tabs ----------------------------------------------------------------------------------
 
@@ -775,7 +782,7 @@ class ServodeskApp(App[None]):
         if self.observe_only:
             self.notify(OBSERVE_ONLY, severity="error", timeout=6)
             return
-        self._command_change(lambda client: client.take_command())
+        self._command_change(_take_in_reduced_speed)
 
     def action_release_command(self) -> None:
         """Give command back: the controller holds; another client may take it."""
@@ -790,6 +797,35 @@ class ServodeskApp(App[None]):
         except ControllerError as exc:
             self.notify(str(exc), severity="error")
         self._link(command=_role(client))
+
+    def action_speed_mode(self) -> None:
+        """Reduced speed (T1) at once; automatic (full speed) only after asking, and only for
+        the commanding client (an observer's switch is refused with who commands)."""
+        client = self.client
+        if client is None or isinstance(self.screen, ConfirmScreen):
+            return
+        if client.speed_mode == "automatic":
+            self._set_speed(client, "reduced")
+            return
+        if not client.commanding:
+            self.notify(f"speed mode: {client.role}; take command first (^K)", severity="error")
+            return
+
+        def answer(yes: bool | None) -> None:
+            if yes:
+                self._set_speed(client, "automatic")
+
+        self.push_screen(ConfirmScreen(
+            "Switch to automatic (full speed)?",
+            "Moves, jogs and go-tos then run at the machine's full speed, no longer held to "
+            "250 mm/s at the tool. Make sure nobody is inside the robot's envelope.",
+            "Automatic"), answer)
+
+    def _set_speed(self, client: ControlClient, mode: str) -> None:
+        try:
+            client.set_speed_mode(mode)
+        except (ControllerError, ValueError) as exc:
+            self.notify(str(exc), severity="error")
 
     def action_dismiss_fault(self) -> None:
         self.fault_kind = ""
@@ -818,6 +854,13 @@ class ServodeskApp(App[None]):
         if action in ("take_command", "release_command"):
             return self._attached is not None
         return True
+
+
+def _take_in_reduced_speed(client: ControlClient) -> None:
+    """Take command of a service's controller and put it in reduced speed (T1), as the TUI
+    starts: the one who commands chooses automatic, after asking."""
+    client.take_command()
+    client.set_speed_mode("reduced")
 
 
 def _role(client: ControlClient | None) -> str:

@@ -207,6 +207,9 @@ class StatusHeader(Horizontal):
             text.append("E-STOP", "bold red")
         else:
             text.append(MODE_NAMES.get(status.mode, str(status.mode)), "bold cyan")
+        # reduced speed (T1) or automatic, the controller's; automatic in the warning colour
+        text.append(*(("  T1 250 mm/s", "bold green") if status.speed_mode == "reduced"
+                      else ("  AUTO", "bold black on yellow")))
         if status.move_total and not status.estop:
             pct = 100.0 * status.move_done / status.move_total
             text.append(f"  move {status.move_id} {pct:3.0f} %", "cyan")

@@ -35,7 +35,10 @@ class Tui:
         # A Pilot-driven app on a loaded two-core machine can pause its client's heartbeat
         # thread past 250 ms, and the controller would (rightly) abort the move. Heartbeat
         # loss is proven in tests/faults and tests/control; here the UI flows are.
-        client_options = {"heartbeat_timeout_s": 2.0, **options.pop("client_options", {})}
+        # The flows proven here run at full speed, as before the TUI started in reduced speed
+        # (T1); tests/app/test_tui_speed_mode.py starts it as an operator does.
+        client_options = {"heartbeat_timeout_s": 2.0, "speed_mode": "automatic",
+                          **options.pop("client_options", {})}
         return ServodeskApp(machine, "sim", None, self.data_dir, lockstep=lockstep,
                             client_options=client_options, **options)
 

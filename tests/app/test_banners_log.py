@@ -103,6 +103,7 @@ def test_banners_and_the_log_tell_the_story_of_a_session(controller_service, tui
             await pilot.press("ctrl+l")
 
             # a limit banner goes once the joint has left the limit, with no ^L
+            client.set_speed_mode("automatic")  # taking command set T1, which refuses duty
             client.jog_joint("updown", -100.0)  # from park (-20°) down to its -27° limit
             await tui.until(lambda: "limit" in banner.message, timeout=20, what="the limit")
             client.jog_joint("updown", 60.0)

@@ -7,6 +7,7 @@ from __future__ import annotations
 import asyncio
 
 from app.tui import attached_app
+from app.widgets.dialogs import ConfirmScreen
 from app.widgets.live_text import LiveText
 from control.rt.layout import Mode
 
@@ -33,6 +34,10 @@ def test_two_attached_tuis_one_commands_the_other_observes(controller_service, t
             await tui.until(lambda: any(f"command is held by {name}; take it first" in text
                                         for text in refused), what="the observer's refusal")
             assert first.client.status().mode == Mode.HOLD  # nothing reached the controller
+            tui.post_key(first, "ctrl+y")  # taking command set T1, which refuses a duty jog
+            await tui.until(lambda: isinstance(first.screen, ConfirmScreen), what="the question")
+            tui.post_key(first, "y")
+            await tui.until(lambda: first.client.speed_mode == "automatic", what="automatic")
             tui.post_key(first, "a")
             await tui.until(lambda: first.client.status().mode == Mode.MANUAL_ACTUATE
                             and first.client.status().duty[0] > 0, what="the commander's jog")

@@ -11,6 +11,9 @@ jog_speed; the same motions in automatic are faster than that, so each check can
 
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
 import threading
 import time
 from collections.abc import Callable
@@ -23,12 +26,13 @@ from control import ControlClient
 from control.link import NotCommanding
 from control.motion.cartesian import cartesian_path
 from control.motion.robot_model import builtin_unimate
+from control.recorder import load_run
 from control.rt.commands import SetSpeedMode
 from control.rt.layout import Mode
 from control.rt.speed_cap import TOOL_SPEED
 from control.rt.wire import Message
 from hw.machine import load_machine
-from tests.conftest import ServiceProcess
+from tests.conftest import ROOT, ServiceProcess
 from tests.control.waiting import wait_until
 
 UNIMATE = load_machine("unimate2000b")
@@ -250,3 +254,20 @@ def test_only_the_commander_switches_the_speed_mode(controller_service: ServiceP
     finally:
         observer.close()
         commander.close()
+
+
+def test_servodesk_move_reduced_runs_in_reduced_speed(tmp_path: Path) -> None:
+    """``servodesk move goto --reduced``: the JSON and the run's metadata say reduced, and the
+    tool stayed within 250 mm/s; without it, automatic and faster (as before)."""
+    targets = ",".join(f"{q:g}" for q in far_from_home())
+    for options, mode in ((["--reduced"], "reduced"), ([], "automatic")):
+        done = subprocess.run([sys.executable, "-m", "app", "move", "goto", "--targets", targets,
+                               "--speed", "1", "--lockstep", "--json", "--data-dir",
+                               str(tmp_path), *options], cwd=ROOT, capture_output=True,
+                              text=True, timeout=120)
+        assert done.returncode == 0, done.stderr
+        report = json.loads(done.stdout)
+        run = load_run(Path(report["run"]["json"]))
+        assert report["speed_mode"] == run.meta["speed_mode"] == mode
+        fastest = tool_speed(run.t, run.desired)
+        assert fastest <= TOOL_SPEED + 1e-6 if mode == "reduced" else fastest > 2 * TOOL_SPEED
