@@ -31,7 +31,7 @@ from app.event_log import LogEntry, entries_of
 from app.history import History, Sampler
 from app.messages import ClientFailed, ClientReady, ControllerEvent, RunsChanged
 from app.priority import Priority, raise_priority, raise_priority_under, restore
-from app.tabs.tab import STATUS_HZ, TabPage
+from app.tabs.tab import TabPage
 from app.widgets.dialogs import ConfirmScreen
 from app.widgets.header import FaultBanner, StatusHeader
 from app.widgets.key_bar import KeyBar
@@ -51,7 +51,7 @@ if TYPE_CHECKING:
     from app.tabs.positions import PositionsTab
     from app.tabs.runs import RunsTab
 
-HEADER_HZ = STATUS_HZ
+HEADER_HZ = 10.0
 FIRST_TAB = "jog"  # the tab shown at start: the only one built before the first frame
 BUILD_GAP_S = 0.02  # between two tabs built after it: the keys and the header's turn
 STALL_DUPLICATE_S = 2.0  # a stall the Latency tab sees this soon after the controller's notice
@@ -599,9 +599,6 @@ class ServodeskApp(App[None]):
             if self.desk.story.update(self.sampler.latest) and self.fault_kind == "limit":
                 self.action_dismiss_fault()  # the joint has left its limit
         self.header.latest = self.desk.events.latest  # a tab's refusal logs without the app
-        tab = self._active
-        if tab is not None and tab.paced_by_status():  # one screen update for both
-            tab.refresh_live()
 
     # -- tabs ----------------------------------------------------------------------------------
 
