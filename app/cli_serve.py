@@ -94,6 +94,8 @@ def run(args: argparse.Namespace) -> int:
     finally:
         if controller is not None:
             _stop(controller)
+    print(f"servodesk serve: stopped ({server.ended} open session"
+          f"{'' if server.ended == 1 else 's'} ended)", file=sys.stderr)
     return 0
 
 

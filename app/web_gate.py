@@ -21,6 +21,7 @@ Each refusal is answered before a session's process starts: 403 with the reason 
 
 from __future__ import annotations
 
+import asyncio
 import hmac
 import ipaddress
 import logging
@@ -130,6 +131,8 @@ class GatedServer(Server):
         self.gate = gate
         self.max_sessions = max_sessions
         self.sessions = 0  # open now; counted on the event loop's one thread
+        self._handlers: set[asyncio.Task[Any]] = set()  # the open sessions' websocket handlers
+        self.ended = 0  # sessions still open when serve stopped, ended by it
 
     async def _make_app(self) -> web.Application:
         app = await super()._make_app()
@@ -139,6 +142,14 @@ class GatedServer(Server):
 
     async def on_startup(self, app: web.Application) -> None:
         """Nothing: serve prints its address, with the token, itself."""
+
+    async def on_shutdown(self, app: web.Application) -> None:
+        """End every session now: its TUI is told to quit and its websocket closes. Left open,
+        aiohttp waits for the browser to go (23 s with one session open)."""
+        self.ended = len(self._handlers)
+        for handler in self._handlers:
+            handler.cancel()
+        await asyncio.gather(*self._handlers, return_exceptions=True)
 
     def initialize_logging(self) -> None:
         super().initialize_logging()
@@ -167,9 +178,13 @@ class GatedServer(Server):
             _refuse(request, problem)
         self._check_room(request)
         self.sessions += 1
+        handler = asyncio.current_task()
+        assert handler is not None  # aiohttp runs each request as a task
+        self._handlers.add(handler)
         try:
             return await super().handle_websocket(request)  # until its TUI has ended
         finally:
+            self._handlers.discard(handler)
             self.sessions -= 1
 
     def _check_room(self, request: web.Request) -> None:

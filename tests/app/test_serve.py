@@ -1,7 +1,8 @@
 """``servodesk serve`` in a real headless Chromium: the tabs render, live values change, an
 observe-only session's jog and take-command are refused (a script attached beside it sees
 the joints still held, no jog) while its E-stop latches, and with ``--command`` the session
-takes command at start and its E-stop latches; serve stops the controller it started.
+takes command at start and its E-stop latches; serve stops the controller it started, and
+ends the sessions still open when it stops.
 
 Its gate (issue 22), with sessions a script opens as the page does: a page or session without
 serve's token, at a foreign Host or from another site's page is refused before any session's
@@ -130,6 +131,7 @@ def test_an_observe_only_session_shows_live_tabs_and_refuses_commands_but_not_es
     finally:
         script.close()
     assert serve.stop() == 0
+    assert "stopped (1 open session ended)" in serve.log.read_text()  # not left to time out
     assert controller_service.proc.poll() is None  # serve attached: the controller runs on
 
 
@@ -147,6 +149,8 @@ def test_with_command_the_session_commands_and_its_estop_latches(served, page, t
         wait_until(lambda: script.status().estop, STEP_S, "the session's E-stop latched")
         page.wait_for("Every valve is closed", STEP_S, after=mark)  # the banner
         assert serve.stop() == 0
+        # serve ended the open session itself: aiohttp, left to it, waited 23 s for the page
+        assert "stopped (1 open session ended)" in serve.log.read_text()
         # the controller serve started is stopped with it
         wait_until(lambda: not script.alive, STEP_S, "the controller stopped with serve")
     finally:
