@@ -127,14 +127,16 @@ def test_a_joint_that_cannot_hold_gets_its_valves_closed(controller, until, meas
 def test_steps_of_any_size_inside_the_limits_complete(controller) -> None:
     """Each joint steps across 90 % of its range and back to the middle: errors far beyond
     any following-error distance, closed at the speed the saturated valve gives, so every
-    step completes (the rule for steps, docs/supervisor.md)."""
+    step completes (the rule for steps, docs/supervisor.md). Each step's path lasts the
+    longest crossing at full duty and 2 s more."""
     client = controller(lockstep=True)
     for j, joint in enumerate(UNIMATE.joints):
         here = np.array(client.status().position)
         low = joint.lower + 0.05 * (joint.upper - joint.lower)
         high = joint.upper - 0.05 * (joint.upper - joint.lower)
+        duration = 0.9 * (joint.upper - joint.lower) / joint.full_duty_speed + 2.0
         for target in (low, high, here[j]):
-            path = moves.step(here, j, target, duration=8.0, machine=UNIMATE)
+            path = moves.step(here, j, target, duration=duration, machine=UNIMATE)
             result = client.wait(client.move(path, kind="step"), timeout=120)
             assert result.complete, (joint.name, target, result.status)
             here = np.array(client.status().position)
