@@ -25,6 +25,7 @@ cannot press a key.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import sys
@@ -213,7 +214,7 @@ def _play(args: argparse.Namespace, client: ControlClient, program: Program, boo
     if not client.status().flags & Flag.HOMED:
         starts_zeroed = isinstance(first, Move) and first.kind == "initialise"
         if args.initialise:
-            print("initialising: driving down to the bottom stop…", file=sys.stderr, flush=True)
+            _say("initialising: driving down to the bottom stop…")
             ok, status = initialise_rig(client)
             if not ok:
                 print(f"servodesk: initialise: {status}", file=sys.stderr)
@@ -228,8 +229,8 @@ def _play(args: argparse.Namespace, client: ControlClient, program: Program, boo
     try:
         runner = Runner(client, checked, on_report=_Progress(estop).report)
         _Operator(runner).start()
-        print(f"running {program.name} ({len(checked.visits)} steps from step {args.start}), "
-              f"run {runner.run_id}; Ctrl+C is the E-stop", file=sys.stderr, flush=True)
+        _say(f"running {program.name} ({len(checked.visits)} steps from step {args.start}), "
+             f"run {runner.run_id}; Ctrl+C is the E-stop")
         runner.run()
         outcome = None
         while outcome is None:
@@ -250,20 +251,31 @@ class _Progress:
 
     def report(self, report: Report) -> None:
         from control.program.model import Wait
-        from control.program.runner import StepDone, StepStarted
+        from control.program.runner import MoveStarted, StepDone, StepStarted
 
         if self.estop.pressed and not self.announced:
             self.announced = True
-            print("servodesk: E-stop: every valve closed and latched; saving the run recorded "
-                  "so far", file=sys.stderr, flush=True)
+            _say("servodesk: E-stop: every valve closed and latched; saving the run recorded so "
+                 "far")
         if isinstance(report, StepStarted):
             step = report.visit.step
             ask = (": press Enter to go on" if isinstance(step, Wait) and step.operator
                    else "")
-            print(f"{report.visit.where}: {step.title}{ask}", file=sys.stderr, flush=True)
+            _say(f"{report.visit.where}: {step.title}{ask}")
+        elif isinstance(report, MoveStarted):
+            handle = report.handle
+            seconds = handle.samples * float(handle.meta["sample_time_s"])
+            _say(f"  moving: {handle.plan.title}, {seconds:.2f} s; Ctrl+C is the E-stop")
         elif isinstance(report, StepDone):
             result = report.result
-            print(f"  {result.status} ({result.seconds:.2f} s)", file=sys.stderr, flush=True)
+            _say(f"  {result.status} ({result.seconds:.2f} s)")
+
+
+def _say(line: str) -> None:
+    """Progress on stderr; a reader gone (``… 2>&1 | head``) stops the progress, not the
+    program."""
+    with contextlib.suppress(OSError):
+        print(line, file=sys.stderr, flush=True)
 
 
 class _Operator(threading.Thread):

@@ -55,6 +55,8 @@ SLOW_PATHS = (
     "tests/app/test_cli_move.py",      # servodesk move: a controller (and an emulator) each
     "tests/app/test_cli_runs.py",      # servodesk runs in subprocesses
     "tests/app/test_cli_plot.py",      # servodesk move --plot and runs show --plot in subprocesses
+    "tests/app/test_cli_program.py",   # servodesk run PROGRAM in subprocesses
+    "tests/control/program/test_runner.py",  # programs run on the control subprocess
     "tests/control/test_client.py",    # the control subprocess, for real
     "tests/control/test_timing.py",    # the thesis's timing on the control subprocess
     "tests/control/test_settle_and_rest.py",  # fast moves and rest on both machines

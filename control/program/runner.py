@@ -13,8 +13,9 @@ Each step is planned from where the joints are when it starts (the check planned
 where the step before was to end; ``control.program.check``), sent, and waited for; its
 ``StepResult`` is kept in ``results`` and reported, as are the start of each step and the
 end of the program, through ``on_report`` (called on the runner's thread: a TUI posts it to
-its own loop). ``run``/``single_step`` start a thread; ``run_next`` runs the next step in the
-caller's thread instead (a caller that drives the program itself).
+its own loop), and ``MoveStarted`` once a step's move is under way. ``run`` and
+``single_step`` start a thread; ``run_next`` runs the next step in the caller's thread
+instead (a caller that drives the program itself).
 
 Every move of a program run carries ``meta["program"]`` in its run's metadata: the
 program's name and file, the program-run id (one per ``Runner``), the step's number and
@@ -25,6 +26,7 @@ the simulator's time, as fast as it runs).
 
 from __future__ import annotations
 
+import contextlib
 import enum
 import secrets
 import threading
@@ -48,6 +50,7 @@ if TYPE_CHECKING:
 
 POLL_S = 0.01  # how often a wait or a move looks at the stop, the E-stop and the clock
 INITIALISE_S = 120.0  # the rig's ram from its top to the bottom stop at 20 % takes ~30 s
+START_WAIT_S = 10.0  # a move the controller took is running within a few ticks
 STOPPED = "stopped by the operator"
 
 
@@ -115,6 +118,14 @@ class StepStarted:
 
 
 @dataclass(frozen=True)
+class MoveStarted:
+    """The step's move is under way on the controller (``handle``: its id, plan, samples)."""
+
+    visit: Visit
+    handle: MoveHandle
+
+
+@dataclass(frozen=True)
 class StepDone:
     result: StepResult
 
@@ -124,7 +135,7 @@ class ProgramEnded:
     outcome: ProgramOutcome
 
 
-Report = StepStarted | StepDone | ProgramEnded
+Report = StepStarted | MoveStarted | StepDone | ProgramEnded
 
 
 def new_run_id() -> str:
@@ -234,6 +245,14 @@ class Runner:
             self._thread.start()
 
     def _loop(self, single: bool) -> None:
+        try:
+            self._steps(single)
+        except Exception as exc:  # a bug here, or in on_report: hold, and end the program
+            with contextlib.suppress(ControllerError):
+                self.client.hold("program failed")
+            self._end(RunnerState.FAILED, f"the runner failed: {exc!r}")
+
+    def _steps(self, single: bool) -> None:
         while True:
             result = self.run_next()
             if result is None or self.state.over:
@@ -307,19 +326,31 @@ class Runner:
         if plan is None:
             return StepResult(visit, "there already", True)
         plan = replace(plan, meta={**plan.meta, "program": self._meta(visit)})
+        started = client.status().time_s
         handle = client.run(plan)
         self._moving = handle
         try:
             if self._stop.is_set():  # stopped while it was being sent
                 client.hold(f"program {STOPPED}")
+            self._started(visit, handle)
             while not handle.done.wait(POLL_S):
                 client.check()
         finally:
             self._moving = None
         result = handle.result
         assert result is not None
+        # the controller's time, not the run's rows: a feed override or hold stretches it
         return StepResult(visit, result.status, result.complete and not self._stop.is_set(),
-                          result.run.samples * result.run.sample_time_s, result)
+                          client.status().time_s - started, result)
+
+    def _started(self, visit: Visit, handle: MoveHandle) -> None:
+        """Report the move once the controller follows it (or has: a short one in lockstep
+        may be over before the first look)."""
+        deadline = time.monotonic() + START_WAIT_S
+        while (not handle.done.is_set() and time.monotonic() < deadline
+               and self.client.status().move_id != handle.move_id):
+            time.sleep(POLL_S / 4)
+        self._report(MoveStarted(visit, handle))
 
     def _meta(self, visit: Visit) -> dict[str, Any]:
         program = self.checked.program

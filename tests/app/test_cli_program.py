@@ -1,0 +1,158 @@
+"""``servodesk run PROGRAM`` in real subprocesses: the two example programs run to the end
+(lockstep) with their runs grouped by the program run; a program that fails its check exits
+2 with every problem and moves nothing; ``--check`` and ``--from``; an operator's wait
+without a terminal is refused; Ctrl+C mid-program is an E-stop with the run saved (exit 1,
+in real time: the signal must land while a move runs)."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from app.cli import main
+
+ROOT = Path(__file__).resolve().parents[2]
+ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
+RUN_S = 180.0  # the pick and place takes ~8 s alone in lockstep; a loaded machine, more
+
+
+def servodesk_run(*args: str, data_dir: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "app", "run", *args, "--data-dir",
+                           str(data_dir)], cwd=ROOT, env=ENV, capture_output=True, text=True,
+                          timeout=RUN_S, stdin=subprocess.DEVNULL)
+
+
+def grouped(run_id: str, data_dir: Path, capsys: pytest.CaptureFixture[str]) -> list[dict]:
+    """``servodesk runs list --program RUN_ID --json``, in this process."""
+    capsys.readouterr()
+    assert main(["runs", "list", "--program", run_id, "--json", "--data-dir",
+                 str(data_dir)]) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+def test_the_rig_sequence_runs_to_the_end(tmp_path: Path,
+                                          capsys: pytest.CaptureFixture[str]) -> None:
+    done = servodesk_run("programs/rig_sequence.toml", "--lockstep", "--json",
+                         data_dir=tmp_path)
+    assert done.returncode == 0, done.stderr
+    report = json.loads(done.stdout)
+    assert (report["program"], report["machine"], report["state"]) == (
+        "rig test sequence", "rig", "done")
+    steps = report["steps"]
+    assert [s["step"] for s in steps] == [1, 2, 3, 4, 5, 6, 7]
+    assert all(s["ok"] for s in steps) and steps[0]["status"].startswith("complete: initialised")
+    assert [s.get("kind") for s in steps] == [None, "step", "step", "ramp", "sine",
+                                              "multi_step", "go_to"]
+    step_up = steps[1]["metrics"][0]  # Figure 3.7's step, 200 → 600 mm
+    assert step_up["final"] == pytest.approx(600.0, abs=0.5)
+    assert step_up["step"] == pytest.approx(400.0, abs=1.0)
+    runs = grouped(report["run_id"], tmp_path, capsys)
+    assert [r["stem"] for r in runs] == [s["run"] for s in steps[1:]]
+
+
+def test_the_pick_and_place_runs_to_the_end_on_the_programs_positions(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    done = servodesk_run("programs/unimate_pick_and_place.toml", "--lockstep", "--json",
+                         data_dir=tmp_path)
+    assert done.returncode == 0, done.stderr
+    report = json.loads(done.stdout)
+    assert report["state"] == "done" and report["steps_run"] == report["steps_planned"] == 18
+    steps = report["steps"]
+    lines = [s for s in steps if s.get("kind") == "cartesian"]
+    assert len(lines) == 8 and all(s["status"] == "complete" for s in lines)
+    assert [s["passes"] for s in steps if s["step"] == 4] == [[1], [2]]
+    pick = steps[2]  # down to the part: ends on the program's "pick" joints
+    assert pick["title"] == "Down to the part"
+    saved = json.loads((tmp_path / f"{pick['run']}.json").read_text())
+    assert saved["meta"]["end_joints"] == [1296.316, 20.0, -2.207, 2.207, 90.0, 0.0]
+    assert saved["meta"]["program"]["run_id"] == report["run_id"]
+    assert len(grouped("pick and place", tmp_path, capsys)) == 14  # its moves: not the waits
+
+
+def test_a_program_that_fails_its_check_exits_2_with_every_problem(tmp_path: Path) -> None:
+    program = tmp_path / "bad.toml"
+    program.write_text('machine = "unimate2000b"\n\n[[step]]\ngo = "nowhere"\n\n[[step]]\n'
+                       'move = "step"\njoint = "Up/Down"\ntarget = 40\n', encoding="utf-8")
+    done = servodesk_run(str(program), "--lockstep", data_dir=tmp_path / "runs")
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.splitlines() == [
+        f"{program} line 4, step 1 (go to 'nowhere'): no taught position 'nowhere' — taught: "
+        "home, park",
+        f"{program} line 9, step 2 (move step): target: Up/Down target 40° is outside "
+        "-27…30° (machine unimate2000b); enter a value in that range",
+        f"servodesk: {program}: 2 problem(s); nothing moved"]
+    assert done.stdout == "" and not (tmp_path / "runs").exists()
+    program.write_text('machine = "rig"\n[[step]\n', encoding="utf-8")
+    broken = servodesk_run(str(program), data_dir=tmp_path / "runs")
+    assert broken.returncode == 2
+    assert broken.stderr.startswith(f"{program} line 2: not valid TOML: ")
+
+
+def test_check_only_and_from_a_step(tmp_path: Path) -> None:
+    done = servodesk_run("programs/unimate_pick_and_place.toml", "--check", "--from", "4",
+                         data_dir=tmp_path)
+    assert done.returncode == 0, done.stderr
+    # pass 1 from step 4 (7 steps), pass 2 whole (8), then home
+    assert done.stdout.strip() == ("programs/unimate_pick_and_place.toml: checked, 12 steps, "
+                                   "16 to run from step 4 on unimate2000b")
+    beyond = servodesk_run("programs/unimate_pick_and_place.toml", "--check", "--from", "13",
+                           data_dir=tmp_path)
+    assert beyond.returncode == 2 and "no step 13: the program has steps 1…12" in beyond.stderr
+
+
+def test_the_rig_not_zeroed_is_refused_unless_the_program_or_the_option_zeroes_it(
+        tmp_path: Path) -> None:
+    done = servodesk_run("programs/rig_sequence.toml", "--from", "2", "--lockstep",
+                         data_dir=tmp_path)
+    assert done.returncode == 2
+    assert "--initialise: the Single-axis hydraulic test rig's encoder is not zeroed" in (
+        done.stderr)
+    assert not list(tmp_path.glob("*.json"))
+
+
+def test_an_operators_wait_without_a_terminal_is_refused(tmp_path: Path) -> None:
+    program = tmp_path / "ask.toml"
+    program.write_text('machine = "unimate2000b"\n[[step]]\nwait = "operator"\n',
+                       encoding="utf-8")
+    done = servodesk_run(str(program), "--check", data_dir=tmp_path)
+    assert done.returncode == 2
+    assert done.stderr.splitlines()[0] == (
+        f"{program} line 2, step 1 (wait for the operator): waits for the operator, and stdin "
+        "is not a terminal: run it from a terminal, or wait = SECONDS")
+
+
+def test_ctrl_c_mid_program_is_an_estop_with_the_run_saved(tmp_path: Path) -> None:
+    program = tmp_path / "long.toml"
+    program.write_text('machine = "unimate2000b"\n[[step]]\nmove = "step"\njoint = "updown"\n'
+                       'target = 5\nduration = 30\nlabel = "long"\n[[step]]\ngo = "home"\n',
+                       encoding="utf-8")
+    proc = subprocess.Popen([sys.executable, "-m", "app", "run", str(program), "--json",
+                             "--data-dir", str(tmp_path)], cwd=ROOT, env=ENV, text=True,
+                            stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE)
+    try:
+        seen = []
+        deadline = time.monotonic() + RUN_S
+        while not any(line.startswith("  moving: ") for line in seen):
+            assert time.monotonic() < deadline and proc.poll() is None, "".join(seen)
+            seen.append(proc.stderr.readline())
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=RUN_S)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 1, "".join(seen) + err
+    assert "E-stop: every valve closed and latched" in err
+    report = json.loads(out)
+    assert report["state"] == "failed" and not report["complete"]
+    [step] = report["steps"]  # home never ran
+    assert step["status"].startswith("estop") and step["run"] is not None
+    assert (tmp_path / f"{step['run']}.json").is_file()
