@@ -23,7 +23,8 @@ against it (issue 25: a 1° step onto 30° latched a feedback fault).
 
 In reduced speed (``control/rt/speed_cap.py``) each sample's wanted velocities (every
 joint at its jog speed toward its goal, or at its streamed velocity) are scaled together so
-that the tool stays within 250 mm/s; a joint already faster slows at its ``max_accel``.
+that the tool stays within 250 mm/s with the margin of ``JOG_TRACKING`` (the hold law follows
+a creeping target in small jerks); a joint already faster slows at its ``max_accel``.
 
 Inputs: the goal per joint (``move_goal``) or its streamed velocity (``stream``), the
 hold target (moved in place). Outputs: the target each tick and the jog velocity per
@@ -35,7 +36,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from control.rt.speed_cap import SpeedCap
+from control.rt.speed_cap import JOG_TRACKING, SpeedCap
 from hw.machine import Joint, Machine
 
 DEADMAN_S = 0.150  # a streamed velocity not renewed within this brakes to 0
@@ -135,7 +136,7 @@ class PositionJog:
                 unscaled[j] = self.wanted[j]
             else:
                 unscaled[j] = self.speed[j] if self.goal[j] != target[j] else 0.0
-        return self.cap.fraction(unscaled, target)
+        return self.cap.fraction(unscaled, target, JOG_TRACKING)
 
     def braking_speed(self, j: int, distance: float) -> float:
         """The fastest joint ``j`` may go with ``distance`` left to stop in."""

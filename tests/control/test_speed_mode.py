@@ -2,11 +2,11 @@
 
 Every speed is measured from what the controller recorded or published, never from what the
 client planned: the tool point's speed from forward kinematics of each row (desired, and
-actual over 0.2 s: an encoder count differenced over one tick reads as a spike, and at a
-jog's few degrees a second the simulated arm moves in small stick-slip jerks, 269 mm/s over
-50 ms where 194 is commanded: benchmarks/speed_mode.py prints both), each joint's from its
-rows. In reduced speed the tool stays within 250 mm/s and each joint within its
-jog_speed; the same motions in automatic are faster than that, so each check can fail.
+actual over 0.2 s: an encoder count differenced over one tick reads as a spike, and a jog's
+status is sampled every few tens of ms of a lockstep controller; benchmarks/speed_mode.py
+prints the actual over 50 ms too), each joint's from its rows. In reduced speed the tool
+stays within 250 mm/s and each joint within its jog_speed; the same motions in automatic are
+faster than that, so each check can fail.
 """
 
 from __future__ import annotations
