@@ -156,3 +156,52 @@ def test_ctrl_c_mid_program_is_an_estop_with_the_run_saved(tmp_path: Path) -> No
     [step] = report["steps"]  # home never ran
     assert step["status"].startswith("estop") and step["run"] is not None
     assert (tmp_path / f"{step['run']}.json").is_file()
+
+
+def test_a_move_not_in_position_ends_the_program_with_exit_1(tmp_path: Path) -> None:
+    """The rig with a goal_time of 0.5 s: a 1,100 mm step whose path lasts 0.3 s cannot be in
+    position 0.5 s after it (the ram does 800 mm/s at most), so that step ends unsettled, the
+    program ends there (park never runs) and exits 1 with the run saved."""
+    machine = tmp_path / "rig.toml"
+    machine.write_text((ROOT / "hw" / "machines" / "rig.toml").read_text(encoding="utf-8")
+                       .replace("goal_time = 2.0", "goal_time = 0.5"), encoding="utf-8")
+    program = tmp_path / "quick.toml"
+    program.write_text('machine = "rig"\n[[step]]\nmove = "initialise"\n[[step]]\nmove = "step"\n'
+                       'target = 1100\nduration = 0.3\n[[step]]\ngo = "park"\n', encoding="utf-8")
+    done = servodesk_run(str(program), "--machine", str(machine), "--lockstep", "--json",
+                         data_dir=tmp_path)
+    assert done.returncode == 1, done.stderr
+    report = json.loads(done.stdout)
+    assert report["state"] == "failed" and [s["step"] for s in report["steps"]] == [1, 2]
+    step = report["steps"][1]
+    assert step["status"].startswith("unsettled") and not step["ok"]
+    assert report["reason"].startswith("step 2 (move step): unsettled")
+    assert (tmp_path / f"{step['run']}.json").is_file()
+
+
+def test_an_operators_wait_goes_on_at_enter_on_a_terminal(tmp_path: Path) -> None:
+    import pty
+
+    program = tmp_path / "ask.toml"
+    program.write_text('machine = "unimate2000b"\n[[step]]\nwait = "operator"\n'
+                       'label = "Load the part"\n[[step]]\nwait = 0.1\n', encoding="utf-8")
+    terminal, stdin = pty.openpty()
+    proc = subprocess.Popen([sys.executable, "-m", "app", "run", str(program), "--lockstep",
+                             "--data-dir", str(tmp_path)], cwd=ROOT, env=ENV, text=True,
+                            stdin=stdin, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    os.close(stdin)
+    try:
+        seen = []
+        deadline = time.monotonic() + RUN_S
+        while "step 1: Load the part: press Enter to go on\n" not in seen:
+            assert time.monotonic() < deadline and proc.poll() is None, "".join(seen)
+            seen.append(proc.stderr.readline())
+        os.write(terminal, b"\n")
+        out, err = proc.communicate(timeout=RUN_S)
+    finally:
+        os.close(terminal)
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 0, "".join(seen) + err
+    assert "program ask, run " in out and ": done (every step completed)" in out
