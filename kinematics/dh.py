@@ -67,6 +67,30 @@ def forward(links: Sequence[DHLink], q: ArrayLike) -> np.ndarray:
     prismatic ones) → ``(..., 4, 4)`` with the position in mm. Raises
     ValueError if ``q`` has the wrong length or a NaN/inf.
     """
+    q = _checked(links, q)
+    t = links[0].transform(q[..., 0])
+    for i, link in enumerate(links[1:], start=1):
+        t = t @ link.transform(q[..., i])
+    return t
+
+
+def frames(links: Sequence[DHLink], q: ArrayLike) -> np.ndarray:
+    """Every frame of the chain in the base frame: ``T_0^0 = I, T_1^0, …, T_n^0`` (eq. 4.03's
+    partial products), for drawing the links.
+
+    ``q: (..., n)`` as ``forward`` → ``(..., n + 1, 4, 4)``; the last frame is ``forward``'s.
+    Raises ValueError as ``forward`` does.
+    """
+    q = _checked(links, q)
+    out = np.empty((*q.shape[:-1], len(links) + 1, 4, 4))
+    out[..., 0, :, :] = np.eye(4)
+    for i, link in enumerate(links):
+        out[..., i + 1, :, :] = out[..., i, :, :] @ link.transform(q[..., i])
+    return out
+
+
+def _checked(links: Sequence[DHLink], q: ArrayLike) -> np.ndarray:
+    """``q`` as a float array of shape ``(..., len(links))``; ValueError says what is wrong."""
     if not links:
         raise ValueError("a DH chain needs at least one link")
     q = np.asarray(q, dtype=float)
@@ -74,7 +98,4 @@ def forward(links: Sequence[DHLink], q: ArrayLike) -> np.ndarray:
         raise ValueError(f"expected joint values of shape (..., {len(links)}), got {q.shape}")
     if not np.isfinite(q).all():
         raise ValueError("joint values must be finite numbers; got NaN or inf")
-    t = links[0].transform(q[..., 0])
-    for i, link in enumerate(links[1:], start=1):
-        t = t @ link.transform(q[..., i])
-    return t
+    return q

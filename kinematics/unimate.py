@@ -72,6 +72,7 @@ from numpy.typing import ArrayLike
 from kinematics import xyz_fixed
 from kinematics.dh import DHLink
 from kinematics.dh import forward as dh_forward
+from kinematics.dh import frames as dh_frames
 
 JOINTS = ("In/Out", "Rotate", "Up/Down", "Bend", "Yaw", "Swivel")
 UNITS = ("mm", "°", "°", "°", "°", "°")
@@ -203,6 +204,16 @@ class Unimate2000B:
         if q.ndim == 0 or q.shape[-1] != 6:
             raise ValueError(f"expected joint vectors of shape (..., 6), got {q.shape}")
         return dh_forward(self.links(), q[..., list(DH_ORDER)])
+
+    def frames(self, q: ArrayLike) -> np.ndarray:
+        """Every link frame ``T_0^0 … T_6^0`` of joint vectors ``q: (..., 6)`` (mm, deg) →
+        ``(..., 7, 4, 4)`` (mm): the base, then frames 1-6 in DH order; the last is
+        ``forward``'s. Origins 2 and 3 coincide with 1 and 4 where a link has no length (the
+        drawing of the arm takes them as they come)."""
+        q = np.asarray(q, dtype=float)
+        if q.ndim == 0 or q.shape[-1] != 6:
+            raise ValueError(f"expected joint vectors of shape (..., 6), got {q.shape}")
+        return dh_frames(self.links(), q[..., list(DH_ORDER)])
 
     def pose(self, q: ArrayLike) -> np.ndarray:
         """Pose of joint vectors ``q: (..., 6)`` → ``(..., 6)``: x, y, z (mm), γ, β, α (deg)."""
