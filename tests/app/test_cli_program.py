@@ -71,40 +71,42 @@ def test_the_pick_and_place_runs_to_the_end_on_the_programs_positions(
     pick = steps[2]  # down to the part: ends on the program's "pick" joints
     assert pick["title"] == "Down to the part"
     saved = json.loads((tmp_path / f"{pick['run']}.json").read_text())
-    assert saved["meta"]["end_joints"] == [1296.316, 20.0, -2.207, 2.207, 90.0, 0.0]
+    assert saved["meta"]["end_joints"] == [1297.56, 20.0, -1.323, 1.323, 90.0, 0.0]
     assert saved["meta"]["program"]["run_id"] == report["run_id"]
     assert len(grouped("pick and place", tmp_path, capsys)) == 14  # its moves: not the waits
 
 
-def test_a_program_that_fails_its_check_exits_2_with_every_problem(tmp_path: Path) -> None:
+def test_a_program_that_fails_its_check_exits_2_with_every_problem(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """In this process: the check comes before any controller starts."""
     program = tmp_path / "bad.toml"
     program.write_text('machine = "unimate2000b"\n\n[[step]]\ngo = "nowhere"\n\n[[step]]\n'
                        'move = "step"\njoint = "Up/Down"\ntarget = 40\n', encoding="utf-8")
-    done = servodesk_run(str(program), "--lockstep", data_dir=tmp_path / "runs")
-    assert done.returncode == 2, done.stderr
-    assert done.stderr.splitlines() == [
+    runs = tmp_path / "runs"
+    assert main(["run", str(program), "--lockstep", "--data-dir", str(runs)]) == 2
+    out, err = capsys.readouterr()
+    assert err.splitlines() == [
         f"{program} line 4, step 1 (go to 'nowhere'): no taught position 'nowhere' — taught: "
         "home, park",
         f"{program} line 9, step 2 (move step): target: Up/Down target 40° is outside "
         "-27…30° (machine unimate2000b); enter a value in that range",
         f"servodesk: {program}: 2 problem(s); nothing moved"]
-    assert done.stdout == "" and not (tmp_path / "runs").exists()
+    assert out == "" and not runs.exists()
     program.write_text('machine = "rig"\n[[step]\n', encoding="utf-8")
-    broken = servodesk_run(str(program), data_dir=tmp_path / "runs")
-    assert broken.returncode == 2
-    assert broken.stderr.startswith(f"{program} line 2: not valid TOML: ")
+    assert main(["run", str(program), "--data-dir", str(runs)]) == 2
+    assert capsys.readouterr().err.startswith(f"{program} line 2: not valid TOML: ")
 
 
-def test_check_only_and_from_a_step(tmp_path: Path) -> None:
-    done = servodesk_run("programs/unimate_pick_and_place.toml", "--check", "--from", "4",
-                         data_dir=tmp_path)
-    assert done.returncode == 0, done.stderr
+def test_check_only_and_from_a_step(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    program = "programs/unimate_pick_and_place.toml"
+    monkeypatch.chdir(ROOT)
+    assert main(["run", program, "--check", "--from", "4", "--data-dir", str(tmp_path)]) == 0
     # pass 1 from step 4 (7 steps), pass 2 whole (8), then home
-    assert done.stdout.strip() == ("programs/unimate_pick_and_place.toml: checked, 12 steps, "
-                                   "16 to run from step 4 on unimate2000b")
-    beyond = servodesk_run("programs/unimate_pick_and_place.toml", "--check", "--from", "13",
-                           data_dir=tmp_path)
-    assert beyond.returncode == 2 and "no step 13: the program has steps 1…12" in beyond.stderr
+    assert capsys.readouterr().out.strip() == (
+        f"{program}: checked, 12 steps, 16 to run from step 4 on unimate2000b")
+    assert main(["run", program, "--check", "--from", "13", "--data-dir", str(tmp_path)]) == 2
+    assert "no step 13: the program has steps 1…12" in capsys.readouterr().err
 
 
 def test_the_rig_not_zeroed_is_refused_unless_the_program_or_the_option_zeroes_it(
