@@ -204,15 +204,16 @@ def _writable(data_dir: Path) -> None:
 
 def _play(args: argparse.Namespace, client: ControlClient, program: Program, book: PositionBook
           ) -> int:
-    from control.program import Runner
+    from control.program import Runner, visits
     from control.program.model import Move
     from control.program.runner import initialise_rig
     from control.rt.layout import Flag
 
     machine = client.machine
-    first = program.step(args.start)
+    first = next(iter(visits(program, args.start)), None)
     if not client.status().flags & Flag.HOMED:
-        starts_zeroed = isinstance(first, Move) and first.kind == "initialise"
+        starts_zeroed = (first is None or (isinstance(first.step, Move)
+                         and first.step.kind == "initialise"))
         if args.initialise:
             _say("initialising: driving down to the bottom stop…")
             ok, status = initialise_rig(client)
@@ -237,7 +238,7 @@ def _play(args: argparse.Namespace, client: ControlClient, program: Program, boo
             outcome = runner.wait(0.05)
     finally:
         estop.restore()
-    _summary(args, runner, outcome, checked, time.monotonic() - started)
+    _summary(args, outcome, checked, time.monotonic() - started)
     saved = all(r.move is None or r.move.files is not None for r in outcome.results)
     return DONE if outcome.complete and saved else ENDED
 
@@ -293,8 +294,8 @@ class _Operator(threading.Thread):
             self.runner.proceed()
 
 
-def _summary(args: argparse.Namespace, runner: Runner, outcome: ProgramOutcome,
-             checked: CheckedProgram, wall_s: float) -> None:
+def _summary(args: argparse.Namespace, outcome: ProgramOutcome, checked: CheckedProgram,
+             wall_s: float) -> None:
     program = checked.program
     steps = [r.figures() for r in outcome.results]
     moved_s = sum(r.seconds for r in outcome.results if r.move is not None)

@@ -254,13 +254,19 @@ class Runner:
 
     def _steps(self, single: bool) -> None:
         while True:
+            while self._paused.is_set() and not self._stop.is_set():
+                time.sleep(POLL_S)  # a feed hold lasts until resume: no new step starts in one
             result = self.run_next()
             if result is None or self.state.over:
                 return
             if single:
                 with self._lock:
+                    paused = self._paused.is_set()
+                    self._paused.clear()  # held between steps: the next one starts unpaused
                     if self.state in (RunnerState.RUNNING, RunnerState.PAUSED):
                         self.state = RunnerState.HELD
+                if paused:
+                    self.client.resume()
                 return
 
     def run_next(self) -> StepResult | None:
@@ -268,6 +274,8 @@ class Runner:
         program (``done``, ``failed``, ``stopped``) after its last step or a step that did not
         complete."""
         visit = self.current
+        if visit is None and not self.state.over:  # nothing to run (comments only)
+            self._end(RunnerState.DONE, "every step completed")
         if visit is None or self.state.over:
             return None
         if self.state in (RunnerState.READY, RunnerState.HELD):
