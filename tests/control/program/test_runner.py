@@ -235,3 +235,23 @@ def test_a_caller_drives_the_steps_itself(robot: ControlClient) -> None:
     assert runner.state is RunnerState.RUNNING and runner.current.index == 1
     assert runner.run_next() is not None and runner.state is RunnerState.DONE
     assert runner.run_next() is None
+
+
+def test_no_step_starts_during_a_feed_hold(robot: ControlClient) -> None:
+    """Held during the operator's wait, which the operator then ends: the go to after it
+    waits for resume."""
+    runner = Runner(robot, checked(robot, '[[step]]\nwait = "operator"\n[[step]]\ngo = "home"\n'
+                                          'speed = 1\n[[step]]\ngo = "park"\nspeed = 1\n'))
+    runner.run()
+    wait_until(lambda: runner.current is not None and runner.current.index == 0, 10,
+               "the operator's wait")
+    runner.pause()
+    runner.proceed()
+    wait_until(lambda: len(runner.results) == 1, 10, "the wait's end")
+    now = robot.status().time_s
+    wait_until(lambda: robot.status().time_s > now + 1.0, 10, "a second held")
+    assert runner.state is RunnerState.PAUSED and len(runner.results) == 1
+    assert not robot.status().moving
+    runner.resume()
+    outcome = runner.wait(END_S)
+    assert outcome is not None and outcome.complete and len(outcome.results) == 3
