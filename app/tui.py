@@ -41,7 +41,7 @@ from control.motion.positions import Position
 from control.motion.robot_model import model_of
 from control.recorder import default_data_dir
 from control.rt.events import Commander, Died, EStop, Fault, Initialised, Notice, Refused
-from control.rt.layout import Mode
+from control.rt.layout import Mode, Status
 from control.timing import Timing
 from hw.machine import Machine, load_machine
 
@@ -185,6 +185,9 @@ class ServodeskApp(App[None]):
         Binding("ctrl+o", "release_command", "release command", priority=True,
                 tooltip="the controller holds; another client may take command"),
         Binding("ctrl+q", "quit", "quit", priority=True),
+        # not priority: in a text field ^A is the field's (to the start)
+        Binding("ctrl+a", "arm_view", "arm view", tooltip="the arm live in 3D on the whole "
+                "screen, with the Moves tab's path and the named positions"),
         # the focus moves as the app takes the key, so the keys typed after it go to the next
         # field (a focus key left to the screen moved it only after the keys behind it)
         Binding("tab", "focus_next", "next field", show=False, priority=True),
@@ -644,6 +647,8 @@ class ServodeskApp(App[None]):
         return self._active is not None and self._active is self.tabs.made_tab(name)
 
     def action_show_tab(self, name: str) -> None:
+        if len(self.screen_stack) > 1 and not isinstance(self.screen, ModalScreen):
+            self.pop_screen()  # the arm's full view (^A): the tab is what was asked for
         self.query_one("#tabs", TabbedContent).active = f"pane-{name}"
         self._activate(name)
 
@@ -835,6 +840,20 @@ class ServodeskApp(App[None]):
             return
         positions = cast("PositionsTab", await self._build("positions"))
         positions.action_teach()
+
+    def action_arm_view(self) -> None:
+        """The arm's view on the whole screen, showing the move running or previewed."""
+        from app.screens.arm import ArmScreen  # loaded when first shown, not before
+
+        if isinstance(self.screen, ArmScreen | ModalScreen):
+            return
+        moves = cast("MovesTab | None", self.tabs.made_tab("moves"))
+        plan = None if moves is None else moves.plan_running or moves.previewed
+        self.push_screen(ArmScreen(self.machine, self.model, self._latest_status, plan,
+                                   self._positions or ()))
+
+    def _latest_status(self) -> Status | None:
+        return self.sampler.latest if self.sampler is not None else None
 
     def action_run_move(self) -> None:
         """Run the move filled in on the Moves tab (whichever widget has the focus)."""

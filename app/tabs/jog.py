@@ -235,6 +235,7 @@ class JogPad(Widget, can_focus=True):
         Binding("m", "mode", "mode"),
         Binding("w", "frame", "frame joint/world/tool"),
         Binding("enter", "hold_here", "hold here"),
+        Binding("p", "arm_view", "arm view"),
     ]
 
     mode: reactive[str] = reactive("duty")
@@ -272,6 +273,9 @@ class JogPad(Widget, can_focus=True):
         velocity: tuple[float, ...]
         frame: str
         repeat: bool
+
+    class ArmViewToggled(Message):
+        """Show the arm's view in place of the table and help, or hide it again."""
 
     @dataclass
     class Stopped(Message):
@@ -342,6 +346,9 @@ class JogPad(Widget, can_focus=True):
     def hold_duty(self) -> float:
         """The hold-to-move duty of the chosen increment (%), capped at HOLD_DUTY_MAX."""
         return min(HOLD_DUTY_MAX, HOLD_DUTY_PER_STEP * self.increment)
+
+    def action_arm_view(self) -> None:
+        self.post_message(self.ArmViewToggled())
 
     def action_increment(self, k: int) -> None:
         self.increment = k
@@ -562,6 +569,21 @@ class JogTab(TabPage):
         self._forget_steps()
         self._release_servo("E-stop")
         self.refresh_live()
+
+    def on_jog_pad_arm_view_toggled(self) -> None:
+        from app.widgets.arm_view import ArmView, named_positions  # loaded when first shown
+
+        views = self.query(ArmView)
+        if views:
+            shown = views.first().display = not views.first().display
+        else:
+            view = ArmView(self.machine, self.model, self.status, id="jog-arm")
+            self.mount(view)
+            view.show_positions(named_positions(self.desk.data_dir, self.machine))
+            shown = True
+        short = self.screen.has_class("-short")  # 80 × 24: in place of the table too
+        for part, hide in (("#jog-help", True), ("#jog-dead-band", True), ("#jog-table", short)):
+            self.query_one(part).display = not (shown and hide)
 
     def on_jog_pad_duty_changed(self, message: JogPad.DutyChanged) -> None:
         # A duty the pad has moved on from (a later key, or let go since: the tab was left,

@@ -59,6 +59,7 @@ from app.tabs.move_forms import (
 )
 from app.tabs.path_forms import PathFileForm, ViaPointsForm
 from app.tabs.tab import TabPage
+from app.widgets.arm_view import ArmView
 from app.widgets.fields import FieldError, NumberField
 from app.widgets.figure_plot import FigurePlot
 from app.widgets.live_text import LiveText
@@ -126,6 +127,7 @@ class MovesTab(TabPage):
         self.last_result: MoveResult | None = None
         self._preview_timer: Timer | None = None
         self.forms: list[MoveForm] = []
+        self.previewed: MovePlan | None = None  # the plan the preview shows (the arm's view's)
 
     def compose(self) -> ComposeResult:
         kinds = forms_for(self.machine)
@@ -147,6 +149,7 @@ class MovesTab(TabPage):
             with Vertical(id="moves-right"):
                 yield Static(id="move-preview-title")
                 yield FigurePlot(id="move-preview")
+                yield ArmView(self.machine, self.model, self.status, id="move-arm")
         with Vertical(id="moves-bottom"):
             yield Static(id="move-error")
             with Horizontal(id="move-run-state"):
@@ -250,7 +253,11 @@ class MovesTab(TabPage):
         except (FieldError, ValueError) as exc:
             title.update(Text(str(exc), "yellow"))
             plot.show(None)
+            self.previewed = None
+            self.query_one(ArmView).show_plan(None)
             return
+        self.previewed = plan
+        self.query_one(ArmView).show_plan(plan.path, plan.kind)
         dt = self.desk.dt
         names = [j.name for j in self.machine.joints]
         if plan.path is not None:
