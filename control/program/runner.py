@@ -73,8 +73,9 @@ class StepResult:
     """How one visit of a step ended: ``status`` (a move's: ``complete``, ``unsettled: …``,
     ``estop: …``, ``aborted: …``; ``ok`` for a wait or a feed, ``there already`` for a go
     to where the joints are; ``error: …`` for a step that could not run), ``ok`` when it
-    completed (in position, for a move), ``seconds`` on the controller's clock, and the
-    move's result for a step that moved."""
+    completed (in position, for a move), ``seconds`` on the controller's clock (a move's: its
+    run's, approach, path and settle, stretched by a feed override or hold), and the move's
+    result for a step that moved."""
 
     visit: Visit
     status: str
@@ -334,7 +335,6 @@ class Runner:
         if plan is None:
             return StepResult(visit, "there already", True)
         plan = replace(plan, meta={**plan.meta, "program": self._meta(visit)})
-        started = client.status().time_s
         handle = client.run(plan)
         self._moving = handle
         try:
@@ -347,9 +347,10 @@ class Runner:
             self._moving = None
         result = handle.result
         assert result is not None
-        # the controller's time, not the run's rows: a feed override or hold stretches it
+        run = result.run  # its time column: the move's, stretched by a feed override or hold
+        seconds = float(run.t[-1] - run.t[0]) if run.samples else 0.0
         return StepResult(visit, result.status, result.complete and not self._stop.is_set(),
-                          client.status().time_s - started, result)
+                          seconds, result)
 
     def _started(self, visit: Visit, handle: MoveHandle) -> None:
         """Report the move once the controller follows it (or has: a short one in lockstep
