@@ -463,15 +463,17 @@ def soak(seconds: float) -> bool:
 
 
 class TmuxApp:
-    """``python -m app`` (from ``root``) in a 160 × 48 tmux window of its own tmux server."""
+    """``python -m app`` (from ``root``) in a 160 × 48 tmux window of its own tmux server; or
+    ``python PEER`` (the bare Textual app beside it)."""
 
-    def __init__(self, root: Path, data_dir: str, name: str) -> None:
+    def __init__(self, root: Path, data_dir: str, name: str, peer: bool = False) -> None:
         self.tmux = [shutil.which("tmux") or "tmux", "-L", f"servodesk-bench-{os.getpid()}",
                      "-f", os.devnull]
         self.name = name
+        what = shlex.quote(str(PEER)) if peer else f"-m app --data-dir {data_dir}"
         # exec: the pane's process is the app itself, whose CPU time /proc gives
         command = (f"cd {shlex.quote(str(root))} && PYTHONPATH={shlex.quote(str(root))} exec "
-                   f"{shlex.quote(sys.executable)} -m app --data-dir {data_dir}")
+                   f"{shlex.quote(sys.executable)} {what}")
         self.started = time.monotonic()
         subprocess.run([*self.tmux, "new-session", "-d", "-s", name, "-x", str(SIZE[0]),
                         "-y", str(SIZE[1]), command], check=True)
@@ -509,7 +511,10 @@ class TmuxApp:
         subprocess.run([*self.tmux, "kill-server"], capture_output=True)
 
 
-LIVE = (" RUN", "mode HOLD")  # the header once the controller's status is shown
+# A live screen: the header once the controller's status is shown (RUN on the lamp, the mode
+# read from the status), not merely the first frame (the lamp says STARTING before the status)
+LIVE = (" RUN", "mode HOLD")
+PEER = Path(__file__).resolve().with_name("textual_peer.py")  # its first frame shows both too
 IDLE_TABS = (("jog", "F1"), ("scope", "F3"), ("status", "F4"))
 IDLE_S = 10.0  # each tab's idle CPU is measured over this long, after IDLE_SETTLE_S
 IDLE_SETTLE_S = 2.0
@@ -526,22 +531,29 @@ def burning(burn: bool):
             burner.wait()
 
 
-def startup(repeats: int, root: Path = ROOT, burn: bool = False) -> list[float]:
-    """Seconds from starting ``python -m app`` in a 160 × 48 tmux window to a live screen."""
+def load() -> str:
+    return f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs"
+
+
+def startup(repeats: int, root: Path = ROOT, burn: bool = False, peer: bool = False
+            ) -> list[float]:
+    """Seconds from starting ``python -m app`` (or the bare peer) in a 160 × 48 tmux window to
+    a live screen."""
     if shutil.which("tmux") is None:
         print("\n5. startup: skipped (no tmux)")
         return []
     times = []
     with tempfile.TemporaryDirectory() as data_dir, burning(burn):
         for k in range(repeats):
-            app = TmuxApp(root, data_dir, f"s{k}")
+            app = TmuxApp(root, data_dir, f"s{k}", peer)
             try:
                 times.append(app.wait_for(*LIVE))
             finally:
                 app.close()
-    print(f"\n5. startup to a live screen (tmux 160×48, {len(times)} starts, "
+    what = "the bare Textual peer's first frame" if peer else "a live screen"
+    print(f"\n5. startup to {what} (tmux 160×48, {len(times)} starts, "
           f"{'beside a CPU burner' if burn else 'no burner'}, {root}): median "
-          f"{statistics.median(times):.2f} s, max {max(times):.2f} s")
+          f"{statistics.median(times):.2f} s, max {max(times):.2f} s; {load()}")
     return times
 
 
@@ -562,7 +574,26 @@ def idle_cpu(root: Path = ROOT) -> dict[str, float]:
         finally:
             app.close()
     print(f"\n9. idle UI CPU (tmux 160×48, {IDLE_S:g} s a tab, {root}): "
-          + ", ".join(f"{name} {pct:.1f} %" for name, pct in cost.items()) + " of a core")
+          + ", ".join(f"{name} {pct:.1f} %" for name, pct in cost.items())
+          + f" of a core; {load()}")
+    return cost
+
+
+def peer_idle_cpu() -> float:
+    """The bare Textual peer's CPU (``benchmarks/textual_peer.py``: the Jog screen's widget
+    count, one line changing ten times a second), % of one core, as ``idle_cpu`` measures."""
+    with tempfile.TemporaryDirectory() as data_dir:
+        app = TmuxApp(ROOT, data_dir, "peer", peer=True)
+        try:
+            app.wait_for(*LIVE)
+            time.sleep(IDLE_SETTLE_S)
+            cpu, wall = app.cpu_s(), time.monotonic()
+            time.sleep(IDLE_S)
+            cost = 100 * (app.cpu_s() - cpu) / (time.monotonic() - wall)
+        finally:
+            app.close()
+    print(f"\n9. bare Textual peer idle (tmux 160×48, {IDLE_S:g} s, {PEER.name}): {cost:.1f} % "
+          f"of a core; {load()}")
     return cost
 
 
@@ -588,19 +619,23 @@ def key_to_screen(presses: int, root: Path = ROOT, burn: bool = False) -> list[f
     print(f"\n10. key to the screen (Jog tab, tmux 160×48, {presses} keys, "
           f"{'beside a CPU burner' if burn else 'no burner'}, {root}): median "
           f"{statistics.median(samples):.0f} ms, p95 {np.percentile(samples, 95):.0f} ms, "
-          f"max {max(samples):.0f} ms")
+          f"max {max(samples):.0f} ms; {load()}")
     return samples
 
 
 def tmux_figures(roots: list[Path], repeats: int, presses: int) -> None:
     """Items 2 and 3 of issue 26 for each of ``roots`` (a worktree of an older commit beside
     this one), one after the other in one run: idle CPU, start quiet and beside a burner,
-    key to the screen quiet and beside a burner."""
+    key to the screen quiet and beside a burner; then the bare Textual peer's idle CPU and
+    start, the base these are to be read against."""
     for root in roots:
         idle_cpu(root)
         for burn in (False, True):
             startup(repeats, root, burn)
             key_to_screen(presses, root, burn)
+    peer_idle_cpu()
+    for burn in (False, True):
+        startup(repeats, ROOT, burn, peer=True)
 
 
 def browser_first_render(repeats: int = 3) -> None:

@@ -16,7 +16,7 @@ from textual.widgets import Static
 
 from app.event_log import LogEntry
 from app.widgets.fitting import clip_words, fit_parts
-from app.widgets.live_text import LiveText
+from app.widgets.live_text import LiveLines, LiveText
 from control.rt.layout import Flag, Mode, Status
 
 MODE_NAMES = {
@@ -109,8 +109,9 @@ class StatusHeader(Horizontal):
     def compose(self) -> ComposeResult:
         with Vertical(id="header-text"):
             yield LiveText(id="header-identity")
-            yield LiveText(id="header-health")
-            yield LiveText(id="header-loop")
+            # drawn by the changed cells: the numbers of the loop line, not the lamp beside it
+            yield LiveLines(id="header-health")
+            yield LiveLines(id="header-loop")
         yield EStopLamp(id="estop-lamp")
 
     def on_mount(self) -> None:

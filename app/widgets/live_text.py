@@ -12,8 +12,10 @@ from __future__ import annotations
 import math
 from collections.abc import Hashable
 
+from rich.cells import cell_len
 from rich.console import Group, RenderableType
 from rich.segment import Segment, Segments
+from rich.style import Style
 from rich.table import Table
 from rich.text import Text
 from textual.geometry import Region
@@ -96,6 +98,9 @@ class LiveLines(LiveText):
         super().__init__(renderable, id=id, classes=classes)
         self._rows: list[Text] | None = None  # the Text shown, line by line
         self._strips: list[Strip | None] = []  # each line drawn, None until it is again
+        # the style its lines are drawn in: found once, not per line (it walks every ancestor,
+        # two thirds of a line's cost), until a stylesheet change reaches the widget
+        self._style: Style | None = None
 
     def show(self, renderable: RenderableType) -> None:
         if not isinstance(renderable, Text):
@@ -111,32 +116,55 @@ class LiveLines(LiveText):
             self.repaints += 1
             self.refresh()
             return
-        changed = [y for y, (old, new) in enumerate(zip(before, rows, strict=True))
-                   if fingerprint(old) != fingerprint(new)]
-        for y in changed:
-            self._strips[y] = None
+        width = self.size.width
+        changed = [Region(x, y, w, 1) for y, (old, new) in enumerate(zip(before, rows, strict=True))
+                   if fingerprint(old) != fingerprint(new)
+                   for x, w in [changed_cells(old, new, width)]]
+        for region in changed:
+            self._strips[region.y] = None
         if changed:
             self.repaints += 1
-            width = self.size.width
-            self.refresh(*(Region(0, y, width, 1) for y in changed))
+            self.refresh(*changed)
 
     def on_resize(self) -> None:
         self._strips = [None] * len(self._strips)
         super().on_resize()
 
+    def notify_style_update(self) -> None:
+        super().notify_style_update()
+        self._style = None
+        self._strips = [None] * len(self._strips)
+
     def render_line(self, y: int) -> Strip:
         if self._rows is None:
             return super().render_line(y)
         width = self.size.width
+        style = self._style
+        if style is None:
+            style = self._style = self.rich_style
         if y >= len(self._rows):
-            return Strip.blank(width, self.rich_style)
+            return Strip.blank(width, style)
         strip = self._strips[y]
         if strip is None or strip.cell_length != width:
             line = self._rows[y]
             strip = (Strip(list(line.render(self.app.console)))
-                     .crop(0, width).adjust_cell_length(width).apply_style(self.rich_style))
+                     .crop(0, width).adjust_cell_length(width).apply_style(style))
             self._strips[y] = strip
         return strip
+
+
+def changed_cells(old: Text, new: Text, width: int) -> tuple[int, int]:
+    """The columns ``(x, width)`` of a line that differ from ``old`` to ``new``: the screen
+    updates the smallest box around every change, and a box narrower than the screen leaves
+    out the widgets beside it (Status' pose and link blocks, the header's lamp). The whole
+    line when the styles changed or a character is not one cell wide."""
+    a, b = old.plain, new.plain
+    if (a == b or old.spans != new.spans or old.style != new.style or len(a) != len(b)
+            or cell_len(a) != len(a) or cell_len(b) != len(b)):
+        return 0, width
+    first = next((i for i, (p, q) in enumerate(zip(a, b, strict=True)) if p != q), len(a))
+    last = next((i for i in range(len(a) - 1, first - 1, -1) if a[i] != b[i]), first)
+    return first, last - first + 1
 
 
 def fingerprint(renderable: RenderableType) -> Hashable | None:
