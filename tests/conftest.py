@@ -87,6 +87,7 @@ SLOW_FIXTURES = {
 }
 # Single tests that start one in their body, or that take seconds without one.
 SLOW_TESTS = (
+    "tests/app/test_arm_view.py::test_an_idle_view_draws_once_and_a_new_pose_draws_again",  # Pilot
     "tests/control/rt/test_seqlock.py::test_reader_never_sees_a_torn_record",  # spawned writer
     "tests/control/rt/test_shm.py::test_orphan_of_a_killed_process_is_cleaned_up",
     "tests/control/test_recorder.py::test_a_read_only_directory_raises_and_leaves_nothing",

@@ -206,10 +206,10 @@ class RigScene:
              supply_mpa: float) -> DotCanvas:
         canvas = DotCanvas(cols, rows)
         w, h = canvas.width_px, canvas.height_px
-        if w < 8 or h < 12:
+        if w < 8 or h < 20:
             return canvas
         lo, hi = self.joint.lower, self.joint.upper
-        top, bottom = 4.0, h - 10.0  # pixel rows of the top of the stroke and the floor
+        top, bottom = 12.0, h - 6.0  # pixel rows of the top of the stroke and the floor
         barrel_top = bottom - (bottom - top) * 0.35
         travel = barrel_top - top - (bottom - top) * 0.12  # the load's rise over the stroke
 
@@ -237,12 +237,9 @@ class RigScene:
             y = row(target)
             canvas.segments(np.array([[barrel[0] - 4, y]]), np.array([[ruler, y]]), JOINT_PATH,
                             gap=1)
-            col, r = canvas.cell(np.array([0.0, y]))
-            canvas.label(0, r, f"target {target:.1f}"[: max(0, int(barrel[0] // 2) - 3)],
-                         JOINT_PATH)
-        col, r = canvas.cell(np.array([ruler + 4, rod_top]))
+            canvas.label(0, 1, f"target {target:.1f} {self.joint.unit}", JOINT_PATH)
         load_text = f" · {self.load_kg:g} kg" if self.load_kg else ""
-        canvas.label(col + 1, r, f"{self.joint.name} {position:.1f} {self.joint.unit}"
+        canvas.label(0, 0, f"{self.joint.name} {position:.1f} {self.joint.unit}"
                      f"{load_text}", JOINT_LEVELS[level])
         supply = f"supply {supply_mpa:.1f} MPa" if math.isfinite(supply_mpa) else "supply –"
         col, r = canvas.cell(np.array([barrel[1] + 2, (barrel_top + bottom) / 2]))

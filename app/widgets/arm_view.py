@@ -106,6 +106,7 @@ class ArmView(Widget, can_focus=True):
         self.rig = None if model is not None else RigScene(joint, joint.plant.get("load_kg"))
         self.plan = Plan()
         self.draws = 0  # frames drawn (the idle view's test counts them)
+        self.polls = 0  # times it looked at the status while on screen
         self._shown_for: tuple[object, ...] | None = None
         self._background: tuple[tuple[object, ...], DotCanvas] | None = None
         self._drawn: Drawn | None = None
@@ -159,6 +160,7 @@ class ArmView(Widget, can_focus=True):
         """Draw if what it would show changed (and it is on screen)."""
         if not self.is_mounted or not self.is_on_screen or self.size.area == 0:
             return
+        self.polls += 1
         status = self.source()
         position = tuple(status.position) if status is not None else None
         desired = tuple(status.desired) if status is not None else None
