@@ -140,6 +140,7 @@ class ModeMachine:
         self.jog = PositionJog(self.machine, self.dt, self.speed)
         self.feed = FeedRate(self.machine, self.dt)
         self.path_velocity = [0.0] * self.machine.n_joints
+        self.peak_velocity = [0.0] * self.machine.n_joints  # reduced speed's (reduced_cap)
         self.position = self.encoders.position  # the same list: read once a tick, shared
         self.desired = [0.0] * n
         self.duty = [0.0] * n
@@ -364,14 +365,23 @@ class ModeMachine:
             path_velocity[j] = (b - a) / self.dt
             desired[j] = a + frac * (b - a)
         if self.sample_start:
-            reduced = self.speed.reduced
-            self.feed.advance(path_velocity, self.speed.fraction(path_velocity, desired)
-                              if reduced else 1.0)
+            self.feed.advance(path_velocity, self.reduced_cap(cells, k, ahead)
+                              if self.speed.reduced else 1.0)
         rate = self.feed.rate
         for j in range(n):
             velocity[j] = rate * path_velocity[j]
         self.transmission.actuators_from_joints(velocity, self.actuator_velocity)
         self.closed_loop(desired, self.actuator_velocity)
+
+    def reduced_cap(self, cells: memoryview, k: int, ahead: int) -> float:
+        """The fraction of the path's speed reduced speed allows here: from the faster of this
+        segment and the next (this tick's advance may reach into it), per joint."""
+        n, path_velocity, peak = self.n, self.path_velocity, self.peak_velocity
+        beyond = ahead + n if k + 1 < self.move.layout.samples - 1 else ahead
+        for j in range(n):
+            later = abs(cells[beyond + j] - cells[ahead + j]) / self.dt
+            peak[j] = max(abs(path_velocity[j]), later)
+        return self.speed.fraction(peak, self.desired)
 
     def row_trusted(self, move: ActiveMove, cells: memoryview, row: int,
                     previous: Sequence[float] | None = None) -> bool:

@@ -24,6 +24,7 @@ import pytest
 
 from control import ControlClient
 from control.link import NotCommanding
+from control.motion import form_plans
 from control.motion.cartesian import cartesian_path
 from control.motion.robot_model import builtin_unimate
 from control.recorder import load_run
@@ -99,6 +100,15 @@ def test_a_fast_joint_move_is_slowed_in_reduced_speed_and_not_in_automatic(
         assert reduced.run.meta["speed_mode"] == "reduced"
         assert "speed_mode_changes" not in reduced.run.meta
         assert_reduced(figures(reduced.run.t, reduced.run.desired, reduced.run.actual))
+        # In/Out alone: its jog speed binds, and is measured exactly (no bound between): the
+        # feed is held to the cap as the path speeds up, not brought down to it at its accel
+        here = np.array(robot.status().position)
+        ramp = form_plans.ramp(UNIMATE, here, INOUT, UNIMATE.joints[INOUT].upper - 100.0, 1.0,
+                               dt=robot.dt)  # 240 mm/s, reached at In/Out's max_accel
+        alone = robot.wait(robot.run(ramp), 120)
+        fastest = joint_speed(alone.run.t, alone.run.desired)[INOUT]
+        print(f"In/Out alone: {fastest:.2f} mm/s, its jog speed {JOG_SPEED[INOUT]:g}")
+        assert JOG_SPEED[INOUT] * 0.99 < fastest <= JOG_SPEED[INOUT] + 1e-6
         robot.set_speed_mode("automatic")
         assert robot.status().speed_mode == "automatic"
         automatic = robot.wait(robot.go_to(UNIMATE.home, speed=1.0), 120)
