@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from control.program import Program, parse_program, read_program
@@ -73,6 +73,7 @@ def _toml(tree: object, table: str = "step") -> str:
                                                        for c in children)
 
 
+@settings(deadline=None)  # a loaded two-core machine stalls any example now and then
 @given(st.lists(trees, min_size=1, max_size=3), text)
 def test_programs_of_any_shape_read_back_the_same(steps: list, label: str) -> None:
     source = 'machine = "rig"\n' + "".join(_toml(t) for t in steps)
