@@ -13,6 +13,7 @@ from control.client import ControlClient, Event
 from hw.machine import Machine
 
 Result = ControlClient | Exception  # the client, or why it did not start
+TUI_CLIENT = {"speed_mode": "reduced"}  # the TUI's controller starts in T1, until asked
 
 
 class ControllerStart:
@@ -37,7 +38,7 @@ class ControllerStart:
         result: Result
         try:
             result = ControlClient(machine, backend, port=port, seed=seed, data_dir=data_dir,
-                                   on_event=self._event, **options)
+                                   on_event=self._event, **{**TUI_CLIENT, **options})
         except Exception as exc:  # ControllerError, a bad port, no shared memory…
             result = exc
         with self._lock:

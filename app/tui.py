@@ -25,10 +25,10 @@ from textual.binding import Binding
 from textual.screen import ModalScreen
 from textual.widgets import Select, TabbedContent, TabPane
 
-from app.controller_start import ControllerStart
+from app.controller_start import TUI_CLIENT, ControllerStart
 from app.desk import Desk
 from app.event_log import LogEntry, entries_of
-from app.history import History, Sampler
+from app.history import SAMPLE_HZ, History, Sampler
 from app.messages import ClientFailed, ClientReady, ControllerEvent, RunsChanged
 from app.priority import Priority, raise_priority, raise_priority_under, restore
 from app.tabs.tab import TabPage
@@ -52,6 +52,10 @@ if TYPE_CHECKING:
     from app.tabs.runs import RunsTab
 
 HEADER_HZ = 10.0
+# the history's rate while the Scope is hidden: its past is then drawn from 50 samples a
+# second (two or more a column of a 10 s window), and the sampler's reads, 2 % of a core at
+# SAMPLE_HZ, cost a quarter of that on the other tabs
+HIDDEN_SCOPE_HZ = 50.0
 FIRST_TAB = "jog"  # the tab shown at start: the only one built before the first frame
 BUILD_GAP_S = 0.02  # between two tabs built after it: the keys and the header's turn
 STALL_DUPLICATE_S = 2.0  # a stall the Latency tab sees this soon after the controller's notice
@@ -85,6 +89,7 @@ TABS: tuple[tuple[str, TabKind], ...] = (
     ("identify", TabKind("Identify", "app.tabs.identify", "IdentifyTab")),
     ("positions", TabKind("Positions", "app.tabs.positions", "PositionsTab")),
     ("log", TabKind("Log", "app.tabs.log", "LogTab")),
+    ("program", TabKind("Program", "app.tabs.program", "ProgramTab")),
 )
 FAULT_ADVICE = {
     "limit": "Drive it back with the opposite jog key, or run a move that stays inside the "
@@ -378,7 +383,7 @@ class ServodeskApp(App[None]):
                 self.machine, self.backend, port=self.port, seed=self.seed,
                 lockstep=self.lockstep, data_dir=self.data_dir, sim_options=self.sim_options,
                 on_event=self._event_from_thread,
-                **{"speed_mode": "reduced", **self.client_options})  # T1 until asked
+                **{**TUI_CLIENT, **self.client_options})
         except Exception as exc:  # ControllerError, a bad port, no shared memory…
             self._client_started(exc)
             return
@@ -423,6 +428,7 @@ class ServodeskApp(App[None]):
             return
         client = message.client
         self.sampler = Sampler(client.status, self.history)
+        self._pace_sampler()
         self.sampler.start()
         self._link(state="live", command=_role(client))
         if self._estop_pending:
@@ -624,12 +630,19 @@ class ServodeskApp(App[None]):
             self.call_next(self._build_and_show, name)
             return
         self._active = tab
+        self._pace_sampler()
         tab.shown()
         self.refresh_bindings()
         self.call_after_refresh(self._focus_active)
         if name not in self._settled:
             self._settled.add(name)
             self.set_timer(SETTLE_S, self._freeze_long_lived)
+
+    def _pace_sampler(self) -> None:
+        """Sample the status at full rate while the Scope shows, slower otherwise."""
+        if self.sampler is not None:
+            scope = self._active is not None and self._active is self.tabs.made_tab("scope")
+            self.sampler.period = 1.0 / (SAMPLE_HZ if scope else HIDDEN_SCOPE_HZ)
 
     def _focus_active(self) -> None:
         """Focus where the visible tab's keys work, once its pane is displayed (a hidden
