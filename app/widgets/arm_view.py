@@ -208,11 +208,12 @@ class ArmView(Widget, can_focus=True):
             self._background = (key, self.arm.background(projection, cols, rows, self.plan,
                                                          reduced))
         canvas = self._background[1].copy()
-        if position is None:
-            return canvas
-        if desired is not None and not np.allclose(desired, position, atol=1e-3):
+        # no target (manual actuation: NaN) is no ghost; a ghost where the arm is, none either
+        if (desired is not None and position is not None and np.isfinite(desired).all()
+                and not np.allclose(desired, position, atol=1e-3)):
             self.arm.arm(canvas, projection, desired, ghost=True)
-        self.arm.arm(canvas, projection, position)
+        if position is not None and np.isfinite(position).all():
+            self.arm.arm(canvas, projection, position)
         return canvas
 
     def _caption_strip(self, position: tuple[float, ...] | None, width: int) -> Strip:

@@ -11,7 +11,7 @@ import numpy as np
 from textual.app import App, ComposeResult
 from textual.widgets import OptionList, TextArea
 
-from app.plotting.arm_scene import GHOST, JOINT_LEVELS, JOINT_PATH
+from app.plotting.arm_scene import GHOST, JOINT_LEVELS, JOINT_PATH, LINK
 from app.screens.arm import ArmScreen
 from app.widgets.arm_view import ArmView
 from control.motion.robot_model import builtin_unimate
@@ -25,7 +25,8 @@ BRAILLE = range(0x2801, 0x2900)
 
 
 def status(position: tuple[float, ...], desired: tuple[float, ...] | None = None) -> Status:
-    """A status record as the controller publishes it, at ``position``."""
+    """A status record as the controller publishes it, at ``position`` (``desired`` NaN in
+    manual actuation, where nothing is targeted)."""
     zeros = (0.0,) * 6
     return Status(tick=1, time_s=0.0, wall_ns=0, mode=Mode.HOLD, flags=Flag(0), move_id=0,
                   move_done=0, move_total=0, late_last_us=0.0, late_max_us=0.0, overruns=0,
@@ -77,8 +78,12 @@ def test_an_idle_view_draws_once_and_a_new_pose_draws_again() -> None:
             await Tui.until(lambda: view.draws == 2, what="the new pose drawn")
             await pilot.pause()
             assert cells_styled(view, GHOST) > 0, "no ghost of the desired pose"
+            now["status"] = status(moved, desired=(float("nan"),) * 6)  # manual: no target
+            await Tui.until(lambda: view.draws == 3, what="the pose without a target drawn")
+            await pilot.pause()
+            assert cells_styled(view, GHOST) == 0 and cells_styled(view, LINK) > 0
             await pilot.press("f")  # the keys need the focus: the view is the only focusable
-            await Tui.until(lambda: view.view.name == "front" and view.draws == 3,
+            await Tui.until(lambda: view.view.name == "front" and view.draws == 4,
                             what="the front view drawn")
 
     asyncio.run(scenario())
