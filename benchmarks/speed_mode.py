@@ -1,7 +1,7 @@
 """Reduced speed (T1) against automatic: the largest tool and joint speeds of manual motions.
 
-Run: ``PYTHONPATH=. python benchmarks/speed_mode.py`` (about 20 s; the lockstep simulated
-Unimate 2000B).
+Run: ``PYTHONPATH=. python benchmarks/speed_mode.py`` (about 40 s; the simulated Unimate 2000B,
+in lockstep but for the loop's cost).
 
 Each manual motion runs once in each mode, from home: a go-to at full speed fraction (In/Out to
 1700 mm, Rotate to 40°, the Positions tab's "go"), a Cartesian line of 600 mm sideways as fast
@@ -11,8 +11,9 @@ reduced and automatic side by side, the largest speed of the tool point from for
 kinematics of the desired rows (what the controller commands) and of the actual ones over
 50 ms and 0.2 s (the arm's own; over one tick an encoder count reads as a spike), and the
 largest joint speed as a fraction of that joint's jog speed (desired). Jogs are measured
-from the status, sampled as often as it can be read. Then what a batch forward kinematics of a
-60 s path costs (why the controller bounds the tool's speed instead, control/rt/speed_cap.py).
+from the status, sampled as often as it can be read. Then the loop's compute per tick during
+a go-to in each mode (in real time), and what a batch forward kinematics of a 60 s path costs
+(why the controller bounds the tool's speed instead, control/rt/speed_cap.py).
 """
 
 from __future__ import annotations
@@ -50,14 +51,21 @@ def joint_fraction(t: np.ndarray, q: np.ndarray) -> float:
     return float((np.abs(np.diff(q, axis=0)) / np.diff(t)[:, None] / JOG_SPEED).max())
 
 
-def sampled(robot: ControlClient, start: object) -> tuple[np.ndarray, ...]:
-    """Status rows from ``start()`` until the hold target has stood still 0.3 s."""
+def sampled(robot: ControlClient, start: object,
+            stream: tuple[list[float], float] | None = None) -> tuple[np.ndarray, ...]:
+    """Status rows from ``start()`` until the hold target has stood still 0.3 s; ``stream``:
+    a velocity jog ``(velocity, seconds)`` renewed from this loop every 20 ms of controller
+    time (a lockstep controller's time runs fast: a thread could miss the 150 ms deadman)."""
     rows: list[tuple[float, tuple[float, ...], tuple[float, ...]]] = []
     start()
+    began = sent = robot.status().time_s
     still = None
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline:
         s = robot.status()
+        if stream and s.time_s - began < stream[1] and s.time_s - sent >= 0.02:
+            robot.jog_velocity(stream[0])
+            sent = s.time_s
         if rows and s.time_s == rows[-1][0]:
             continue
         if rows and s.desired == rows[-1][1] and s.time_s > rows[0][0] + 0.2:
@@ -70,18 +78,8 @@ def sampled(robot: ControlClient, start: object) -> tuple[np.ndarray, ...]:
     return tuple(np.array([r[i] for r in rows]) for i in range(3))
 
 
-def stream(robot: ControlClient, velocity: list[float], seconds: float) -> None:
-    start = robot.status().time_s
-    while (now := robot.status().time_s) - start < seconds:
-        robot.jog_velocity(velocity)
-        while robot.status().time_s < now + 0.05:
-            time.sleep(0.001)
-
-
 def motions(robot: ControlClient) -> dict[str, tuple[np.ndarray, ...]]:
     """Each manual motion's ``(t, desired, actual)``, each from home."""
-    import threading
-
     home = np.array(UNIMATE.home)
     far = home.copy()
     far[INOUT], far[ROTATE] = 1700.0, 40.0
@@ -99,10 +97,28 @@ def motions(robot: ControlClient) -> dict[str, tuple[np.ndarray, ...]]:
     out["position jog"] = sampled(robot, lambda: robot.jog_position(ROTATE, 20.0))
     velocity = [0.0] * UNIMATE.n_joints
     velocity[ROTATE] = -JOG_SPEED[ROTATE]
-    thread = threading.Thread(target=stream, args=(robot, velocity, 1.5))
-    out["velocity jog"] = sampled(robot, thread.start)
-    thread.join()
+    out["velocity jog"] = sampled(robot, lambda: robot.jog_velocity(velocity), (velocity, 1.5))
     return out
+
+
+def loop_cost() -> str:
+    """The loop's mean compute per tick over the go-to in each mode, in real time (lockstep's
+    clock does not count compute)."""
+    far = np.array(UNIMATE.home)
+    far[INOUT], far[ROTATE] = 1700.0, 40.0
+    cost = {}
+    with tempfile.TemporaryDirectory() as data, \
+            ControlClient("unimate2000b", data_dir=data) as robot:
+        robot.wait(robot.go_to(UNIMATE.home, speed=1.0), 60)
+        for mode, target in (("automatic", far), ("reduced", UNIMATE.home)):
+            robot.set_speed_mode(mode)
+            before = robot.status()
+            robot.wait(robot.go_to(target, speed=1.0), 120)
+            after = robot.status()
+            cost[mode] = (after.compute_total_s - before.compute_total_s) / (after.tick
+                                                                            - before.tick)
+    return (f"loop compute per tick during a go-to, real time: reduced "
+            f"{cost['reduced'] * 1e6:.0f} µs | automatic {cost['automatic'] * 1e6:.0f} µs")
 
 
 def main() -> None:
@@ -127,6 +143,7 @@ def main() -> None:
         joints = " | ".join(f"{joint_fraction(*figures[m][name][:2]):6.2f}"
                             for m in ("reduced", "automatic"))
         print(f"{name:16}{cells[0]:>22}{cells[1]:>22}{cells[2]:>22}{joints:>18}")
+    print(loop_cost())
     q = np.tile(np.array(UNIMATE.home), (60_000, 1)) + np.random.default_rng(0).random((60_000, 6))
     MODEL.pose(q[:10])
     took = []

@@ -14,7 +14,6 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
-import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -140,21 +139,28 @@ def test_a_fast_cartesian_line_is_slowed_in_reduced_speed_and_not_in_automatic(
         assert fast["tool desired"] > 2 * TOOL_SPEED and fast["tool actual"] > 2 * TOOL_SPEED
 
 
-def sampled(robot: ControlClient, moving: Callable[[], None], until_still: float = 0.3
+def sampled(robot: ControlClient, start: Callable[[], None],
+            stream: tuple[list[float], float] | None = None
             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The status's time, desired and position as often as it can be read, from ``moving()``
-    until the hold target has not moved for ``until_still`` s of the controller's time."""
+    """The status's time, desired and position as often as it can be read, from ``start()``
+    until the hold target has stood still 0.3 s of the controller's time. ``stream``: a
+    velocity jog ``(velocity, seconds)`` renewed from this loop every 20 ms of the controller's
+    time for that long (its deadman is 150 ms; a lockstep controller's time runs fast)."""
     rows: list[tuple[float, tuple[float, ...], tuple[float, ...]]] = []
-    moving()
+    start()
+    began = sent = robot.status().time_s
     deadline = time.monotonic() + 60
     still_since = None
     while time.monotonic() < deadline:
         status = robot.status()
+        if stream and status.time_s - began < stream[1] and status.time_s - sent >= 0.02:
+            robot.jog_velocity(stream[0])
+            sent = status.time_s
         if rows and status.time_s == rows[-1][0]:
             continue
         if rows and status.desired == rows[-1][1] and status.time_s > 0.2 + rows[0][0]:
             still_since = still_since or status.time_s
-            if status.time_s - still_since > until_still:
+            if status.time_s - still_since > 0.3:
                 break
         else:
             still_since = None
@@ -163,38 +169,21 @@ def sampled(robot: ControlClient, moving: Callable[[], None], until_still: float
     return t, np.array([r[1] for r in rows]), np.array([r[2] for r in rows])
 
 
-def streamed(robot: ControlClient, velocity: list[float], seconds: float,
-             threads: list[threading.Thread]) -> Callable[[], None]:
-    """A velocity jog streamed every 50 ms of the controller's time for ``seconds`` of it (a
-    thread, added to ``threads``: the sampling goes on meanwhile)."""
-
-    def stream() -> None:
-        start = robot.status().time_s
-        while (now := robot.status().time_s) - start < seconds:
-            robot.jog_velocity(velocity)
-            wait_until(lambda: robot.status().time_s >= now + 0.05, 10, "50 ms of the controller")
-
-    thread = threading.Thread(target=stream, daemon=True)
-    threads.append(thread)
-    return thread.start
-
-
 @pytest.mark.parametrize("jog", ["position", "velocity"])
 def test_jogs_are_slowed_in_reduced_speed_and_not_in_automatic(tmp_path: Path, jog: str) -> None:
     """Rotate jogged at its jog speed with the arm half out: the tool's arc is faster than
     250 mm/s in automatic (15°/s at about 1.5 m), within it in reduced."""
-    velocity = [0.0] * UNIMATE.n_joints
     measured = {}
-    threads: list[threading.Thread] = []
     with client(tmp_path, "reduced") as robot:
         for mode, sign in (("reduced", 1.0), ("automatic", -1.0)):
             robot.set_speed_mode(mode)
-            velocity[ROTATE] = sign * JOG_SPEED[ROTATE]
-            start = (lambda s=sign: robot.jog_position(ROTATE, s * 20.0)) if jog == "position" \
-                else streamed(robot, velocity, 1.5, threads)
-            measured[mode] = figures(*sampled(robot, start))
-            for thread in threads:
-                thread.join()
+            if jog == "position":
+                rows = sampled(robot, lambda s=sign: robot.jog_position(ROTATE, s * 20.0))
+            else:
+                velocity = [0.0] * UNIMATE.n_joints
+                velocity[ROTATE] = sign * JOG_SPEED[ROTATE]
+                rows = sampled(robot, lambda v=velocity: robot.jog_velocity(v), (velocity, 1.5))
+            measured[mode] = figures(*rows)
     assert_reduced(measured["reduced"])
     print("automatic", measured["automatic"])
     assert measured["automatic"]["tool desired"] > 1.4 * TOOL_SPEED
