@@ -17,9 +17,12 @@ from pathlib import Path
 import pytest
 
 from app.cli import main
+from control.motion.positions import PositionBook, positions_file, save_positions
+from hw.machine import load_machine
 
 ROOT = Path(__file__).resolve().parents[2]
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
+UNIMATE = load_machine("unimate2000b")
 RUN_S = 180.0  # the pick and place takes ~8 s alone in lockstep; a loaded machine, more
 
 
@@ -92,6 +95,12 @@ def test_a_program_that_fails_its_check_exits_2_with_every_problem(
         "-27…30° (machine unimate2000b); enter a value in that range",
         f"servodesk: {program}: 2 problem(s); nothing moved"]
     assert out == "" and not runs.exists()
+    # a position taught in the data directory's positions file (the Positions tab's) counts
+    book = PositionBook(UNIMATE).teach("nowhere", UNIMATE.home)
+    save_positions(book, positions_file(runs, UNIMATE))
+    assert main(["run", str(program), "--check", "--data-dir", str(runs)]) == 2
+    assert [line.split(": ", 1)[0] for line in capsys.readouterr().err.splitlines()] == [
+        f"{program} line 9, step 2 (move step)", "servodesk"]
     program.write_text('machine = "rig"\n[[step]\n', encoding="utf-8")
     assert main(["run", str(program), "--data-dir", str(runs)]) == 2
     assert capsys.readouterr().err.startswith(f"{program} line 2: not valid TOML: ")
