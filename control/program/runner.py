@@ -387,7 +387,10 @@ class Runner:
                 return StepResult(visit, "ok", True, waited)
             if not step.operator and waited >= step.seconds:
                 return StepResult(visit, "ok", True, waited)
-            self._go_on.wait(POLL_S) if step.operator else time.sleep(POLL_S)
+            if step.operator:
+                self._go_on.wait(POLL_S)
+            else:
+                time.sleep(POLL_S)
 
     def _initialise(self, visit: Visit) -> StepResult:
         started = self.client.status().time_s
