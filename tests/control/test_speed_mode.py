@@ -194,7 +194,7 @@ def test_switching_to_reduced_mid_move_slows_it_without_a_jump(tmp_path: Path) -
     path (the desired velocity continuous, within the joints' acceleration), then stays
     within the reduced limits; the run says when. Automatic is refused while it moves."""
     with client(tmp_path, "automatic") as robot:
-        handle = robot.go_to(far_from_home(), speed=1.0)
+        handle = robot.go_to(far_from_home(), speed=0.5)  # long enough to switch within
         wait_until(lambda: robot.status().move_done > robot.status().move_total // 3, 60,
                    "a third of the move")
         robot.set_speed_mode("reduced")
