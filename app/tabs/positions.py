@@ -203,6 +203,15 @@ class PositionsTab(TabPage):
         name = self.selected_name()
         return None if name is None else self.book.find(name)
 
+    def go_speed(self) -> float:
+        """The speed fraction typed for a go-to (a program's go to takes it); 0.5 while what
+        is typed is not one."""
+        try:
+            speed = self.query_one("#positions-speed", NumberField).value()
+        except FieldError:
+            return 0.5
+        return 0.5 if speed is None else speed
+
     def refresh_live(self) -> None:
         status = self.status()
         here = self.query_one("#positions-here", LiveText)

@@ -5,12 +5,14 @@ joints 1–3 then wrist joints 4–6, fewer at a time on a small screen) and
 ``plotdata.m`` (one joint's error, response, duty and estimated velocity). A plot
 is exported as an SVG drawn from the run's data, under ``plots/`` next to the
 runs. Runs the recorder could not save are kept in memory and listed first, so
-they can be saved elsewhere.
+they can be saved elsewhere. The moves of one program run (``meta.program``:
+``control/program/runner.py``) are listed together, in the order the program made them,
+each named by its program, run id and step.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import ClassVar
 
@@ -26,6 +28,7 @@ from app.desk import Desk
 from app.plotting.figure import Figure
 from app.plotting.run_plot import export, steady_velocity, view_figure, view_slug, views
 from app.plotting.strips import panel_size
+from app.run_groups import grouped, program_cell, program_of
 from app.run_text import local_time, run_lines
 from app.tabs.tab import TabPage
 from app.widgets.figure_plot import FigurePlot
@@ -48,9 +51,12 @@ class RunsTab(TabPage):
 
     @dataclass
     class Listed(Message, bubble=False):
-        """The runs in the data directory, newest first (from the listing worker)."""
+        """The runs in the data directory, newest first, a program run's together in its
+        order (from the listing worker); ``programs``: each program run's ``meta.program``
+        by the run's stem."""
 
         infos: list[RunInfo]
+        programs: dict[str, dict] = field(default_factory=dict)
 
     @dataclass
     class Opened(Message, bubble=False):
@@ -90,7 +96,7 @@ class RunsTab(TabPage):
 
     def on_mount(self) -> None:
         self.query_one("#runs-table", DataTable).add_columns("started", "kind", "status",
-                                                             "samples")
+                                                             "samples", "program")
         self.query_one("#runs-save").display = False
 
     def focus_main(self) -> None:
@@ -119,7 +125,9 @@ class RunsTab(TabPage):
 
     @work(thread=True, exclusive=True, group="runs-list")
     def _list(self) -> None:
-        self.post_message(self.Listed(list_runs(self.desk.data_dir)))
+        infos = list_runs(self.desk.data_dir)
+        programs = {i.files.stem: p for i in infos if (p := program_of(i)) is not None}
+        self.post_message(self.Listed(grouped(infos, programs), programs))
 
     def on_runs_tab_listed(self, message: Listed) -> None:
         infos = self.infos = message.infos
@@ -127,14 +135,17 @@ class RunsTab(TabPage):
         table.clear()
         for i, run in enumerate(self.unsaved):
             table.add_row(local_time(run.start_time), run.kind,
-                          Text("NOT SAVED", "bold red"), str(run.samples), key=f"unsaved-{i}")
+                          Text("NOT SAVED", "bold red"), str(run.samples),
+                          program_cell(run.meta.get("program")), key=f"unsaved-{i}")
         for info in infos:
             if info.damaged:
-                table.add_row("?", info.files.stem, Text("damaged", "red"), "", key=info.files.stem)
+                table.add_row("?", info.files.stem, Text("damaged", "red"), "", "",
+                              key=info.files.stem)
                 continue
             style = "green" if info.status == "complete" else "yellow"
             table.add_row(local_time(info.start_time), info.kind, Text(info.status[:28], style),
-                          str(info.samples), key=info.files.stem)
+                          str(info.samples), program_cell(message.programs.get(info.files.stem)),
+                          key=info.files.stem)
         self.query_one("#runs-meta", Static).update(Text(
             f"{len(infos)} run(s) in {self.desk.data_dir}" if infos or self.unsaved else
             f"no runs yet in {self.desk.data_dir}: run a move from the Moves tab", "dim"))
@@ -189,7 +200,11 @@ class RunsTab(TabPage):
         self.run = run
         self.run_name = name
         self.view = 0
-        self.query_one("#runs-meta", Static).update("\n".join(run_lines(run, name)))
+        lines = run_lines(run, name)
+        if isinstance(program := run.meta.get("program"), dict):
+            lines.append(f"program {program.get('name')}, run {program.get('run_id')}, step "
+                         f"{program.get('step')} ({program.get('title')})")
+        self.query_one("#runs-meta", Static).update("\n".join(lines))
         self.draw()
 
     def action_next_view(self) -> None:

@@ -56,6 +56,7 @@ ESSENTIAL = {
     "positions": ("#positions-table", "#positions-speed", "#positions-here",
                   "#positions-state"),
     "log": ("#log-file", "#log-table"),
+    "program": ("#program-path", "#program-table", "#program-state", "#program-problems"),
 }
 
 
@@ -134,7 +135,7 @@ async def resize(tui, app: ServodeskApp, pilot, size: tuple[int, int]) -> None:
 
 
 def tab_bar_whole(app: ServodeskApp) -> None:
-    """F1…F10 each on the tab bar, whole, with the Jog tab chosen (no scrolling to reach one)."""
+    """F1…F11 each on the tab bar, whole, with the Jog tab chosen (no scrolling to reach one)."""
     tabs = list(app.query(ContentTab))
     assert len(tabs) == len(TABS)
     for i, tab in enumerate(tabs):

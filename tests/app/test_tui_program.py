@@ -1,0 +1,379 @@
+"""The Program tab (issue 27 item 2) on the real controller, lockstep: a program taught from
+Positions (steps inserted, moved, deleted), saved, opened again and checked, single-stepped
+and run to the end, its moves listed together on the Runs tab; a bad program shows each
+problem's line and step and cannot run; feed hold and resume, stop, a start from a step that
+asks first, the refusals (E-stop latched, a move running elsewhere); in reduced speed (T1) the
+program advances only while the enabling key repeats, and a release is a feed hold; the rig's
+example program runs from the tab. The edits themselves are checked without a controller."""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from textual.widgets import DataTable, Input
+
+from app.tabs.program import ProgramTab
+from app.tabs.program_edit import delete_step, insert_go_to, move_step
+from app.widgets.dialogs import ConfirmScreen, EditValueScreen
+from control.motion import form_plans
+from control.program import RunnerState, parse_program, read_program
+from control.program.model import GoTo
+
+SIZE = (120, 36)
+RUN_S = 60.0  # a program of a few go-tos on a loaded two-core machine
+EXAMPLES = Path(__file__).resolve().parents[2] / "programs"
+REPEAT_S = 0.03  # a terminal's auto-repeat
+
+
+async def program_tab(tui, app, pilot) -> ProgramTab:
+    await pilot.press("f11")
+    tab = app.query_one(ProgramTab)
+    await tui.until(lambda: tab.visible_now, what="the Program tab shown")
+    return tab
+
+
+async def open_path(tui, tab: ProgramTab, pilot, path: Path) -> None:
+    """Type ``path`` in the path field, Enter: read and checked."""
+    field = tab.query_one("#program-path", Input)
+    field.value = str(path)
+    field.focus()
+    await pilot.press("enter")
+
+
+async def checked(tui, tab: ProgramTab) -> None:
+    await tui.until(lambda: not tab.checking and (tab.checked is not None or tab.problems),
+                    what="the check")
+
+
+async def listed(tui, tab: ProgramTab, pilot) -> list[str]:
+    """The steps' table as shown (once its columns have taken their new widths)."""
+    await pilot.pause()
+    return tui.text(tab.query_one("#program-table", DataTable)).splitlines()
+
+
+def said(tui, tab: ProgramTab) -> str:
+    return tab.query_one("#program-state").text
+
+
+async def ended(tui, tab: ProgramTab) -> None:
+    await tui.until(lambda: tab.runner is not None and tab.runner.state.over, RUN_S,
+                    what=lambda: f"the program's end ({said(tui, tab)})")
+
+
+BAD = """name = "bad"
+machine = "unimate2000b"
+
+[[step]]
+go = "nowhere"
+
+[[step]]
+move = "step"
+joint = "Up/Down"
+target = 40.0
+"""
+
+SLOW = """name = "slow"
+machine = "unimate2000b"
+
+[[step]]
+go = "park"
+speed = 0.1
+
+[[step]]
+go = "home"
+speed = 1.0
+"""
+
+T1 = """name = "t1"
+machine = "unimate2000b"
+
+[[step]]
+move = "step"
+joint = "Up/Down"
+target = 5.0
+duration = 6.0
+
+[[step]]
+go = "home"
+speed = 1.0
+"""
+
+
+def test_a_program_is_taught_saved_opened_stepped_and_run(tui, data_dir: Path) -> None:
+    async def scenario() -> None:
+        app = tui.app()
+        path = data_dir / "programs" / "taught.toml"
+        path.parent.mkdir(parents=True)
+        (path.parent / "bad.toml").write_text(BAD)
+        async with app.run_test(size=SIZE) as pilot:
+            start = np.array((await tui.ready(app, pilot)).position)
+            tab = await program_tab(tui, app, pilot)
+            await open_path(tui, tab, pilot, path)  # no such file: a new program, after asking
+            await tui.until(lambda: isinstance(app.screen, ConfirmScreen), what="the question")
+            await pilot.press("y")
+            await tui.until(lambda: tab.program is not None and "no steps yet" in
+                            tab.query_one("#program-problems").text, what="an empty program")
+
+            # taught: a position taught here, then go tos inserted from the Positions tab
+            await pilot.press("f9")
+            positions = app.tab("positions")
+            table = positions.query_one("#positions-table", DataTable)
+            await tui.until(lambda: positions.visible_now and table.row_count == 2)
+            await pilot.press("t")
+            assert isinstance(app.screen, EditValueScreen)
+            app.screen.query_one(Input).value = "spot"
+            await pilot.press("enter")
+            await tui.until(lambda: table.row_count == 3, what="spot taught")
+            positions.query_one("#positions-speed Input", Input).value = "1"
+
+            async def insert(row: int) -> None:
+                await pilot.press("f9")
+                await tui.until(lambda: positions.visible_now)
+                table.move_cursor(row=row)
+                await pilot.press("f11")
+                await tui.until(lambda: tab.visible_now)
+                count = tab.program.count
+                await pilot.press("i")
+                await tui.until(lambda: tab.program.count == count + 1, what="a step inserted")
+
+            await insert(1)  # park
+            await insert(2)  # spot
+            await insert(0)  # home, after spot
+            assert [s.position for s in tab.program.steps] == ["park", "spot", "home"]
+            await pilot.press("u")  # home up, above spot
+            await tui.until(lambda: [s.position for s in tab.program.steps]
+                            == ["park", "home", "spot"], what="home moved up")
+            assert tab._selected() == 2
+            await pilot.press("delete")  # and deleted
+            await tui.until(lambda: [s.position for s in tab.program.steps] == ["park", "spot"],
+                            what="home deleted")
+            await checked(tui, tab)
+            assert tab.checked is not None, tab.problems
+
+            # saved: the file reads back as the listing, carrying the taught position
+            await pilot.press("w")
+            await tui.until(path.exists, what="the program saved")
+            saved = read_program(path)
+            assert [(s.position, s.speed) for s in saved.steps] == [("park", 1.0), ("spot", 1.0)]
+            assert np.allclose(saved.positions["spot"], start, atol=0.5)
+            await tui.until(lambda: not tab.dirty)
+
+            # opened again (l) and checked clean; one step; the rest to the end
+            before = tab.program
+            await pilot.press("l")
+            await tui.until(lambda: tab.program is not before, what="the file opened again")
+            assert tab.program.source == path and tab.program == saved
+            await checked(tui, tab)
+            assert tab.checked is not None and not tab.problems, tab.problems
+            await pilot.press("n")
+            await tui.until(lambda: tab.runner is not None and tab.runner.state
+                            is RunnerState.HELD, RUN_S, what="one step done, held")
+            assert [r.visit.step.number for r in tab.runner.results] == [1]
+            assert tab.at == 2  # the next marked
+            assert "complete" in (await listed(tui, tab, pilot))[1]
+            assert np.allclose(app.client.status().position, app.machine.park, atol=0.5)
+            await pilot.press("r")
+            await ended(tui, tab)
+            outcome = tab.runner.outcome()
+            assert outcome.complete, outcome.reason
+            assert [(r.visit.step.number, r.status) for r in outcome.results] == [
+                (1, "complete"), (2, "complete")]
+            rows = (await listed(tui, tab, pilot))
+            assert all("complete" in rows[n] and " s" in rows[n] for n in (1, 2)), rows
+            assert np.allclose(app.client.status().position, start, atol=0.5)
+
+            # a bad program: each problem with its line and step; r runs nothing
+            await open_path(tui, tab, pilot, path.parent / "bad.toml")
+            await checked(tui, tab)
+            problems = tab.query_one("#program-problems").text
+            assert "2 problem(s)" in problems, problems
+            assert "line 5, step 1: no taught position 'nowhere'" in problems, problems
+            assert "line 10, step 2:" in problems and "-27…30" in problems, problems
+            await pilot.press("r")
+            assert "problem(s)" in said(tui, tab)
+            assert tab.runner is None and not app.client.status().moving
+
+
+            # the Runs tab: the program run's moves together, in its order, named by it
+            await pilot.press("f6")
+            runs = app.tab("runs")
+            await tui.until(lambda: len(runs.infos) >= 2, what="the runs listed")
+            cells = [str(row[-1]) for row in (runs.query_one("#runs-table", DataTable)
+                                              .get_row_at(i) for i in range(len(runs.infos)))]
+            mark = f"taught #{outcome.run_id[-4:]}"
+            assert [c for c in cells if mark in c] == [f"{mark} · step 1", f"{mark} · step 2"]
+            first = next(i for i, c in enumerate(cells) if mark in c)
+            assert mark in cells[first + 1], cells  # together
+
+    asyncio.run(scenario())
+
+
+def test_hold_resume_stop_start_from_a_step_t1s_enabling_key_and_the_refusals(
+        tui, data_dir: Path) -> None:
+    async def scenario() -> None:
+        app = tui.app()
+        folder = data_dir / "programs"
+        folder.mkdir(parents=True)
+        (folder / "slow.toml").write_text(SLOW)
+        (folder / "t1.toml").write_text(T1)
+        async with app.run_test(size=SIZE) as pilot:
+            await tui.ready(app, pilot)
+            client = app.client
+            tab = await program_tab(tui, app, pilot)
+
+            # held and resumed: the move stands on its path, then goes on; stopped: it holds
+            await open_path(tui, tab, pilot, folder / "slow.toml")
+            await checked(tui, tab)
+            assert tab.checked is not None, tab.problems
+            await pilot.press("r")
+            await tui.until(lambda: client.status().moving and client.status().move_done > 200,
+                            RUN_S, what="step 1 moving")
+            await pilot.press("p")
+            await tui.until(lambda: client.status().paused, what="the feed hold")
+            assert tab.runner.state is RunnerState.PAUSED
+            await pilot.press("p")
+            await tui.until(lambda: not client.status().paused, what="resumed")
+            assert tab.runner.state is RunnerState.RUNNING
+            await pilot.press("s")
+            await ended(tui, tab)
+            assert tab.runner.state is RunnerState.STOPPED
+            assert not client.status().moving
+            assert "stopped by the" in (await listed(tui, tab, pilot))[1]
+
+            # from step 2: asked first; no, then yes: only step 2 runs, from where the arm is
+            table = tab.query_one("#program-table", DataTable)
+            table.move_cursor(row=1)
+            stopped = tab.runner
+            await pilot.press("f")
+            await tui.until(lambda: isinstance(app.screen, ConfirmScreen), what="the question")
+            assert "Start from step 2" in app.screen.question
+            await pilot.press("n")
+            await tui.until(lambda: not isinstance(app.screen, ConfirmScreen))
+            assert tab.runner is stopped and "cancelled" in said(tui, tab)
+            await pilot.press("f")
+            await tui.until(lambda: isinstance(app.screen, ConfirmScreen), what="the question")
+            await pilot.press("y")
+            await tui.until(lambda: tab.runner is not stopped, what="a new program run")
+            await ended(tui, tab)
+            outcome = tab.runner.outcome()
+            assert outcome.complete and [r.visit.step.number for r in outcome.results] == [2]
+
+            # reduced speed (T1): r is refused; the program goes only while space repeats
+            await pilot.press("ctrl+y")  # reduced speed: at once
+            await tui.until(lambda: client.speed_mode == "reduced", what="T1")
+            await open_path(tui, tab, pilot, folder / "t1.toml")
+            await checked(tui, tab)
+            await pilot.press("r")  # refused: T1 runs on the enabling key
+            assert "hold space" in said(tui, tab) and tab.runner is None
+
+            async def hold_space(until, what: str) -> None:
+                """Space repeating every REPEAT_S until ``until()``."""
+                deadline = time.monotonic() + RUN_S
+                while not until():
+                    if time.monotonic() > deadline:
+                        pytest.fail(f"timed out holding space for {what}")
+                    tui.post_key(app, "space")
+                    await asyncio.sleep(REPEAT_S)
+
+            await hold_space(lambda: client.status().moving and client.status().move_done > 200,
+                             "step 1 moving")
+            assert tab.runner.state is RunnerState.RUNNING
+            # let go: a feed hold, and the step goes no further while the key is up
+            await tui.until(lambda: client.status().paused, what="the hold on release")
+            assert tab.runner.state is RunnerState.PAUSED
+            released = client.status().time_s
+            standing: list[int] = []  # where the move is, a second and two seconds later
+
+            def later(seconds: float) -> bool:
+                status = client.status()
+                if status.time_s < released + seconds:
+                    return False
+                standing.append(status.move_done)
+                return True
+
+            await tui.until(lambda: later(1.0), what="a second on the controller's clock")
+            await tui.until(lambda: later(2.0), what="two seconds on the controller's clock")
+            assert standing[0] == standing[1] and client.status().moving, standing
+            assert tab.at == 1 and not tab.runner.results
+            # held again: it goes on, step after step, to the end
+            await hold_space(lambda: tab.runner.state.over, "the end")
+            outcome = tab.runner.outcome()
+            assert outcome.complete, outcome.reason
+            assert [r.visit.step.number for r in outcome.results] == [1, 2]
+            assert client.speed_mode == "reduced"
+
+            # refused, with the reason: a move running elsewhere, then the E-stop latched
+            here = np.array(client.status().position)
+            plan = form_plans.go_to(app.machine, here, app.machine.park, 0.1, dt=client.dt)
+            client.run(plan)
+            await tui.until(lambda: client.status().moving, what="a move of the test's")
+            runner = tab.runner
+            await pilot.press("n")  # a single step needs no enabling key: refused all the same
+            assert "a move is running" in said(tui, tab) and tab.runner is runner
+            await pilot.press("ctrl+e")
+            await tui.until(lambda: client.status().estop, what="the E-stop")
+            await pilot.press("n")
+            assert "the E-stop is latched" in said(tui, tab) and tab.runner is runner
+
+    asyncio.run(scenario())
+
+
+def test_the_rig_example_runs_from_the_tab(tui) -> None:
+    async def scenario() -> None:
+        app = tui.app("rig")
+        async with app.run_test(size=SIZE) as pilot:
+            await tui.ready(app, pilot)
+            tab = await program_tab(tui, app, pilot)
+            field = tab.query_one("#program-path", Input)
+            example = EXAMPLES / "rig_sequence.toml"
+            await tui.until(lambda: field.value == str(example), what="the example offered")
+            await pilot.press("l")
+            await checked(tui, tab)
+            assert tab.checked is not None, tab.problems
+            await pilot.press("r")  # it begins with Initialise: the unzeroed rig may run it
+            await ended(tui, tab)
+            outcome = tab.runner.outcome()
+            assert outcome.complete, outcome.reason
+            assert [r.visit.step.number for r in outcome.results] == list(range(1, 8))
+            rows = (await listed(tui, tab, pilot))
+            assert all("complete" in rows[n] for n in range(1, 8)), rows
+
+    asyncio.run(scenario())
+
+
+PROGRAM = parse_program("""name = "edit"
+machine = "unimate2000b"
+
+[[step]]
+go = "home"
+
+[[step]]
+repeat = 2
+
+[[step.steps]]
+go = "park"
+
+[[step.steps]]
+wait = 1.0
+""", "edit.toml")
+
+
+def test_edits_keep_the_listing_numbered_as_the_file_will_be() -> None:
+    moved, at = move_step(PROGRAM, 4, -1)  # the wait above the go to park, in its repeat
+    assert [s.title for s, _ in moved.listing()] == ["go to 'home'", "repeat 2 times",
+                                                     "wait 1 s", "go to 'park'"]
+    assert at == 3 and moved.step(3).line > moved.step(2).line
+    with pytest.raises(ValueError, match="first of its block"):
+        move_step(PROGRAM, 3, -1)
+    inserted, at = insert_go_to(PROGRAM, 3, "spot", 0.7, (1300.0, 0.0, 0.0, 0.0, 90.0, 0.0))
+    assert at == 4 and inserted.step(4) == GoTo(4, inserted.step(4).line, position="spot",
+                                                speed=0.7)
+    assert inserted.positions["spot"] == (1300.0, 0.0, 0.0, 0.0, 90.0, 0.0)
+    deleted, at = delete_step(PROGRAM, 2)  # the repeat with its steps
+    assert [s.title for s, _ in deleted.listing()] == ["go to 'home'"] and at == 1
+    with pytest.raises(ValueError, match="steps"):  # a repeat left empty is no program
+        delete_step(delete_step(PROGRAM, 4)[0], 3)
