@@ -12,10 +12,12 @@ run id, each step's result and figures). It exits
   or bad input: nothing moved.
 
 Ctrl+C (SIGINT, and SIGTERM) is the E-stop: latched at once, the run of the move in
-progress saved, exit 1. ``--check`` only checks (from the machine's home, no controller
-started); ``--from STEP`` starts at a step number of the listing; ``--initialise`` zeroes the
-rig's encoder before the program (as ``servodesk move``). Positions come from the data
-directory's positions file (the Positions tab's), then from the program's ``[positions]``.
+progress saved, exit 1. ``--reduced`` runs it in reduced speed (T1: the tool at most
+250 mm/s, each joint at most its jog speed; a pulse step refused); ``--check`` only checks
+(from the machine's home, no controller started); ``--from STEP`` starts at a step number
+of the listing; ``--initialise`` zeroes the rig's encoder before the program (as
+``servodesk move``). Positions come from the data directory's positions file (the
+Positions tab's), then from the program's ``[positions]``.
 
 A ``wait = "operator"`` step asks on stderr and goes on when a line (Enter) comes on stdin;
 without a terminal on stdin a program with one is refused at its check (exit 2): a script
@@ -77,6 +79,10 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--initialise", action="store_true",
                    help="rig: drive the ram to the bottom stop and zero the encoder before the "
                         "program (every run starts a new controller, not zeroed)")
+    p.add_argument("--reduced", action="store_true",
+                   help="reduced speed (ISO 10218-1's T1): the controller keeps the tool at most "
+                        "250 mm/s and each joint at most its jog speed (default: automatic, full "
+                        "speed); a program with a pulse, open-loop duty, is refused")
     p.add_argument("--lockstep", action="store_true",
                    help="simulator only: run the controller as fast as it computes, not in "
                         "real time (scripts, tests)")
@@ -110,7 +116,7 @@ def _run(args: argparse.Namespace) -> int:
     data_dir = Path(args.data_dir).expanduser() if args.data_dir else default_data_dir()
     book = _book(data_dir, machine)
     if args.check:
-        checked = _check(program, machine, book, _resting(machine), args.start)
+        checked = _check(program, machine, book, _resting(machine), args.start, args.reduced)
         print(f"{program.source}: checked, {program.count} steps, {len(checked.visits)} to run "
               f"from step {args.start} on {machine.name}")
         return DONE
@@ -122,14 +128,15 @@ def _run(args: argparse.Namespace) -> int:
                        "run the simulator (--backend sim)")
     # before anything starts; the rig's initialise puts it on its bottom stop first
     _check(program, machine, book, np.array(machine.lower, dtype=float) if args.initialise
-           else _resting(machine), args.start)
+           else _resting(machine), args.start, args.reduced)
     _writable(data_dir)
     pace = ({"lockstep": True, "heartbeat_timeout_s": LOCKSTEP_HEARTBEAT_S} if args.lockstep
             else {})
     try:
         client = ControlClient(machine, args.backend, port=args.port, seed=args.seed,
                                data_dir=data_dir, timing=Timing(args.timing, args.interrupt_ms,
-                                                                tuple(args.slip)), **pace)
+                                                                tuple(args.slip)),
+                               speed_mode="reduced" if args.reduced else "automatic", **pace)
     except (ControllerError, OSError, ValueError) as exc:
         raise BadInput(f"cannot start the controller: {exc}") from None
     try:
@@ -173,15 +180,22 @@ def _resting(machine: Machine) -> np.ndarray:
     return np.array([(j.lower + j.upper) / 2 for j in machine.joints])
 
 
-def _check(program: Program, machine: Machine, book: PositionBook, here: np.ndarray, start: int
-           ) -> CheckedProgram:
+def _check(program: Program, machine: Machine, book: PositionBook, here: np.ndarray, start: int,
+           reduced: bool) -> CheckedProgram:
     from control.program import ProgramError, check
-    from control.program.model import Wait
+    from control.program.model import Move, Wait
 
     try:
         checked = check(program, machine, book, here, start=start)
     except ProgramError as exc:
         raise CheckFailed(exc.problems) from None
+    pulses = [v.step for v in checked.visits if isinstance(v.step, Move)
+              and v.step.kind == "pulse"]
+    if reduced and pulses:
+        raise CheckFailed(tuple(
+            Problem(str(program.source), step.line, "a pulse is open-loop duty, which reduced "
+                    "speed cannot hold to 250 mm/s: leave --reduced out to run it", step)
+            for step in {s.number: s for s in pulses}.values()))
     if not sys.stdin.isatty():
         waits = [v.step for v in checked.visits
                  if isinstance(v.step, Wait) and v.step.operator]
@@ -189,7 +203,7 @@ def _check(program: Program, machine: Machine, book: PositionBook, here: np.ndar
             raise CheckFailed(tuple(
                 Problem(str(program.source), step.line, "waits for the operator, and stdin is "
                         "not a terminal: run it from a terminal, or wait = SECONDS", step)
-                for step in dict.fromkeys(waits)))
+                for step in {s.number: s for s in waits}.values()))
     return checked
 
 
@@ -224,7 +238,8 @@ def _play(args: argparse.Namespace, client: ControlClient, program: Program, boo
             raise BadInput(f"--initialise: the {machine.title}'s encoder is not zeroed (every "
                            "`servodesk run` starts a new controller); add --initialise, or "
                            "begin the program with move = \"initialise\"")
-    checked = _check(program, machine, book, np.array(client.status().position), args.start)
+    checked = _check(program, machine, book, np.array(client.status().position), args.start,
+                     args.reduced)
     estop = EStopOnSignal(client)
     started = time.monotonic()
     try:
@@ -303,7 +318,8 @@ def _summary(args: argparse.Namespace, outcome: ProgramOutcome, checked: Checked
     if args.json:
         print(json.dumps({
             "program": program.name, "file": str(program.source), "machine": program.machine,
-            "run_id": outcome.run_id, "state": outcome.state.value,
+            "run_id": outcome.run_id, "speed_mode": "reduced" if args.reduced else "automatic",
+            "state": outcome.state.value,
             "complete": outcome.complete, "reason": outcome.reason, "from_step": checked.start,
             "steps": steps, "steps_run": len(steps), "steps_planned": len(checked.visits),
             "moves_s": round(moved_s, 3), "total_s": round(controller_s, 3),

@@ -216,3 +216,24 @@ def test_an_operators_wait_goes_on_at_enter_on_a_terminal(tmp_path: Path) -> Non
             proc.wait()
     assert proc.returncode == 0, "".join(seen) + err
     assert "program ask, run " in out and ": done (every step completed)" in out
+
+
+def test_reduced_speed_runs_the_program_in_t1_and_refuses_a_pulse(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    pulse = tmp_path / "pulse.toml"
+    pulse.write_text('machine = "rig"\n[[step]]\nmove = "initialise"\n[[step]]\nmove = "pulse"\n',
+                     encoding="utf-8")
+    assert main(["run", str(pulse), "--reduced", "--check", "--data-dir", str(tmp_path)]) == 2
+    assert capsys.readouterr().err.splitlines()[0] == (
+        f"{pulse} line 4, step 2 (move pulse): a pulse is open-loop duty, which reduced speed "
+        "cannot hold to 250 mm/s: leave --reduced out to run it")
+    program = tmp_path / "go.toml"
+    program.write_text('machine = "unimate2000b"\n[[step]]\ngo = "home"\nspeed = 1\n',
+                       encoding="utf-8")
+    done = servodesk_run(str(program), "--reduced", "--lockstep", "--json", data_dir=tmp_path)
+    assert done.returncode == 0, done.stderr
+    report = json.loads(done.stdout)
+    [step] = report["steps"]
+    assert report["speed_mode"] == "reduced" and step["status"] == "complete"
+    saved = json.loads((tmp_path / f"{step['run']}.json").read_text())
+    assert saved["meta"]["speed_mode"] == "reduced"
