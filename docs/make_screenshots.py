@@ -6,9 +6,9 @@ runs an Up/Down step from the Moves tab (and watches it on the Scope), identifie
 then saves each tab as the operator would see it. Then every tab again at 80 × 24, the
 smallest terminal servodesk is laid out for, in ``docs/screenshots/80x24/``. Runs go to
 a temporary directory; ``--rig`` adds the rig's Jog and Moves tabs; ``--small`` makes
-only the 80 × 24 ones. Every SVG is written to load nothing from the network (``offline``:
-Textual's names its font on a CDN); ``--offline`` makes the SVGs already there so, without
-running the app.
+only the 80 × 24 ones; ``--arm`` only the arm's view (``arm*.svg``, both sizes, and the
+rig's). Every SVG is written to load nothing from the network (``offline``: Textual's names
+its font on a CDN); ``--offline`` makes the SVGs already there so, without running the app.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from textual.pilot import Pilot
-from textual.widgets import Input, OptionList
+from textual.widgets import Input, OptionList, TextArea
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -32,6 +32,7 @@ from app.tabs.moves import MovesTab
 from app.tabs.runs import RunsTab
 from app.tui import ServodeskApp
 from app.widgets.fields import NumberField
+from control.rt.layout import Flag
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "docs" / "screenshots"
@@ -172,6 +173,53 @@ async def rig(data_dir: str) -> None:
         save(app, "rig-moves")
 
 
+async def arm_view(data_dir: str, size: tuple[int, int], folder: Path) -> None:
+    """The arm's view: on the Jog tab (p), and on its own screen (^A) while a via-points move
+    runs towards Up/Down's limit (amber), its path and the desired pose ahead of the arm."""
+    app = ServodeskApp("unimate2000b", data_dir=data_dir, client_options=CLIENT)
+    async with app.run_test(size=size) as pilot:
+        await wait_for(lambda: app.sampler is not None and app.sampler.latest is not None)
+        await wait_for(lambda: all(tab.is_mounted for tab in app.tabs.values()))
+        await pilot.pause(1.0)
+        await pilot.press("p")
+        await pilot.pause(1.0)
+        save(app, "arm-jog", folder)
+        await pilot.press("p", "f2")
+        await pilot.pause(0.3)
+        kinds = app.query_one("#move-kinds", OptionList)
+        kinds.highlighted = next(i for i in range(kinds.option_count)
+                                 if str(kinds.get_option_at_index(i).prompt) == "Via points")
+        await pilot.pause(0.3)
+        q = list(app.client.status().position)
+        via = [q[0] + 250, q[1] + 40, 10.0, q[3] + 20, 35.0, q[5]]
+        end = [q[0] + 450, q[1] + 75, 27.0, q[3] + 30, 60.0, q[5] + 45]
+        app.query_one("#via-points", TextArea).text = "\n".join(
+            " ".join(f"{v:.2f}" for v in row) for row in (via, end))
+        moves = app.query_one(MovesTab)
+        await wait_for(lambda: moves.previewed is not None)
+        await pilot.pause(0.5)
+        await pilot.press("ctrl+s")
+        await wait_for(lambda: moves.handle is not None)
+        await pilot.press("ctrl+a", "plus")
+        await pilot.pause(5.0)
+        save(app, "arm", folder)
+        await pilot.press("ctrl+g")
+
+
+async def rig_arm(data_dir: str) -> None:
+    """The rig's ram on its own screen (^A) on its way to a target."""
+    app = ServodeskApp("rig", data_dir=data_dir, client_options=CLIENT)
+    async with app.run_test(size=SIZE) as pilot:
+        await wait_for(lambda: app.sampler is not None and app.sampler.latest is not None)
+        await pilot.pause(1.0)
+        app.client.initialise()  # the encoder zeroed at the bottom stop: then it moves
+        await wait_for(lambda: app.client.status().flags & Flag.HOMED, timeout=60)
+        app.client.go_to([800.0], speed=0.3)
+        await pilot.press("ctrl+a")
+        await pilot.pause(2.0)
+        save(app, "rig-arm")
+
+
 async def small(data_dir: str) -> None:
     """Every tab at 80 × 24: a jog, an Up/Down step previewed with its approach, then run
     (its result table), the run's plot, and the others as they open."""
@@ -217,6 +265,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rig", action="store_true", help="also the rig's Jog and Moves tabs")
     parser.add_argument("--small", action="store_true", help="only the 80 × 24 screenshots")
+    parser.add_argument("--arm", action="store_true", help="only the arm's view, both sizes")
     parser.add_argument("--offline", action="store_true",
                         help="only rewrite the SVGs there to load nothing from the network")
     args = parser.parse_args()
@@ -225,6 +274,12 @@ def main() -> None:
         return
     OUT.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as data_dir:
+        if args.arm or not args.small:
+            asyncio.run(arm_view(data_dir, SIZE, OUT))
+            asyncio.run(arm_view(data_dir, SMALL, OUT / f"{SMALL[0]}x{SMALL[1]}"))
+            asyncio.run(rig_arm(data_dir))
+        if args.arm:
+            return
         if not args.small:
             asyncio.run(unimate(data_dir))
             if args.rig:

@@ -38,15 +38,15 @@ BASE_MM = 200.0
 ENVELOPE_POINTS = 180
 
 LINK = Style(color="bright_white", bold=True)
-GHOST = Style(color="grey50", dim=True)
-JOINT_LEVELS = (Style(color="bright_cyan", bold=True), Style(color="dark_orange", bold=True),
+GHOST = Style(color="grey58")
+JOINT_LEVELS = (Style(color="#56b6c2", bold=True), Style(color="dark_orange", bold=True),
                 Style(color="red", bold=True))
 TRIAD = (Style(color="red"), Style(color="green"), Style(color="blue"))
 FLOOR = Style(color="grey35")
 ENVELOPE = Style(color="grey42")
 BASE = Style(color="white")
-JOINT_PATH = Style(color="magenta")
-LINE_PATH = Style(color="bright_cyan")
+JOINT_PATH = Style(color="#c678dd")
+LINE_PATH = Style(color="#61afef")
 MARKER = Style(color="yellow")
 WARN = Style(color="yellow", bold=True)
 DANGER = Style(color="red", bold=True)

@@ -142,6 +142,11 @@ class ArmView(Widget, can_focus=True):
 
     # -- keys ---------------------------------------------------------------------------------
 
+    def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
+        if action in ("orbit", "zoom", "view"):
+            return self.arm is not None  # the rig's schematic has one view
+        return True
+
     def action_orbit(self, d_azimuth: int, d_elevation: int) -> None:
         self.view = self.view.orbited(d_azimuth * ORBIT_DEG, d_elevation * ORBIT_DEG)
 
