@@ -241,6 +241,7 @@ class ServodeskApp(App[None]):
         self._building: dict[str, asyncio.Event] = {}  # tabs being mounted: set once mounted
         self._wanted = FIRST_TAB  # the tab last chosen (shown once it is built)
         self._rest_started = False  # the tabs not shown are being built (once live)
+        self._quitting = False  # asked to quit: no tab is built from now on
         self._positions: tuple[Position, ...] | None = None  # as the Positions tab last read
         self._early: list[ClientReady | ClientFailed | ControllerEvent] | None = []
         self.fault_kind = ""
@@ -360,7 +361,7 @@ class ServodeskApp(App[None]):
         tab is then ready when first chosen, and neither the first frame nor the first live
         one waited for them."""
         for name, _ in TABS:
-            if not self.is_running:
+            if not self.is_running or self._quitting:
                 return
             await self._build(name)
             await asyncio.sleep(BUILD_GAP_S)
@@ -762,14 +763,22 @@ class ServodeskApp(App[None]):
             return
         concern = self._quit_concern()
         if not concern:
-            self.exit()
+            await self._exit_once_built()
             return
 
         def answer(yes: bool | None) -> None:
             if yes:
-                self.exit()
+                self.call_next(self._exit_once_built)
 
         self.push_screen(QuitScreen("Quit servodesk?", concern, "Quit"), answer)
+
+    async def _exit_once_built(self) -> None:
+        """Exit once no tab is half mounted: a tab whose mount the exit overtook found its
+        own widgets gone (a traceback and exit status 1 for ^Q just after the start)."""
+        self._quitting = True
+        while self._building:
+            await next(iter(self._building.values())).wait()
+        self.exit()
 
     def _quit_concern(self) -> str:
         """Why quitting now deserves a second thought ("" when it does not)."""

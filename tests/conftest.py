@@ -87,6 +87,9 @@ SLOW_FIXTURES = {
 }
 # Single tests that start one in their body, or that take seconds without one.
 SLOW_TESTS = (
+    # the app in a fresh interpreter, and servodesk in tmux
+    "tests/app/test_ui_cost.py::test_no_tab_module_but_jogs_is_imported_before_the_first_frame",
+    "tests/app/test_ui_cost.py::test_servodesk_starts_its_controller_before_it_imports_the_screen",
     "tests/app/test_arm_view.py::test_an_idle_view_draws_once_and_a_new_pose_draws_again",  # Pilot
     "tests/control/rt/test_seqlock.py::test_reader_never_sees_a_torn_record",  # spawned writer
     "tests/control/rt/test_shm.py::test_orphan_of_a_killed_process_is_cleaned_up",

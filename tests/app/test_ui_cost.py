@@ -5,17 +5,37 @@ before the first frame. (Its CPU and times are figures: ``benchmarks/ui.py --tmu
 from __future__ import annotations
 
 import asyncio
+import json
+import os
+import shlex
+import subprocess
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import ClassVar
 
+import pytest
+from rich.text import Text
+from textual.app import App, ComposeResult
+from textual.geometry import Region
 from textual.strip import Strip
 from textual.widget import Widget
 
 import app.tui
 from app.tui import ServodeskApp
-from app.widgets.live_text import LiveText
+from app.widgets.live_text import LiveLines, LiveText
+from tests.app.conftest import Tui
+from tests.app.terminal import (
+    HEIGHT,
+    REPO,
+    START_S,
+    TMUX,
+    WIDTH,
+    Terminal,
+    kill_server,
+    tmux,
+)
 
 APP_DIR = Path(app.tui.__file__).parent
 
@@ -148,5 +168,140 @@ def test_a_tab_chosen_while_it_is_being_built_shows_whole(tui) -> None:
                             and all(p.styles.visibility == "visible" for p in parts),
                             what=lambda: f"Moves' parts: {[p.styles.visibility for p in parts]}")
             await pilot.pause()
+
+    asyncio.run(scenario())
+
+
+def test_no_tab_module_but_jogs_is_imported_before_the_first_frame(tmp_path: Path) -> None:
+    """A fresh interpreter (this one has every tab imported by the tests): the app started,
+    the modules of app.tabs loaded when its first frame has been drawn. The old app.tui
+    imported every tab's module (their numpy, plotting and forms) before anything was drawn."""
+    script = f"""
+import asyncio, json, sys
+from pathlib import Path
+import app.tui
+from app.tui import TABS, ServodeskApp
+
+class First(ServodeskApp):
+    CSS_PATH = [str(Path(app.tui.__file__).parent / path) for path in ServodeskApp.CSS_PATH]
+    loaded = None
+
+    def on_mount(self):
+        self.call_after_refresh(self.first_frame)
+
+    def first_frame(self):
+        self.loaded = sorted(m for m in sys.modules if m.startswith("app.tabs."))
+
+async def main():
+    app = First("unimate2000b", "sim", None, {str(tmp_path)!r},
+                client_options={{"heartbeat_timeout_s": 2.0}})
+    async with app.run_test(size=(160, 48)) as pilot:
+        while app.loaded is None:
+            await asyncio.sleep(0.01)
+    print(json.dumps({{"loaded": app.loaded, "tabs": [name for name, _ in TABS]}}))
+
+asyncio.run(main())
+"""
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=120, cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO)})
+    assert done.returncode == 0, done.stderr
+    seen = json.loads(done.stdout.strip().splitlines()[-1])
+    others = {f"app.tabs.{name}" for name in seen["tabs"] if name != "jog"}
+    assert "app.tabs.jog" in seen["loaded"]
+    assert not others & set(seen["loaded"]), sorted(others & set(seen["loaded"]))
+
+
+@pytest.mark.skipif(TMUX is None, reason="tmux is not installed (apt-get install tmux)")
+def test_servodesk_starts_its_controller_before_it_imports_the_screen(tmp_path: Path) -> None:
+    """``servodesk`` in a real terminal: when the controller's process is started, Textual is
+    not imported yet (the process comes up on the other core while the screen's code loads);
+    the screen then goes live on that controller, in reduced speed as the TUI starts it. The
+    old start imported the screen, built it, and only then started the controller."""
+    record = tmp_path / "at-start.json"
+    # an audit hook sees the controller's process start, in the app's own interpreter
+    script = f"""
+import json, sys
+
+def hook(event, args):
+    if event == "subprocess.Popen" and "control.rt.process" in str(args[1]):
+        with open({str(record)!r}, "w") as out:
+            json.dump({{"textual": "textual" in sys.modules}}, out)
+
+sys.addaudithook(hook)
+from app.cli import main
+sys.exit(main(["--data-dir", {str(tmp_path / "data")!r}]))
+"""
+    socket, status = f"servodesk-start-{os.getpid()}", tmp_path / "exit-status"
+    command = (f"cd {shlex.quote(str(REPO))} && env -u COLUMNS -u LINES "
+               f"PYTHONPATH={shlex.quote(str(REPO))} {shlex.quote(sys.executable)} -c "
+               f"{shlex.quote(script)}; echo $? > {shlex.quote(str(status))}")
+    try:
+        tmux(socket, "start-server", ";", "set-option", "-g", "remain-on-exit", "on", ";",
+             "new-session", "-d", "-s", "start", "-x", str(WIDTH), "-y", str(HEIGHT), command)
+        term = Terminal(socket, "start", status)
+        term.wait(lambda s: " RUN" in s and "mode HOLD" in s and "T1" in s,
+                  "a live screen in reduced speed", timeout=START_S)
+        assert json.loads(record.read_text()) == {"textual": False}
+        term.keys("C-q")
+        term.wait(lambda s: term.exit_status() is not None, "the app's exit")
+        assert term.exit_status() == 0, term.screen()
+    finally:
+        kill_server(socket)
+
+
+def test_a_line_that_changed_repaints_only_its_changed_cells() -> None:
+    """A LiveLines line whose numbers changed asks the screen to update those cells, not the
+    whole line: the box the screen redraws then leaves out the widgets beside them (Status'
+    blocks, the header's lamp). The old LiveLines refreshed the line's whole width."""
+
+    class One(App[None]):
+        def compose(self) -> ComposeResult:
+            yield LiveLines(id="lines")
+
+    async def scenario() -> None:
+        app = One()
+        async with app.run_test(size=(80, 4)) as pilot:
+            lines = app.query_one(LiveLines)
+            lines.show(Text("tick 100  t 1.00 s\nmode HOLD"))
+            await pilot.pause()
+            asked: list[Region] = []
+            refresh = lines.refresh
+
+            def recorded(*regions: Region, **options: object) -> Widget:
+                asked.extend(regions)
+                return refresh(*regions, **options)  # type: ignore[arg-type]
+
+            lines.refresh = recorded  # type: ignore[method-assign]
+            lines.show(Text("tick 107  t 1.07 s\nmode HOLD"))
+            assert asked == [Region(7, 0, 9, 1)]  # "7  t 1.07": the first to the last change
+            await pilot.pause()
+            assert Tui.text(lines).splitlines()[0].startswith("tick 107  t 1.07 s")
+            asked.clear()
+            lines.show(Text.assemble("tick 107  t 1.07 s\n", ("mode HOLD", "bold")))
+            assert asked == [Region(0, 1, 80, 1)]  # a style changed: the whole line
+
+    asyncio.run(scenario())
+
+
+def test_the_history_is_sampled_at_full_rate_only_while_the_scope_shows(tui) -> None:
+    """The sampler reads the status 200 times a second for the Scope's plots; on the other
+    tabs 50 are enough (the Scope's past is then drawn from those), at a quarter of the CPU.
+    The old sampler read at 200 Hz on every tab."""
+
+    async def scenario() -> None:
+        app = tui.app(lockstep=False)
+        async with app.run_test(size=(160, 48)) as pilot:
+            await tui.ready(app, pilot)
+            assert app.sampler is not None
+            assert app.sampler.period == pytest.approx(1 / 50)  # Jog
+            await pilot.press("f3")
+            await tui.until(lambda: app.tab("scope").visible_now, what="the Scope shown")
+            assert app.sampler.period == pytest.approx(1 / 200)
+            samples = len(app.history)
+            await tui.until(lambda: len(app.history) >= samples + 100, timeout=20,
+                            what="a hundred samples more")
+            await pilot.press("f4")
+            await tui.until(lambda: app.tab("status").visible_now, what="the Status shown")
+            assert app.sampler.period == pytest.approx(1 / 50)
 
     asyncio.run(scenario())
