@@ -57,6 +57,7 @@ from control.program import (
     dump_program,
     move_steps,
     read_program,
+    visits,
 )
 from control.program.model import Wait
 from control.program.runner import MoveStarted, ProgramEnded, Report, StepDone, StepStarted
@@ -506,8 +507,6 @@ class ProgramTab(TabPage):
 
     def _first(self, start: int) -> object | None:
         """The first step that will run from ``start`` (for the unzeroed rig's refusal)."""
-        from control.program import visits
-
         program = self.program
         if program is None or not program.steps:
             return None
@@ -518,8 +517,9 @@ class ProgramTab(TabPage):
 
     def _go(self, then: str, checked: CheckedProgram, runner: Runner | None = None) -> None:
         """Start what was asked, now that ``checked`` is clean (a new program run unless
-        ``runner`` goes on); refused if the rig's state changed while it was checked."""
-        if refusal := self._refusal(checked.visits[0].step if checked.visits else None):
+        ``runner`` goes on); a new one is refused if the state changed during its check."""
+        if runner is None and (refusal := self._refusal(
+                checked.visits[0].step if checked.visits else None)):
             self._refuse(refusal)
             return
         if then == "enable" and not self.enabling.held:
