@@ -68,7 +68,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         description="Check a program file (docs/programs.md) whole, then run it on a new "
                     "controller, saving every move's run in the data directory. Exit 0 every "
                     "step completed in position, 1 it ended otherwise (a fault, the E-stop: "
-                    "Ctrl+C), 2 the program fails its check (nothing moved).")
+                    "Ctrl+C), 2 the program fails its check (nothing moved). The machine is the "
+                    "program's (its machine key) unless --machine names another.")
     p.add_argument("program", metavar="PROGRAM", help="the program file (TOML)")
     p.add_argument("--json", action="store_true",
                    help="print one JSON object: the program, its run id, each step's result")
