@@ -55,15 +55,17 @@ def columns(x: np.ndarray, y: np.ndarray, x_range: tuple[float, float],
         values[inside] = np.interp(centres[inside], x, y)
         first = last = _rows(values, y0, y1, height_px)
     else:
-        col = np.floor((x - x0) * x_scale).astype(np.int64)
-        keep = (col >= 0) & (col < width_px) & np.isfinite(y)
-        col, values = col[keep], y[keep]
-        if len(col) == 0:
+        bins = _bins(x, x_range, width_px)
+        values = y[bins.inside]
+        if np.isfinite(values).all():  # the columns' samples as binned for every such trace
+            starts, cols, ends = bins.starts, bins.cols, bins.ends
+        else:
+            col = bins.col[np.isfinite(values)]
+            values = values[np.isfinite(values)]
+            starts, cols, ends = _runs(col)
+        if len(values) == 0:
             return low, high
         rows = _rows(values, y0, y1, height_px)
-        starts = np.flatnonzero(np.r_[True, col[1:] != col[:-1]])
-        cols = col[starts]
-        ends = np.r_[starts[1:], len(col)] - 1
         low[cols] = np.minimum.reduceat(rows, starts)
         high[cols] = np.maximum.reduceat(rows, starts)
         first = np.full(width_px, np.nan)
@@ -81,6 +83,45 @@ def columns(x: np.ndarray, y: np.ndarray, x_range: tuple[float, float],
     low[present] = np.minimum(low[present], span_low[present].astype(np.int64))
     high[present] = np.maximum(high[present], span_high[present].astype(np.int64))
     return low, high
+
+
+@dataclass(frozen=True)
+class _Bins:
+    """The samples of one ``x`` in pixel columns: those inside the plot (``inside``), their
+    columns (``col``), and the runs of samples in one column (``_runs``)."""
+
+    inside: np.ndarray
+    col: np.ndarray
+    starts: np.ndarray
+    cols: np.ndarray
+    ends: np.ndarray
+
+
+# The last few binnings, by the very array binned (held, so that its id is not reused): the
+# Scope's traces share one time axis, binned once a frame instead of once a trace.
+_BINNED: list[tuple[np.ndarray, tuple[float, float], int, _Bins]] = []
+BINNED_KEPT = 4
+
+
+def _bins(x: np.ndarray, x_range: tuple[float, float], width_px: int) -> _Bins:
+    for binned, at, width, bins in _BINNED:
+        if binned is x and at == x_range and width == width_px:
+            return bins
+    x0, x1 = x_range
+    col = np.floor((x - x0) * (width_px / (x1 - x0))).astype(np.int64)
+    inside = (col >= 0) & (col < width_px)
+    col = col[inside]
+    bins = _Bins(inside, col, *_runs(col))
+    _BINNED.insert(0, (x, x_range, width_px, bins))
+    del _BINNED[BINNED_KEPT:]
+    return bins
+
+
+def _runs(col: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each run of equal columns in ``col``: its first index, its column, its last index."""
+    starts = np.flatnonzero(np.r_[True, col[1:] != col[:-1]]) if len(col) else col
+    ends = np.r_[starts[1:], len(col)] - 1 if len(col) else col
+    return starts, col[starts], ends
 
 
 def _rows(values: np.ndarray, y0: float, y1: float, height_px: int) -> np.ndarray:
@@ -123,15 +164,37 @@ def vline(x: float, x_range: tuple[float, float], cols: int, rows: int) -> np.nd
     return out
 
 
+class Rows:
+    """A plot's rows as last drawn (dot bits, owners, styles and the strips made of them), so
+    that the next frame makes a strip only for a row that changed: a live plot at rest, or
+    scrolling flat lines, draws the same rows frame after frame."""
+
+    def __init__(self) -> None:
+        self.codes: np.ndarray | None = None
+        self.owner: np.ndarray | None = None
+        self.styles: list[Style] = []
+        self.strips: list[Strip] = []
+        self.framed: list[tuple[Strip, str, Strip]] = []  # a row, its label, the two as one
+
+    def changed(self, codes: np.ndarray, owner: np.ndarray, styles: list[Style]) -> np.ndarray:
+        """Which rows differ from the last drawn (every row, if the plot's shape changed)."""
+        if (self.codes is None or self.owner is None or self.codes.shape != codes.shape
+                or self.styles != styles):
+            return np.ones(codes.shape[0], dtype=bool)
+        return (self.codes != codes).any(axis=1) | (self.owner != owner).any(axis=1)
+
+
 def render(traces: Sequence[Trace], x_range: tuple[float, float],
            y_range: tuple[float, float], cols: int, rows: int,
            guide: Style | None = None, guide_y: float | None = None,
-           marks: Sequence[tuple[float, Style]] = ()) -> list[Strip]:
+           marks: Sequence[tuple[float, Style]] = (), drawn: Rows | None = None
+           ) -> list[Strip]:
     """Draw ``traces`` (later ones on top) into ``rows`` strips of ``cols`` cells.
 
     A cell shared by several traces shows the dots of all of them in the colour
     of the topmost. ``guide_y`` draws a dotted line (a zero line) in ``guide``;
-    each of ``marks`` a dotted vertical line at its time in its style, beneath the traces.
+    each of ``marks`` a dotted vertical line at its time in its style, beneath the traces;
+    ``drawn``: the plot's rows as last drawn, whose unchanged strips are used again.
     """
     if cols <= 0 or rows <= 0:
         return [Strip.blank(max(cols, 0)) for _ in range(max(rows, 0))]
@@ -152,7 +215,14 @@ def render(traces: Sequence[Trace], x_range: tuple[float, float],
         bits = raster(trace, x_range, y_range, cols, rows)
         codes |= bits
         owner[bits > 0] = index
-    return strips(codes, owner, styles)
+    if drawn is None:
+        return strips(codes, owner, styles)
+    changed = drawn.changed(codes, owner, styles)
+    made = iter(strips(codes[changed], owner[changed], styles))
+    before = drawn.strips if len(drawn.strips) == rows else [None] * rows
+    drawn.strips = [next(made) if new else old for new, old in zip(changed, before, strict=True)]
+    drawn.codes, drawn.owner, drawn.styles = codes, owner, styles
+    return drawn.strips
 
 
 def strips(codes: np.ndarray, owner: np.ndarray, styles: Sequence[Style]) -> list[Strip]:

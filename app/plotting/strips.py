@@ -17,7 +17,7 @@ from rich.text import Text
 from textual.geometry import Size
 from textual.strip import Strip
 
-from app.plotting.braille import Trace, render
+from app.plotting.braille import Rows, Trace, render
 from app.plotting.figure import Figure, Panel
 
 LABEL_WIDTH = 8
@@ -37,20 +37,31 @@ def plot_strips(traces: Sequence[Trace], x_range: tuple[float, float],
                 y_range: tuple[float, float], title: Text, width: int, height: int,
                 console: Console, *, zero_line: bool = False,
                 x_labels: tuple[str, str, str] = ("", "", ""),
-                marks: Sequence[tuple[float, Style]] = ()) -> list[Strip]:
+                marks: Sequence[tuple[float, Style]] = (), drawn: Rows | None = None
+                ) -> list[Strip]:
     """``height`` strips of ``width`` cells: a title row, y labels and the traces (and the
     ``marks``' vertical lines), the time axis (blank strips when there is no room for a
-    plot)."""
+    plot); ``drawn``: the traces' rows as last drawn (``braille.Rows``), made again only where
+    they changed."""
     if width <= LABEL_WIDTH + 2 or height < 3:
         return [Strip.blank(width) for _ in range(height)]
     cols, rows = width - LABEL_WIDTH - 1, height - 2
     body = render(traces, x_range, y_range, cols, rows, guide=AXIS_STYLE,
-                  guide_y=0.0 if zero_line else None, marks=marks)
+                  guide_y=0.0 if zero_line else None, marks=marks, drawn=drawn)
     labels = _y_labels(y_range, rows)
     lines = [Strip(list(title.render(console))).crop(0, width).adjust_cell_length(width)]
+    before = drawn.framed if drawn is not None and len(drawn.framed) == rows else []
+    framed = []
     for r, strip in enumerate(body):
-        margin = Segment(labels[r].rjust(LABEL_WIDTH)[:LABEL_WIDTH] + "┤", AXIS_STYLE)
-        lines.append(Strip([margin, *strip], width))
+        label = labels[r].rjust(LABEL_WIDTH)[:LABEL_WIDTH] + "┤"
+        if before and before[r][0] is strip and before[r][1] == label:
+            line = before[r][2]  # the same row beside the same label: as drawn
+        else:
+            line = Strip([Segment(label, AXIS_STYLE), *strip], width)
+        framed.append((strip, label, line))
+        lines.append(line)
+    if drawn is not None:
+        drawn.framed = framed
     lines.append(_axis(x_labels, width, cols))
     return lines
 

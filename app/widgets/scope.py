@@ -11,7 +11,7 @@ from textual.geometry import Region, Size
 from textual.strip import Strip
 from textual.widget import Widget
 
-from app.plotting.braille import Trace
+from app.plotting.braille import Rows, Trace
 from app.plotting.strips import plot_strips
 
 
@@ -28,6 +28,7 @@ class ScopePlot(Widget):
         self._x_labels = ("", "", "")
         self._lines: list[Strip] = []
         self._drawn_for = Size(0, 0)
+        self._rows = Rows()  # the traces' rows as last drawn: a frame makes the changed ones
         self.repaints = 0  # frames that changed what it shows (tests of the idle cost)
 
     def plot(self, traces: Sequence[Trace], x_range: tuple[float, float],
@@ -58,7 +59,8 @@ class ScopePlot(Widget):
         self._drawn_for = self.size
         self._lines = plot_strips(self._traces, self._x_range, self._y_range, self._title,
                                   self.size.width, self.size.height, self.app.console,
-                                  zero_line=self._zero_line, x_labels=self._x_labels)
+                                  zero_line=self._zero_line, x_labels=self._x_labels,
+                                  drawn=self._rows)
 
     def render_line(self, y: int) -> Strip:
         if self.size != self._drawn_for:

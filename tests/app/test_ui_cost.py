@@ -15,7 +15,9 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import ClassVar
 
+import numpy as np
 import pytest
+from rich.style import Style
 from rich.text import Text
 from textual.app import App, ComposeResult
 from textual.geometry import Region
@@ -23,6 +25,7 @@ from textual.strip import Strip
 from textual.widget import Widget
 
 import app.tui
+from app.plotting.braille import Rows, Trace, render
 from app.tui import ServodeskApp
 from app.widgets.live_text import LiveLines, LiveText
 from tests.app.conftest import Tui
@@ -305,3 +308,27 @@ def test_the_history_is_sampled_at_full_rate_only_while_the_scope_shows(tui) -> 
             assert app.sampler.period == pytest.approx(1 / 50)
 
     asyncio.run(scenario())
+
+
+def test_a_plot_makes_again_only_the_rows_that_changed() -> None:
+    """A live plot keeps its rows as drawn (``braille.Rows``): a frame whose dots are the same
+    hands back the very strips of the last one, and a change makes new strips only for the
+    rows it reaches, the same as a fresh drawing. The old raster made every row of every plot
+    again, 25 times a second on the Scope."""
+    x = np.linspace(-10.0, 0.0, 2000)
+    flat = np.full(2000, 5.0)
+    style = Style(color="cyan")
+    drawn = Rows()
+
+    def draw(y: np.ndarray, rows: Rows | None) -> list[Strip]:
+        return render([Trace(x, y, style)], (-10.0, 0.0), (0.0, 10.0), 60, 8, drawn=rows)
+
+    first = draw(flat, drawn)
+    again = draw(flat.copy(), drawn)
+    assert all(a is b for a, b in zip(first, again, strict=True))
+    stepped = flat.copy()
+    stepped[-100:] = 9.0  # the last half second steps up: rows 0 to 4 of 8 reached
+    third = draw(stepped, drawn)
+    remade = [r for r, (a, b) in enumerate(zip(again, third, strict=True)) if a is not b]
+    assert remade and remade == list(range(remade[0], remade[-1] + 1)) and len(remade) < 8
+    assert third == draw(stepped, None)
