@@ -190,9 +190,9 @@ class ServodeskApp(App[None]):
         Binding("ctrl+o", "release_command", "release command", priority=True,
                 tooltip="the controller holds; another client may take command"),
         Binding("ctrl+q", "quit", "quit", priority=True),
-        # not priority: in a text field ^A is the field's (to the start)
-        Binding("ctrl+a", "arm_view", "arm view", tooltip="the arm live in 3D on the whole "
-                "screen, with the Moves tab's path and the named positions"),
+        # priority: from a Moves field too, to see its path (Home goes to a field's start)
+        Binding("ctrl+a", "arm_view", "arm view", priority=True, tooltip="the arm live in 3D "
+                "on the whole screen, with the Moves tab's path and the named positions"),
         # the focus moves as the app takes the key, so the keys typed after it go to the next
         # field (a focus key left to the screen moved it only after the keys behind it)
         Binding("tab", "focus_next", "next field", show=False, priority=True),
@@ -864,10 +864,14 @@ class ServodeskApp(App[None]):
         positions.action_teach()
 
     def action_arm_view(self) -> None:
-        """The arm's view on the whole screen, showing the move running or previewed."""
+        """The arm's view on the whole screen, showing the move running or previewed; or
+        back to the tabs from it."""
         from app.screens.arm import ArmScreen  # loaded when first shown, not before
 
-        if isinstance(self.screen, ArmScreen | ModalScreen):
+        if isinstance(self.screen, ArmScreen):
+            self.pop_screen()
+            return
+        if isinstance(self.screen, ModalScreen):
             return
         moves = cast("MovesTab | None", self.tabs.made_tab("moves"))
         plan = None if moves is None else moves.plan_running or moves.previewed

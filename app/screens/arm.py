@@ -31,7 +31,7 @@ class ArmScreen(Screen[None]):
     }
     """
     BINDINGS: ClassVar = [
-        Binding("ctrl+a,q", "app.pop_screen", "back to the tabs", key_display="^A/q"),
+        Binding("q", "app.pop_screen", "back to the tabs"),  # ^A too: the app's
     ]
 
     def __init__(self, machine: Machine, model: Unimate2000B | None,

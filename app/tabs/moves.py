@@ -59,7 +59,6 @@ from app.tabs.move_forms import (
 )
 from app.tabs.path_forms import PathFileForm, ViaPointsForm
 from app.tabs.tab import TabPage
-from app.widgets.arm_view import ArmView
 from app.widgets.fields import FieldError, NumberField
 from app.widgets.figure_plot import FigurePlot
 from app.widgets.live_text import LiveText
@@ -127,7 +126,7 @@ class MovesTab(TabPage):
         self.last_result: MoveResult | None = None
         self._preview_timer: Timer | None = None
         self.forms: list[MoveForm] = []
-        self.previewed: MovePlan | None = None  # the plan the preview shows (the arm's view's)
+        self.previewed: MovePlan | None = None  # the plan previewed: ^A shows it on the arm
 
     def compose(self) -> ComposeResult:
         kinds = forms_for(self.machine)
@@ -149,7 +148,6 @@ class MovesTab(TabPage):
             with Vertical(id="moves-right"):
                 yield Static(id="move-preview-title")
                 yield FigurePlot(id="move-preview")
-                yield ArmView(self.machine, self.model, self.status, id="move-arm")
         with Vertical(id="moves-bottom"):
             yield Static(id="move-error")
             with Horizontal(id="move-run-state"):
@@ -254,10 +252,8 @@ class MovesTab(TabPage):
             title.update(Text(str(exc), "yellow"))
             plot.show(None)
             self.previewed = None
-            self.query_one(ArmView).show_plan(None)
             return
         self.previewed = plan
-        self.query_one(ArmView).show_plan(plan.path, plan.kind)
         dt = self.desk.dt
         names = [j.name for j in self.machine.joints]
         if plan.path is not None:

@@ -1,6 +1,6 @@
-"""The arm's view in the TUI (issue 28): on the Jog tab (p), on its own screen (^A) and under
-the Moves preview, at 80×24 and 160×48, on the real controller; a near-limit joint coloured;
-an idle view draws nothing; the ghost and the previewed path shown."""
+"""The arm's view in the TUI (issue 28): on the Jog tab (p) and on its own screen (^A, with the
+Moves tab's previewed path), at 80×24 and 160×48, on the real controller; a near-limit joint
+coloured; an idle view draws nothing; the ghost and the previewed path shown."""
 
 from __future__ import annotations
 
@@ -128,7 +128,7 @@ def test_the_jog_tab_and_the_full_screen_show_the_arm_at_160x48(tui) -> None:
     _jog_view_at(tui, LARGE)
 
 
-def test_the_moves_preview_shows_the_path_and_the_full_screen_takes_it(tui) -> None:
+def test_the_moves_preview_path_is_on_the_full_screen_from_its_text_field(tui) -> None:
     async def scenario() -> None:
         app = tui.app()
         async with app.run_test(size=LARGE) as pilot:
@@ -136,24 +136,25 @@ def test_the_moves_preview_shows_the_path_and_the_full_screen_takes_it(tui) -> N
             await pilot.press("f2")
             moves = app.tab("moves")
             await tui.until(lambda: moves.visible_now)
-            view = app.query_one("#move-arm", ArmView)
             target = np.array(start.position)
-            target[0] += 500.0  # the tool sweeps a wide arc: long enough to see in a small view
+            target[0] += 500.0  # the tool sweeps a wide arc
             target[1] += 90.0
             kinds = app.query_one("#move-kinds", OptionList)
             kinds.highlighted = next(i for i in range(kinds.option_count)
                                      if str(kinds.get_option_at_index(i).prompt) == "Via points")
             await tui.until(lambda: moves.form.KIND == "via_points")
-            app.query_one("#via-points", TextArea).text = " ".join(f"{v:.3f}" for v in target)
-            await tui.until(lambda: moves.previewed is not None
-                            and cells_styled(view, JOINT_PATH) > 5,
-                            what=lambda: f"the path on the arm: {drawn(view)}")
-            await pilot.press("ctrl+a")
+            area = app.query_one("#via-points", TextArea)
+            area.focus()
+            area.text = " ".join(f"{v:.3f}" for v in target)
+            await tui.until(lambda: moves.previewed is not None, what="the preview")
+            await pilot.press("ctrl+a")  # typed in the field: the app's, not the field's
             await tui.until(lambda: isinstance(app.screen, ArmScreen))
             full = app.screen.query_one(ArmView)
-            await tui.until(lambda: cells_styled(full, JOINT_PATH) > 5,
+            await tui.until(lambda: cells_styled(full, JOINT_PATH) > 20,
                             what=lambda: drawn(full))
-            await pilot.press("f1")  # a tab's key leaves the full view for the tab
+            await pilot.press("ctrl+a")  # and back
+            await tui.until(lambda: not isinstance(app.screen, ArmScreen))
+            await pilot.press("ctrl+a", "f1")  # a tab's key leaves the full view for the tab
             await tui.until(lambda: not isinstance(app.screen, ArmScreen)
                             and app.tab("jog").visible_now)
 
