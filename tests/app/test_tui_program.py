@@ -16,12 +16,14 @@ import numpy as np
 import pytest
 from textual.widgets import DataTable, Input
 
+from app.run_groups import grouped, program_cell
 from app.tabs.program import ProgramTab
 from app.tabs.program_edit import delete_step, insert_go_to, move_step
 from app.widgets.dialogs import ConfirmScreen, EditValueScreen
 from control.motion import form_plans
 from control.program import RunnerState, parse_program, read_program
 from control.program.model import GoTo
+from control.recorder import RunFiles, RunInfo
 
 SIZE = (120, 36)
 RUN_S = 60.0  # a program of a few go-tos on a loaded two-core machine
@@ -377,3 +379,15 @@ def test_edits_keep_the_listing_numbered_as_the_file_will_be() -> None:
     assert [s.title for s, _ in deleted.listing()] == ["go to 'home'"] and at == 1
     with pytest.raises(ValueError, match="steps"):  # a repeat left empty is no program
         delete_step(delete_step(PROGRAM, 4)[0], 3)
+
+
+def test_a_program_runs_moves_are_listed_together_in_its_order() -> None:
+    """Newest first, as the Runs tab lists runs, but a program run's moves together where its
+    newest is, oldest first (another run made in between does not split them)."""
+    infos = [RunInfo(RunFiles.at(Path("runs"), stem)) for stem in ("e", "d", "c", "b", "a")]
+    programs = {"e": {"run_id": "20261127-0540-7044", "name": "pick", "step": 4, "visit": 2},
+                "c": {"run_id": "20261127-0540-7044", "name": "pick", "step": 3, "visit": 1},
+                "a": {"run_id": "20261127-0540-7044", "name": "pick", "step": 1, "visit": 0}}
+    assert [i.files.stem for i in grouped(infos, programs)] == ["a", "c", "e", "d", "b"]
+    assert program_cell(programs["c"]) == "pick #7044 · step 3"
+    assert program_cell(None) == ""
