@@ -19,6 +19,7 @@ from textual.widgets import DataTable, Input
 from app.run_groups import grouped, program_cell
 from app.tabs.program import ProgramTab
 from app.tabs.program_edit import delete_step, insert_go_to, move_step
+from app.tui import attached_app
 from app.widgets.dialogs import ConfirmScreen, EditValueScreen
 from control.motion import form_plans
 from control.program import RunnerState, parse_program, read_program
@@ -343,6 +344,35 @@ def test_the_rig_example_runs_from_the_tab(tui) -> None:
             assert [r.visit.step.number for r in outcome.results] == list(range(1, 8))
             rows = (await listed(tui, tab, pilot))
             assert all("complete" in rows[n] for n in range(1, 8)), rows
+
+    asyncio.run(scenario())
+
+
+def test_an_observer_opens_only_the_data_directorys_programs_and_cannot_run_or_save(
+        controller_service, tui) -> None:
+    async def scenario() -> None:
+        app = attached_app(controller_service.socket)  # observes: nobody took command
+        async with app.run_test(size=SIZE) as pilot:
+            await tui.ready(app, pilot)
+            tab = await program_tab(tui, app, pilot)
+            field = tab.query_one("#program-path", Input)
+            await tui.until(lambda: field.value.endswith("unimate_pick_and_place.toml"),
+                            what="the example offered")
+            await pilot.press("l")  # outside the data directory: not for an observer to read
+            assert "only a file inside the data directory" in said(tui, tab)
+            assert tab.program is None
+            path = controller_service.data_dir / "programs" / "slow.toml"
+            path.parent.mkdir(parents=True)
+            path.write_text(SLOW)
+            await open_path(tui, tab, pilot, path)  # inside: shown, and checked
+            await checked(tui, tab)
+            assert tab.checked is not None, tab.problems
+            for key in ("r", "n"):
+                await pilot.press(key)
+                assert "observing" in said(tui, tab) and "take it first" in said(tui, tab)
+                assert tab.runner is None and not app.client.status().moving
+            await pilot.press("w")
+            assert "save a program" in said(tui, tab) and "observing" in said(tui, tab)
 
     asyncio.run(scenario())
 
