@@ -40,11 +40,15 @@ async def program_tab(tui, app, pilot) -> ProgramTab:
 
 
 async def open_path(tui, tab: ProgramTab, pilot, path: Path) -> None:
-    """Type ``path`` in the path field, Enter: read and checked."""
+    """Type ``path`` in the path field, Enter: read (then checked), or a new program offered."""
     field = tab.query_one("#program-path", Input)
     field.value = str(path)
     field.focus()
+    before = tab.program
     await pilot.press("enter")
+    await tui.until(lambda: tab.program is not before or isinstance(tab.app.screen,
+                                                                    ConfirmScreen),
+                    what=f"{path} opened")
 
 
 async def checked(tui, tab: ProgramTab) -> None:
@@ -325,7 +329,7 @@ def test_hold_resume_stop_start_from_a_step_t1s_enabling_key_and_the_refusals(
     asyncio.run(scenario())
 
 
-def test_the_rig_example_runs_from_the_tab(tui) -> None:
+def test_the_rig_example_runs_from_the_tab_and_an_unzeroed_rig_is_refused(tui) -> None:
     async def scenario() -> None:
         app = tui.app("rig")
         async with app.run_test(size=SIZE) as pilot:
@@ -334,10 +338,19 @@ def test_the_rig_example_runs_from_the_tab(tui) -> None:
             field = tab.query_one("#program-path", Input)
             example = EXAMPLES / "rig_sequence.toml"
             await tui.until(lambda: field.value == str(example), what="the example offered")
-            await pilot.press("l")
+            # a program that moves the rig before its encoder is zeroed is refused
+            unzeroed = tui.data_dir / "programs" / "step.toml"
+            unzeroed.parent.mkdir(parents=True)
+            unzeroed.write_text('machine = "rig"\n\n[[step]]\nmove = "step"\ntarget = 300.0\n')
+            await open_path(tui, tab, pilot, unzeroed)
+            await checked(tui, tab)
+            await pilot.press("r")
+            assert "the encoders are not zeroed" in said(tui, tab) and tab.runner is None
+            # the example begins with Initialise: it runs
+            await open_path(tui, tab, pilot, example)
             await checked(tui, tab)
             assert tab.checked is not None, tab.problems
-            await pilot.press("r")  # it begins with Initialise: the unzeroed rig may run it
+            await pilot.press("r")
             await ended(tui, tab)
             outcome = tab.runner.outcome()
             assert outcome.complete, outcome.reason
