@@ -2,9 +2,10 @@
 Positions (steps inserted, moved, deleted), saved, opened again and checked, single-stepped
 and run to the end, its moves listed together on the Runs tab; a bad program shows each
 problem's line and step and cannot run; feed hold and resume, stop, a start from a step that
-asks first, the refusals (E-stop latched, a move running elsewhere); in reduced speed (T1) the
-program advances only while the enabling key repeats, and a release is a feed hold; the rig's
-example program runs from the tab. The edits themselves are checked without a controller."""
+asks first, an operator's wait, the refusals (a move running elsewhere, the E-stop latched,
+the rig not zeroed, an observer); in reduced speed (T1) the program advances only while the
+enabling key repeats, and a release is a feed hold; the rig's example program runs from the
+tab. The edits and the Runs tab's grouping are checked without a controller too."""
 
 from __future__ import annotations
 
@@ -227,6 +228,8 @@ def test_hold_resume_stop_start_from_a_step_t1s_enabling_key_and_the_refusals(
         folder.mkdir(parents=True)
         (folder / "slow.toml").write_text(SLOW)
         (folder / "t1.toml").write_text(T1)
+        (folder / "wait.toml").write_text('machine = "unimate2000b"\n\n[[step]]\n'
+                                          'wait = "operator"\n')
         async with app.run_test(size=SIZE) as pilot:
             await tui.ready(app, pilot)
             client = app.client
@@ -268,6 +271,18 @@ def test_hold_resume_stop_start_from_a_step_t1s_enabling_key_and_the_refusals(
             await ended(tui, tab)
             outcome = tab.runner.outcome()
             assert outcome.complete and [r.visit.step.number for r in outcome.results] == [2]
+
+            # an operator's wait lasts until g
+            await open_path(tui, tab, pilot, folder / "wait.toml")
+            await checked(tui, tab)
+            await pilot.press("g")  # nothing waits yet
+            assert "no step waits for the operator" in said(tui, tab)
+            await pilot.press("r")
+            await tui.until(lambda: "g goes on" in said(tui, tab), what="the wait shown")
+            assert tab.runner.state is RunnerState.RUNNING and not tab.runner.results
+            await pilot.press("g")
+            await ended(tui, tab)
+            assert [(r.visit.step.number, r.status) for r in tab.runner.results] == [(1, "ok")]
 
             # reduced speed (T1): r is refused; the program goes only while space repeats
             await pilot.press("ctrl+y")  # reduced speed: at once
