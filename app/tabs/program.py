@@ -59,7 +59,7 @@ from control.program import (
     read_program,
     visits,
 )
-from control.program.model import Wait
+from control.program.model import Step, Wait
 from control.program.runner import MoveStarted, ProgramEnded, Report, StepDone, StepStarted
 from control.rt.layout import Mode
 from hw.machine import Machine
@@ -505,7 +505,7 @@ class ProgramTab(TabPage):
             return
         self._check(start, then)
 
-    def _first(self, start: int) -> object | None:
+    def _first(self, start: int) -> Step | None:
         """The first step that will run from ``start`` (for the unzeroed rig's refusal)."""
         program = self.program
         if program is None or not program.steps:
@@ -793,7 +793,7 @@ class ProgramTab(TabPage):
 
     # -- refusals ------------------------------------------------------------------------------
 
-    def _refusal(self, first: object | None, *, running: bool = False) -> str:
+    def _refusal(self, first: Step | None, *, running: bool = False) -> str:
         """Why a program cannot run now ("" if it can); ``first`` the step it starts with."""
         if self.connection is None or self.client is None:
             return "the controller is not running — " + (self.client_problem
