@@ -10,7 +10,11 @@ Scope's drawing as a peer. Prints figures, asserts nothing.
    pose at every poll, for ``--seconds``; frames drawn a second and the process's CPU
    (Textual's compositor and driver included). The peer: a ScopePlot in the same app fed
    the Scope's data, shifted, at the view's poll rate;
-3. live (``--tmux``): ``python -m app`` in a 160 × 48 tmux window (in reduced speed, as it
+3. the TUI headless (Textual's test driver, 160 × 48, a real-time controller): Up/Down
+   position-jogged by a key every 30 ms as a terminal's repeat delivers it, for ``--seconds``
+   with the Jog tab as it was and with the arm's view switched in (``p``): the view's frames
+   a second and the UI process's CPU (the controller is another process);
+4. live (``--tmux``): ``python -m app`` in a 160 × 48 tmux window (in reduced speed, as it
    starts), Up/Down jogged up and down in position mode (0.2° a press) by a key repeated every
    30 ms, the app's CPU (/proc) over the
    jogging with the Jog tab as it was and with the arm's view switched in (``p``), and the
@@ -259,9 +263,55 @@ class Tmux:
         subprocess.run([*self.tmux, "kill-server"], capture_output=True)
 
 
+async def tui_jogging(seconds: float, view: bool) -> tuple[float, float, float]:
+    """Frames a second of the Jog tab's arm view and its polls a second (0 without it), and
+    % of a core of the UI process, while Up/Down is position-jogged up and down."""
+    from textual import events
+
+    from app.tui import ServodeskApp
+
+    with tempfile.TemporaryDirectory() as data_dir:
+        app = ServodeskApp("unimate2000b", data_dir=data_dir)
+        async with app.run_test(size=SIZES[0]) as pilot:
+            deadline = time.monotonic() + 60
+            while app.sampler is None or app.sampler.latest is None or app.focused is None:
+                if time.monotonic() > deadline:
+                    raise RuntimeError(f"the controller did not start: {app.client_problem}")
+                await asyncio.sleep(0.05)
+            await pilot.press("m", "m", "5", *(["p"] if view else []))
+            await pilot.pause(1.0)
+            views = app.query("#jog-arm")
+            draws: Callable[[], tuple[int, int]] = (
+                (lambda: (views.first(ArmView).draws, views.first(ArmView).polls)) if view
+                else (lambda: (0, 0)))
+            assert app._driver is not None
+            start, cpu, wall = draws(), time.process_time(), time.perf_counter()
+            key, turned = "d", wall
+            while time.perf_counter() - wall < seconds:
+                app._driver.send_message(events.Key(key, key))  # as a terminal's repeat comes
+                if time.perf_counter() - turned > SWING_S:
+                    key, turned = ("c" if key == "d" else "d"), time.perf_counter()
+                await asyncio.sleep(KEY_GAP_S)
+            elapsed = time.perf_counter() - wall
+            end = draws()
+            return ((end[0] - start[0]) / elapsed, (end[1] - start[1]) / elapsed,
+                    100 * (time.process_time() - cpu) / elapsed)
+
+
+def tui_figures(seconds: float) -> None:
+    plain = asyncio.run(tui_jogging(seconds, view=False))[2]
+    fps, polls, beside = asyncio.run(tui_jogging(seconds, view=True))
+    print(f"\n3. the TUI headless 160×48, Up/Down position-jogged (a key every "
+          f"{KEY_GAP_S * 1e3:.0f} ms) for {seconds:g} s: the arm's view drew {fps:.1f} "
+          f"frames/s (it looked {polls:.1f} times a second; a look at an unmoved pose draws "
+          f"nothing); the UI process used {plain:.1f} % of a core without the view, "
+          f"{beside:.1f} % with it (the view's share {beside - plain:+.1f} %); load average "
+          f"{os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs")
+
+
 def tmux_figures(seconds: float) -> None:
     if shutil.which("tmux") is None:
-        print("\n3. live in tmux: skipped (no tmux)")
+        print("\n4. live in tmux: skipped (no tmux)")
         return
     with tempfile.TemporaryDirectory() as data_dir:
         app = Tmux(data_dir)
@@ -284,7 +334,7 @@ def tmux_figures(seconds: float) -> None:
         finally:
             with contextlib.suppress(Exception):
                 app.close()
-    print(f"\n3. live in tmux 160×48, Up/Down jogged (position jog, a key every "
+    print(f"\n4. live in tmux 160×48, Up/Down jogged (position jog, a key every "
           f"{KEY_GAP_S * 1e3:.0f} ms) for {seconds:g} s: the app used {plain:.1f} % of a core "
           f"on the Jog tab as it was, {beside:.1f} % with the arm's view switched in "
           f"(the view's share {beside - plain:+.1f} %; {moved} rows of the screen changed "
@@ -300,6 +350,7 @@ def main() -> None:
     args = parser.parse_args()
     drawing_alone(args.frames)
     headless_figures(args.seconds)
+    tui_figures(args.seconds)
     if args.tmux:
         tmux_figures(args.seconds)
 

@@ -35,7 +35,7 @@ from app.plotting.arm_scene import (
     tool_trace,
 )
 from app.plotting.dot_canvas import DotCanvas, Drawn
-from app.plotting.projection import VIEWS, View
+from app.plotting.projection import VIEWS, Projection, View
 from control.motion.positions import (
     Position,
     PositionBook,
@@ -108,7 +108,8 @@ class ArmView(Widget, can_focus=True):
         self.draws = 0  # frames drawn (the idle view's test counts them)
         self.polls = 0  # times it looked at the status while on screen
         self._shown_for: tuple[object, ...] | None = None
-        self._background: tuple[tuple[object, ...], DotCanvas] | None = None
+        # what the background was drawn for, its projection and the drawing
+        self._background: tuple[tuple[object, ...], Projection, DotCanvas] | None = None
         self._drawn: Drawn | None = None
         self._caption = Strip.blank(0)
         self._size = Size(0, 0)
@@ -208,11 +209,12 @@ class ArmView(Widget, can_focus=True):
         assert self.arm is not None
         reduced = cols < REDUCED[0] or rows < REDUCED[1]
         key = (self.view, cols, rows, self.plan, reduced)
-        projection = self.arm.projection(self.view, cols, rows)
         if self._background is None or self._background[0] != key:
-            self._background = (key, self.arm.background(projection, cols, rows, self.plan,
-                                                         reduced))
-        canvas = self._background[1].copy()
+            projection = self.arm.projection(self.view, cols, rows)
+            self._background = (key, projection, self.arm.background(projection, cols, rows,
+                                                                     self.plan, reduced))
+        _, projection, background = self._background
+        canvas = background.copy()
         # no target (manual actuation: NaN) is no ghost; a ghost where the arm is, none either
         if (desired is not None and position is not None and np.isfinite(desired).all()
                 and not np.allclose(desired, position, atol=1e-3)):
