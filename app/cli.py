@@ -20,7 +20,7 @@ import signal
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NoReturn
 
 from app.priority import raise_priority, restore
 
@@ -43,10 +43,31 @@ def build_parser() -> argparse.ArgumentParser:
         cli_runs,
         cli_serve,
     )
+
+    parser = tui_parser()
+    sub = parser.add_subparsers(title="commands (none: open the TUI)", metavar="COMMAND")
+    for module in (cli_kinematics, cli_machine, cli_emulate, cli_controller, cli_serve, cli_move,
+                   cli_program, cli_runs):
+        module.add_parsers(sub)
+    return parser
+
+
+class Unsure(Exception):
+    """The TUI's own options do not account for the command line: the whole parser must."""
+
+
+class _TuiParser(argparse.ArgumentParser):
+    def error(self, message: str) -> NoReturn:
+        raise Unsure(message)
+
+
+def tui_parser(cls: type[argparse.ArgumentParser] = argparse.ArgumentParser
+               ) -> argparse.ArgumentParser:
+    """``servodesk``'s own options (the global ones and the TUI's), without its commands."""
     from app.cli_options import ALL, global_options
 
-    parser = argparse.ArgumentParser(
-        prog="servodesk",
+    parser = cls(
+        prog="servodesk", add_help=cls is not _TuiParser,  # help lists the commands too
         description="Terminal workstation for real-time control of hydraulic manipulators "
                     "(Unimate 2000B, single-axis test rig).",
         parents=[global_options(*ALL, defaults=True)],
@@ -60,43 +81,51 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--take-command", action="store_true",
                         help="with --attach: take command at start (refused, with who holds it, "
                              "if another client does)")
-    sub = parser.add_subparsers(title="commands (none: open the TUI)", metavar="COMMAND")
-    for module in (cli_kinematics, cli_machine, cli_emulate, cli_controller, cli_serve, cli_move,
-                   cli_program, cli_runs):
-        module.add_parsers(sub)
     return parser
 
 
-def main(argv: list[str] | None = None) -> int:
-    priority = raise_priority()  # the TUI's from its first import; a command's own below
+def parse_for_tui(argv: list[str] | None) -> argparse.Namespace | None:
+    """The arguments of a command line that opens the TUI, read without importing
+    the commands' modules (a third of the TUI's start on a busy machine); None when it names a
+    command, asks for help or is wrong: the whole parser then reads it and says so."""
     try:
-        parser = build_parser()
-        args = parser.parse_args(argv)
-        if hasattr(args, "func"):
-            restore(priority)
-            return run_command(args)
-        return tui(parser, args)
+        args, rest = tui_parser(_TuiParser).parse_known_args(argv)
+    except Unsure:
+        return None
+    return None if rest else args
+
+
+def main(argv: list[str] | None = None) -> int:
+    priority = raise_priority()  # the TUI's from its first import; a command runs at its own
+    try:
+        args = parse_for_tui(argv) or build_parser().parse_args(argv)
+        if not hasattr(args, "func"):
+            return tui(args)
     finally:
         restore(priority)
+    return run_command(args)
 
 
-def tui(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
+def tui(args: argparse.Namespace) -> int:
     """Open the TUI as ``args`` ask; its exit code."""
     from app.cli_options import machine_for
     from control.timing import Timing
 
+    def error(message: str) -> NoReturn:
+        build_parser().error(message)  # the usage of servodesk and its commands
+
     if args.backend == "serial" and not args.port:
-        parser.error("--backend serial needs --port URL (a device, the emulator's pty path or "
+        error("--backend serial needs --port URL (a device, the emulator's pty path or "
                      "socket://HOST:PORT)")
     if (args.observe_only or args.take_command) and args.attach is None:
-        parser.error("--observe-only and --take-command are for a TUI on a controller service: "
+        error("--observe-only and --take-command are for a TUI on a controller service: "
                      "add --attach")
     if args.observe_only and args.take_command:
-        parser.error("--observe-only and --take-command exclude each other")
+        error("--observe-only and --take-command exclude each other")
     try:
         timing = Timing(args.timing, args.interrupt_ms, tuple(args.slip))
     except ValueError as exc:
-        parser.error(str(exc))
+        error(str(exc))
     if args.attach is not None:
         return run_tui(lambda: _attached(args))
     from app.controller_start import ControllerStart
