@@ -91,6 +91,7 @@ SLOW_TESTS = (
     "tests/app/test_ui_cost.py::test_no_tab_module_but_jogs_is_imported_before_the_first_frame",
     "tests/app/test_ui_cost.py::test_servodesk_starts_its_controller_before_it_imports_the_screen",
     "tests/app/test_arm_view.py::test_an_idle_view_draws_once_and_a_new_pose_draws_again",  # Pilot
+    "tests/app/test_arm_view.py::test_the_full_view_works_in_the_browser",  # serve, Chromium
     "tests/control/rt/test_seqlock.py::test_reader_never_sees_a_torn_record",  # spawned writer
     "tests/control/rt/test_shm.py::test_orphan_of_a_killed_process_is_cleaned_up",
     "tests/control/test_recorder.py::test_a_read_only_directory_raises_and_leaves_nothing",
@@ -141,6 +142,7 @@ ONE_AT_A_TIME = (
     "tests/faults/test_serial_link.py::test_losing_a_tcp_link_does_not_stall_the_loop",
     "tests/app/test_tui_heartbeat.py",       # every tab opened beside a burner, 250 ms heartbeat
     "tests/app/test_serve.py",               # headless Chromium, twenty sessions beside a burner
+    "tests/app/test_arm_view.py::test_the_full_view_works_in_the_browser",  # headless Chromium
     "tests/app/test_smoke_tmux.py",          # the app in tmux
     "tests/app/test_typing_tmux.py",         # the app in tmux, keys 5 ms apart
     "tests/control/test_run_keeper.py",      # an E-stop's delivery timed while a run saves
