@@ -136,8 +136,8 @@ class ArmView(Widget, can_focus=True):
             markers: tuple[Marker, ...] = ()
         else:
             points = self.arm.model.forward(np.array([p.joints for p in positions]))[:, :3, 3]
-            markers = tuple(Marker(p.name, tuple(float(v) for v in xyz))  # type: ignore[misc]
-                            for p, xyz in zip(positions, points, strict=True))
+            markers = tuple(Marker(p.name, (float(x), float(y), float(z)))
+                            for p, (x, y, z) in zip(positions, points, strict=True))
         self.plan = Plan(self.plan.path, self.plan.kind, markers)
         self.poll()
 
@@ -171,7 +171,9 @@ class ArmView(Widget, can_focus=True):
         position = tuple(status.position) if status is not None else None
         desired = tuple(status.desired) if status is not None else None
         supply = round(status.supply_mpa, 1) if status is not None and self.rig else None
-        shown_for = (position, desired, supply, self.view, self.size, self.plan)
+        # compared as bytes: a NaN (no target, no supply reading) equals itself there
+        values = np.array([*(position or ()), *(desired or ()), supply or 0.0]).tobytes()
+        shown_for = (values, position is None, self.view, self.size, self.plan)
         if shown_for == self._shown_for:
             return
         self._shown_for = shown_for

@@ -6,6 +6,7 @@ in the browser (``servodesk serve``)."""
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 from collections.abc import Callable
 from pathlib import Path
 
@@ -50,6 +51,13 @@ class ViewApp(App[None]):
         yield ArmView(MACHINE, builtin_unimate(), self.source)
 
 
+def fresh(record: Status) -> Status:
+    """The same status as a new record, every number a new object, as each one read from
+    shared memory is (a NaN is then not the NaN of the last one)."""
+    return dataclasses.replace(record, position=tuple(np.array(record.position).tolist()),
+                               desired=tuple(np.array(record.desired).tolist()))
+
+
 def drawn(view: ArmView) -> str:
     return Tui.text(view)
 
@@ -69,7 +77,7 @@ def test_an_idle_view_draws_once_and_a_new_pose_draws_again() -> None:
     now = {"status": status(home)}
 
     async def scenario() -> None:
-        app = ViewApp(lambda: now["status"])
+        app = ViewApp(lambda: fresh(now["status"]))
         async with app.run_test(size=LARGE) as pilot:
             view = app.query_one(ArmView)
             await Tui.until(lambda: view.draws >= 1, what="the first frame")
@@ -83,7 +91,9 @@ def test_an_idle_view_draws_once_and_a_new_pose_draws_again() -> None:
             assert cells_styled(view, GHOST) > 0, "no ghost of the desired pose"
             now["status"] = status(moved, desired=(float("nan"),) * 6)  # manual: no target
             await Tui.until(lambda: view.draws == 3, what="the pose without a target drawn")
-            await pilot.pause()
+            polls = view.polls
+            await Tui.until(lambda: view.polls >= polls + 10, what="ten polls")
+            assert view.draws == 3, "no target (NaN) is no change: nothing to draw again"
             assert cells_styled(view, GHOST) == 0 and cells_styled(view, LINK) > 0
             await pilot.press("f")  # the keys need the focus: the view is the only focusable
             await Tui.until(lambda: view.view.name == "front" and view.draws == 4,
