@@ -125,9 +125,13 @@ def _runs(col: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def _rows(values: np.ndarray, y0: float, y1: float, height_px: int) -> np.ndarray:
-    """Pixel row of each value (top row 0), clipped onto the plot; NaN stays NaN."""
+    """Pixel row of each value (top row 0), the nearest, clipped onto the plot; NaN stays NaN.
+
+    The middle of the range is a row's middle, not the edge between two: a flat line in the
+    middle of an auto-scaled plot (a joint at rest) stays on its row however its noise goes,
+    where flooring flipped it between two rows, and the row was drawn again, every frame."""
     with np.errstate(invalid="ignore"):
-        rows = np.floor((y1 - values) * (height_px / (y1 - y0)))
+        rows = np.floor((y1 - values) * (height_px / (y1 - y0)) + 0.5)
     return np.clip(rows, 0, height_px - 1)
 
 

@@ -42,6 +42,8 @@ ERROR = Style(color="magenta")
 SETTLE = Style(color="green", dim=True)
 NICE_DUTY = (5.0, 10.0, 25.0, 50.0, 100.0)
 SETTLES_KEPT = 8  # the settles the scope can mark, newest last
+BAR_HZ = 4.0  # the bar's sample count and frame time, at a rate they can be read (its state
+# at once): redrawn with every frame, the bar widened each frame's update to the plots under it
 
 
 @dataclass
@@ -126,6 +128,8 @@ class ScopeTab(TabPage, can_focus=True):
         self.pan_s = 0.0
         self.frame_s = 0.0  # time the last frame took to compute, for the status line
         self.settles: deque[Settle] = deque(maxlen=SETTLES_KEPT)
+        self._bar_shown: tuple[object, ...] = ()  # the bar's state as last shown, and when
+        self._bar_at = 0.0
 
     def compose(self) -> ComposeResult:
         yield LiveText(id="scope-bar")
@@ -281,6 +285,12 @@ class ScopeTab(TabPage, can_focus=True):
         return traces
 
     def _bar(self, samples: int, settling: bool = False) -> None:
+        shown = (self.paused, settling, self.window_s, tuple(self.selected), self.error_view,
+                 self.fixed_y)
+        now = time.monotonic()
+        if shown == self._bar_shown and now - self._bar_at < 1.0 / BAR_HZ:
+            return
+        self._bar_shown, self._bar_at = shown, now
         state = Text("PAUSED", "bold yellow") if self.paused else Text("LIVE", "bold green")
         if settling:
             state.append("  SETTLING", "bold yellow")

@@ -332,3 +332,16 @@ def test_a_plot_makes_again_only_the_rows_that_changed() -> None:
     remade = [r for r, (a, b) in enumerate(zip(again, third, strict=True)) if a is not b]
     assert remade and remade == list(range(remade[0], remade[-1] + 1)) and len(remade) < 8
     assert third == draw(stepped, None)
+
+
+def test_a_flat_line_in_the_middle_of_its_plot_stays_on_its_row_through_noise() -> None:
+    """An auto-scaled plot centres a joint at rest: its line lies on the middle of the range,
+    which is now a row's middle, so noise far below a dot's height leaves the picture as it
+    was. It was the edge between two rows: the line flipped between them with the noise's
+    sign, and the row was drawn again every frame."""
+    x = np.linspace(-10.0, 0.0, 2000)
+    style = Style(color="cyan")
+    pictures = {tuple(strip.text for strip in render(
+        [Trace(x, np.full(2000, 1.5 + noise), style)], (-10.0, 0.0), (1.0, 2.0), 60, 8))
+        for noise in (-1e-6, 0.0, 1e-6)}
+    assert len(pictures) == 1
