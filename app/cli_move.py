@@ -438,7 +438,6 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from control.client import ControlClient, ControllerError
     from control.recorder import default_data_dir
 
     kind: Kind = args.kind
@@ -446,27 +445,14 @@ def _run(args: argparse.Namespace) -> int:
         machine = machine_for(args)
     except MachineError as exc:
         raise BadInput(str(exc)) from None
-    if args.backend == "serial" and not args.port:
-        raise BadInput("--port: --backend serial needs the I/O board's URL (a device, the "
-                       "emulator's pty path or socket://HOST:PORT)")
-    if args.backend == "serial" and args.lockstep:
-        raise BadInput("--lockstep: an I/O board runs in real time; leave --lockstep out, or "
-                       "run the simulator (--backend sim)")
+    check_backend(args)
     _check_fields(args, kind, machine)
     if args.reduced and kind.name == "pulse":
         raise BadInput("--reduced: a pulse is open-loop duty, which reduced speed cannot hold "
                        "to 250 mm/s; leave --reduced out to run it at full speed")
     data_dir = Path(args.data_dir).expanduser() if args.data_dir else default_data_dir()
-    _check_writable(data_dir)
-    pace = ({"lockstep": True, "heartbeat_timeout_s": LOCKSTEP_HEARTBEAT_S} if args.lockstep
-            else {})
-    try:
-        client = ControlClient(machine, args.backend, port=args.port, seed=args.seed,
-                               data_dir=data_dir, timing=Timing(args.timing, args.interrupt_ms,
-                                                                tuple(args.slip)),
-                               speed_mode="reduced" if args.reduced else "automatic", **pace)
-    except (ControllerError, OSError, ValueError) as exc:
-        raise BadInput(f"cannot start the controller: {exc}") from None
+    check_writable(data_dir)
+    client = start_client(args, machine, data_dir)
     try:
         return _move(args, kind, client, machine)
     finally:
@@ -486,7 +472,32 @@ def _check_fields(args: argparse.Namespace, kind: Kind, machine: Machine) -> Non
         pass
 
 
-def _check_writable(data_dir: Path) -> None:
+def check_backend(args: argparse.Namespace) -> None:
+    """The backend options of a command that starts a controller (``move``, ``run``)."""
+    if args.backend == "serial" and not args.port:
+        raise BadInput("--port: --backend serial needs the I/O board's URL (a device, the "
+                       "emulator's pty path or socket://HOST:PORT)")
+    if args.backend == "serial" and args.lockstep:
+        raise BadInput("--lockstep: an I/O board runs in real time; leave --lockstep out, or "
+                       "run the simulator (--backend sim)")
+
+
+def start_client(args: argparse.Namespace, machine: Machine, data_dir: Path) -> ControlClient:
+    """The controller a command runs on, as its options say (``--lockstep``, ``--reduced``…)."""
+    from control.client import ControlClient, ControllerError
+
+    pace = ({"lockstep": True, "heartbeat_timeout_s": LOCKSTEP_HEARTBEAT_S} if args.lockstep
+            else {})
+    try:
+        return ControlClient(machine, args.backend, port=args.port, seed=args.seed,
+                             data_dir=data_dir, timing=Timing(args.timing, args.interrupt_ms,
+                                                              tuple(args.slip)),
+                             speed_mode="reduced" if args.reduced else "automatic", **pace)
+    except (ControllerError, OSError, ValueError) as exc:
+        raise BadInput(f"cannot start the controller: {exc}") from None
+
+
+def check_writable(data_dir: Path) -> None:
     try:
         data_dir.mkdir(parents=True, exist_ok=True)
     except OSError as exc:

@@ -29,7 +29,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
-import os
 import sys
 import threading
 import time
@@ -38,10 +37,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from app.cli_move import LOCKSTEP_HEARTBEAT_S, BadInput, EStopOnSignal
+from app.cli_move import BadInput, EStopOnSignal, check_backend, check_writable, start_client
 from app.cli_options import ALL, DEFAULT_MACHINE, global_options, machine_for
 from control.program.parse import Problem
-from control.timing import Timing
 from hw.machine import Machine, MachineError
 
 if TYPE_CHECKING:
@@ -109,7 +107,6 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from control.client import ControlClient, ControllerError
     from control.recorder import default_data_dir
 
     program = _read(args.program)
@@ -121,25 +118,12 @@ def _run(args: argparse.Namespace) -> int:
         print(f"{program.source}: checked, {program.count} steps, {len(checked.visits)} to run "
               f"from step {args.start} on {machine.name}")
         return DONE
-    if args.backend == "serial" and not args.port:
-        raise BadInput("--port: --backend serial needs the I/O board's URL (a device, the "
-                       "emulator's pty path or socket://HOST:PORT)")
-    if args.backend == "serial" and args.lockstep:
-        raise BadInput("--lockstep: an I/O board runs in real time; leave --lockstep out, or "
-                       "run the simulator (--backend sim)")
+    check_backend(args)
     # before anything starts; the rig's initialise puts it on its bottom stop first
     _check(program, machine, book, np.array(machine.lower, dtype=float) if args.initialise
            else _resting(machine), args.start, args.reduced)
-    _writable(data_dir)
-    pace = ({"lockstep": True, "heartbeat_timeout_s": LOCKSTEP_HEARTBEAT_S} if args.lockstep
-            else {})
-    try:
-        client = ControlClient(machine, args.backend, port=args.port, seed=args.seed,
-                               data_dir=data_dir, timing=Timing(args.timing, args.interrupt_ms,
-                                                                tuple(args.slip)),
-                               speed_mode="reduced" if args.reduced else "automatic", **pace)
-    except (ControllerError, OSError, ValueError) as exc:
-        raise BadInput(f"cannot start the controller: {exc}") from None
+    check_writable(data_dir)
+    client = start_client(args, machine, data_dir)
     try:
         return _play(args, client, program, book)
     finally:
@@ -206,15 +190,6 @@ def _check(program: Program, machine: Machine, book: PositionBook, here: np.ndar
                         "not a terminal: run it from a terminal, or wait = SECONDS", step)
                 for step in {s.number: s for s in waits}.values()))
     return checked
-
-
-def _writable(data_dir: Path) -> None:
-    try:
-        data_dir.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise BadInput(f"--data-dir: cannot create {data_dir}: {exc.strerror or exc}") from None
-    if not os.access(data_dir, os.W_OK | os.X_OK):
-        raise BadInput(f"--data-dir: {data_dir} is not writable: choose another directory")
 
 
 def _play(args: argparse.Namespace, client: ControlClient, program: Program, book: PositionBook
