@@ -77,6 +77,8 @@ JOG_KEYS = (("a", "z"), ("s", "x"), ("d", "c"), ("f", "v"), ("g", "b"), ("h", "n
 MODES = ("duty", "hold-to-move", "position")
 FRAMES = ("joint", "world", "tool")  # w cycles them; world and tool are Cartesian jogs
 CARTESIAN_MODES = ("hold-to-move", "position")
+REDUCED_JOINT_MODES = ("reduced speed (T1): joints jog by position steps; the duty modes need "
+                       "automatic (^Y)")
 # Hold-to-move Cartesian speed, keys 1-9: a fraction of the machine's cartesian_jog_speed.
 CARTESIAN_SPEEDS = (0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.8, 1.0)
 ZONE_WARNING = 0.9  # the pose line warns once a Cartesian jog would run below this speed
@@ -241,6 +243,7 @@ class JogPad(Widget, can_focus=True):
     mode: reactive[str] = reactive("duty")
     increment: reactive[int] = reactive(5)
     frame: reactive[str] = reactive("joint")
+    reduced: reactive[bool] = reactive(False)  # the controller's reduced speed (T1)
 
     @dataclass
     class DutyChanged(Message):
@@ -354,9 +357,19 @@ class JogPad(Widget, can_focus=True):
         self.increment = k
 
     def action_mode(self) -> None:
+        if self.reduced and self.frame == "joint":
+            self.notify(REDUCED_JOINT_MODES, severity="warning")
+            return
         self.stop(hold=False)
         modes = MODES if self.frame == "joint" else CARTESIAN_MODES
         self.mode = modes[(modes.index(self.mode) + 1) % len(modes)]
+
+    def watch_reduced(self, reduced: bool) -> None:
+        """In reduced speed a joint is jogged by position steps only: the duty modes' open-loop
+        duty is refused there (the controller cannot hold it to 250 mm/s)."""
+        if reduced and self.frame == "joint" and self.mode != "position":
+            self.stop(hold=False)
+            self.mode = "position"
 
     def watch_frame(self, frame: str) -> None:
         self.repeat.most, self.repeat.factor = JOINT_RELEASE if frame == "joint" else TOOL_RELEASE
@@ -370,6 +383,7 @@ class JogPad(Widget, can_focus=True):
         self.frame = FRAMES[(FRAMES.index(self.frame) + 1) % len(FRAMES)]
         if self.frame != "joint" and self.mode == "duty":
             self.mode = "position"  # a duty has no Cartesian meaning
+        self.watch_reduced(self.reduced)
 
     def refused_while_latched(self) -> bool:
         """True while the E-stop is latched; then say why (not at every key of a burst)."""
@@ -778,6 +792,7 @@ class JogTab(TabPage):
             if self._was_manual and not manual:  # E-stop, hold or a move ended manual mode
                 self.pad.forget_duties()
             self._was_manual = manual
+            self.pad.reduced = status.speed_mode == "reduced"
         self.query_one("#jog-pose", LiveText).show(self._pose(status))
         note = self.cartesian_note
         if not note.plain and self.zone_note:  # nothing else to say: the whole warning

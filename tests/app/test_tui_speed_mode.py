@@ -1,6 +1,6 @@
 """Reduced speed (T1) in the TUI (issue 27 item 4): it starts in reduced speed, the header says
-which mode the controller is in, ^Y asks before automatic (full speed) and goes back to reduced
-at once; an observer's ^Y is refused, and a TUI that takes command puts the controller in
+which mode the controller is in, the Jog tab jogs joints by position steps (the duty modes are
+refused in reduced speed), ^Y asks before automatic (full speed) and goes back to reduced at once; an observer's ^Y is refused, and a TUI that takes command puts the controller in
 reduced speed."""
 
 from __future__ import annotations
@@ -8,6 +8,7 @@ from __future__ import annotations
 import asyncio
 from pathlib import Path
 
+from app.tabs.jog import JogPad
 from app.tui import ServodeskApp, attached_app
 from app.widgets.dialogs import ConfirmScreen
 from app.widgets.live_text import LiveText
@@ -28,6 +29,17 @@ def test_the_tui_starts_in_reduced_speed_and_asks_before_automatic(tui, data_dir
             await tui.until(lambda: T1 in header.text, what="T1 in the header")
             assert AUTO not in header.text
 
+            # the Jog tab jogs joints by position steps: its duty modes would be refused
+            pad = app.query_one(JogPad)
+            await tui.until(lambda: pad.reduced and pad.mode == "position",
+                            what="the Jog pad in position mode")
+            before = app.client.status().desired[1]
+            await pilot.press("7", "s")  # Rotate + 1°: a position step, not a refused duty
+            await tui.until(lambda: app.client.status().desired[1] > before + 0.5,
+                            what="Rotate's target stepped")
+            await pilot.press("m")  # the duty modes need automatic
+            assert pad.mode == "position"
+
             await pilot.press("ctrl+y")  # asks; cancelled, still reduced
             await tui.until(lambda: isinstance(app.screen, ConfirmScreen), what="the question")
             assert "automatic (full speed)" in app.screen.question
@@ -41,6 +53,8 @@ def test_the_tui_starts_in_reduced_speed_and_asks_before_automatic(tui, data_dir
             await tui.until(lambda: app.client.speed_mode == "automatic", what="automatic")
             await tui.until(lambda: AUTO in header.text and T1 not in header.text,
                             what="AUTO in the header")
+            await pilot.press("m")  # automatic: every mode again
+            assert pad.mode == "duty"
 
             await pilot.press("ctrl+y")  # back to reduced at once: no question
             await tui.until(lambda: app.client.speed_mode == "reduced", what="reduced again")
