@@ -494,6 +494,19 @@ class TmuxApp:
             time.sleep(0.005)
         raise RuntimeError(f"{texts} not on the screen after {timeout:g} s:\n{self.screen()}")
 
+    def line(self, marker: str) -> str:
+        """The first line of the screen holding ``marker`` ("" if none does)."""
+        return next((line for line in self.screen().splitlines() if marker in line), "")
+
+    def wait_change(self, marker: str, before: str, timeout: float = 30.0) -> None:
+        """Until the line holding ``marker`` is no longer ``before``."""
+        deadline = time.monotonic() + timeout
+        while self.line(marker) == before:
+            if time.monotonic() > deadline:
+                raise RuntimeError(f"the line of {marker!r} still shows {before!r} after "
+                                   f"{timeout:g} s:\n{self.screen()}")
+            time.sleep(0.005)
+
     def keys(self, *keys: str) -> None:
         subprocess.run([*self.tmux, "send-keys", "-t", self.name, *keys], check=True)
 
@@ -597,21 +610,29 @@ def peer_idle_cpu() -> float:
     return cost
 
 
+JOG_LINE = "  ·  mode "  # the Jog tab's line of frame, mode and increment (duty) or step
+
+
 def key_to_screen(presses: int, root: Path = ROOT, burn: bool = False) -> list[float]:
     """Jog tab in tmux: an increment key (3 or 7, by turns) sent with ``tmux send-keys`` until
-    the Jog line shows the new increment, ms (the capture polled every ~5 ms: its own cost
-    is in the figure)."""
+    the Jog line shows the new increment (duty mode, the older tabs' first) or step (position
+    mode), ms (the capture polled every ~5 ms: its own cost is in the figure)."""
     samples = []
     with tempfile.TemporaryDirectory() as data_dir, burning(burn):
         app = TmuxApp(root, data_dir, "keys")
         try:
             app.wait_for(*LIVE)
             time.sleep(1.0)
+            first = app.line(JOG_LINE)
+            app.keys("7")  # then each key below changes the line (3 and 7 by turns)
+            app.wait_change(JOG_LINE, first, timeout=5)
+            time.sleep(0.2)
             for i in range(presses):
                 k = "3" if i % 2 == 0 else "7"
+                before = app.line(JOG_LINE)
                 sent = time.monotonic()
                 app.keys(k)
-                app.wait_for(f"increment {k} %", timeout=5)
+                app.wait_change(JOG_LINE, before, timeout=5)
                 samples.append((time.monotonic() - sent) * 1e3)
                 time.sleep(0.1)
         finally:
