@@ -329,6 +329,8 @@ class ServodeskApp(App[None]):
     async def _build(self, name: str) -> TabPage:
         """Mount tab ``name`` in its pane (hidden until chosen) and tell it what the others
         were told while it was not built: the client, its death, a latched E-stop."""
+        if self.tabs.made_tab(name) is None:  # its module imported off the event loop: the
+            await asyncio.to_thread(dict(TABS)[name].load)  # keys are served meanwhile
         tab = self.tab(name)
         if name in self._building:  # chosen while the background mounts it: once it is
             await self._building[name].wait()
