@@ -301,6 +301,7 @@ class JogPad(Widget, can_focus=True):
         self.n = len(units)
         self.duty = [0.0] * self.n
         self.repeat = KeyRepeat()
+        self._mode_in_automatic: str | None = None  # the mode reduced speed put aside
         self.armed = False
         self.latched = False
         self._told_latched = -math.inf
@@ -366,10 +367,16 @@ class JogPad(Widget, can_focus=True):
 
     def watch_reduced(self, reduced: bool) -> None:
         """In reduced speed a joint is jogged by position steps only: the duty modes' open-loop
-        duty is refused there (the controller cannot hold it to 250 mm/s)."""
+        duty is refused there (the controller cannot hold it to 250 mm/s). Back in automatic
+        the pad takes the mode it had again."""
         if reduced and self.frame == "joint" and self.mode != "position":
             self.stop(hold=False)
+            self._mode_in_automatic = self.mode
             self.mode = "position"
+        elif not reduced and self._mode_in_automatic is not None:
+            if self.frame == "joint":
+                self.mode = self._mode_in_automatic
+            self._mode_in_automatic = None
 
     def watch_frame(self, frame: str) -> None:
         self.repeat.most, self.repeat.factor = JOINT_RELEASE if frame == "joint" else TOOL_RELEASE

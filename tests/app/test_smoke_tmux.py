@@ -44,6 +44,11 @@ def test_servodesk_runs_in_a_real_terminal(tmp_path: Path) -> None:
                     "F7 Latency"):
             assert tab in screen
         assert "Unimate 2000B" in screen and "Esc/^E" in screen
+        assert "T1 250 mm/s" in screen  # it starts in reduced speed: duty jogs need automatic
+        term.keys("C-y")
+        term.wait(lambda s: "automatic (full speed)" in s, "the question before automatic")
+        term.keys("y")
+        term.wait(lambda s: "AUTO" in s and "T1 250 mm/s" not in s, "automatic in the header")
         term.keys("a")  # option.c Manual(): +5 % on In/Out, twice
         term.wait(lambda s: jog_duty(s, "+5"), "In/Out commanded +5 %")
         term.keys("a")
