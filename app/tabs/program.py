@@ -71,8 +71,8 @@ RESULT_CHARS = 32
 COLUMNS = (("at", ""), ("n", "#"), ("step", "step"), ("line", "line"), ("result", "result"),
            ("settle", "settle"), ("time", "time"), ("run", "run"))
 RUNNING = (RunnerState.RUNNING, RunnerState.PAUSED)
-T1_RUN = ("reduced speed (T1): hold space to run the program (release: feed hold); n steps "
-          "one step; ^Y switches to automatic")
+T1_RUN = ("reduced speed (T1): hold space to run the program (release: feed hold); n, then "
+          "space held, runs one step; ^Y switches to automatic")
 
 
 class ProgramTab(TabPage):
@@ -154,7 +154,7 @@ class ProgramTab(TabPage):
         self.moving = ""  # what the step's move is doing, while it moves
         self.enabling = KeyRepeat(most=TOOL_RELEASE[0], factor=TOOL_RELEASE[1])
         self._generation = 0
-        self._single = False  # the run is one step (n): in T1 it needs no enabling key
+        self._single_armed = False  # T1: n pressed, the enabling key will run one step
         self._release_seen = -math.inf  # the release check's last look (-inf: not looking)
         self._release_timer: Timer | None = None
         self._watch_timer: Timer | None = None
@@ -479,7 +479,20 @@ class ProgramTab(TabPage):
         self._start("run")
 
     def action_single_step(self) -> None:
-        self._start("step")
+        """One step; in T1 it runs while the enabling key is held, as a run does (ISO
+        10218-1: no motion in T1 without it), so n only makes space's next hold one step."""
+        if not self._reduced():
+            self._start("step")
+            return
+        runner = self.runner
+        first = self._first(1)
+        if runner is not None and runner.state in (RunnerState.READY, RunnerState.HELD):
+            first = runner.current.step if runner.current else None
+        if refusal := self._refusal(first):
+            self._refuse(refusal)
+            return
+        self._single_armed = True
+        self._say("reduced speed (T1): hold space to run one step (release: feed hold)", "cyan")
 
     def _start(self, then: str, start: int = 1) -> None:
         """Run (``run``), one step (``step``), or from ``start`` (``from``) once it checks
@@ -522,7 +535,8 @@ class ProgramTab(TabPage):
                 checked.visits[0].step if checked.visits else None)):
             self._refuse(refusal)
             return
-        if then == "enable" and not self.enabling.held:
+        needs_key = then == "enable" or (then == "step" and self._reduced())
+        if needs_key and not self.enabling.held:
             self._say("the enabling key was let go before the check ended: hold space to run",
                       "yellow")
             return
@@ -534,7 +548,7 @@ class ProgramTab(TabPage):
             self.results = {}
             self._show_steps()
             self._mark(runner.current.step.number if runner.current else None)
-        self._single = then == "step"
+        self._single_armed = False
         try:
             if then == "step":
                 runner.single_step()
@@ -671,7 +685,7 @@ class ProgramTab(TabPage):
             self._command(runner.resume)
             self._state_text()
         elif runner is None or runner.state is not RunnerState.RUNNING:
-            self._start("enable")
+            self._start("step" if self._single_armed else "enable")
 
     def _listen(self) -> None:
         """Look for the enabling key's release from now on (every RELEASE_CHECK_S)."""
@@ -694,10 +708,9 @@ class ProgramTab(TabPage):
         self._hold_released("the enabling key was let go")
 
     def _hold_released(self, why: str) -> None:
-        """In T1 a program runs (a single step aside) only while the enabling key is held."""
+        """In T1 a program runs (a single step too) only while the enabling key is held."""
         runner = self.runner
-        if (runner is not None and runner.state is RunnerState.RUNNING and not self._single
-                and self._reduced()):
+        if runner is not None and runner.state is RunnerState.RUNNING and self._reduced():
             self._command(runner.pause)
             self._say(f"{why}: feed hold · press and hold space to go on", "bold yellow")
             self._state_text()
@@ -805,7 +818,7 @@ class ProgramTab(TabPage):
             return "the controller is not running — the link is lost"
         if status.estop:
             return "the E-stop is latched: release it (^R) when it is safe, then run again"
-        ours = self.runner is not None and not self.runner.state.over
+        ours = self.runner is not None and self.runner.state in RUNNING  # held: not its move
         if (status.moving or status.mode == Mode.INITIALISE) and not (ours or running):
             return "a move is running (Moves or Positions tab): wait for it, or hold (^G)"
         if self.checking:

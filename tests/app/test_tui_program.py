@@ -327,6 +327,13 @@ def test_hold_resume_stop_start_from_a_step_t1s_enabling_key_and_the_refusals(
             assert outcome.complete, outcome.reason
             assert [r.visit.step.number for r in outcome.results] == [1, 2]
             assert client.speed_mode == "reduced"
+            # n in T1: nothing moves until space is held, and then one step only
+            await pilot.press("n")
+            assert "hold space to run one step" in said(tui, tab)
+            assert tab.runner is not None and tab.runner.state.over
+            assert not client.status().moving
+            await hold_space(lambda: tab.runner.state is RunnerState.HELD, "one step")
+            assert [r.visit.step.number for r in tab.runner.results] == [1]
 
             # refused, with the reason: a move running elsewhere, then the E-stop latched
             here = np.array(client.status().position)
@@ -334,7 +341,7 @@ def test_hold_resume_stop_start_from_a_step_t1s_enabling_key_and_the_refusals(
             client.run(plan)
             await tui.until(lambda: client.status().moving, what="a move of the test's")
             runner = tab.runner
-            await pilot.press("n")  # a single step needs no enabling key: refused all the same
+            await pilot.press("n")  # refused at once, before any enabling key
             assert "a move is running" in said(tui, tab) and tab.runner is runner
             await pilot.press("ctrl+e")
             await tui.until(lambda: client.status().estop, what="the E-stop")
