@@ -596,12 +596,14 @@ class JogTab(TabPage):
 
         views = self.query(ArmView)
         if views:
-            shown = views.first().display = not views.first().display
+            view = views.first()
+            shown = view.display = not view.display
         else:
             view = ArmView(self.machine, self.model, self.status, id="jog-arm")
             self.mount(view)
-            view.show_positions(named_positions(self.desk.data_dir, self.machine))
             shown = True
+        if shown:  # as taught now: positions taught since it was last shown are marked too
+            view.show_positions(named_positions(self.desk.data_dir, self.machine))
         short = self.screen.has_class("-short")  # 80 × 24: in place of the table too
         for part, hide in (("#jog-help", True), ("#jog-dead-band", True), ("#jog-table", short)):
             self.query_one(part).display = not (shown and hide)

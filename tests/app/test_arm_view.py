@@ -17,6 +17,7 @@ from textual.widgets import OptionList, TextArea
 from app.plotting.arm_scene import GHOST, JOINT_LEVELS, JOINT_PATH, LINK
 from app.screens.arm import ArmScreen
 from app.widgets.arm_view import ArmView
+from control.motion.positions import PositionBook, positions_file, save_positions
 from control.motion.robot_model import builtin_unimate
 from control.rt.layout import Flag, Mode, Status
 from hw.machine import load_machine
@@ -129,6 +130,11 @@ def _jog_view_at(tui: Tui, size: tuple[int, int]) -> None:
             await tui.until(lambda: not isinstance(app.screen, ArmScreen))
             await pilot.press("p")  # and back: the table and the help again
             await tui.until(lambda: not view.display and app.query_one("#jog-help").display)
+            file = positions_file(app.data_dir, MACHINE)  # a position taught meanwhile
+            save_positions(PositionBook(MACHINE).teach("spot", near), file)
+            await pilot.press("p")  # shown again: marked
+            await tui.until(lambda: "spot" in [m.name for m in view.plan.markers],
+                            what=lambda: f"spot marked: {view.plan.markers}")
 
     asyncio.run(scenario())
 
