@@ -33,7 +33,10 @@ Unimate 2000B. Parts:
 9. idle UI CPU (``--tmux``): ``python -m app`` in tmux, its own process's CPU time (/proc)
    over 10 s on each of Jog, Scope (drawing at its rate) and Status, nothing pressed;
 10. key to the screen (``--tmux``): an increment key sent with ``tmux send-keys`` on the Jog
-   tab until the screen shows the new increment, quiet and beside a CPU burner.
+   tab until the screen shows the new increment, quiet and beside a CPU burner;
+11. the arm's view (``--arm`` alone; also in the full run): a frame's drawing alone, and the
+   view live in a headless app with a new pose every poll, its frames a second and CPU beside
+   a Scope plot fed at the same rate (``benchmarks/arm_view.py``, which also has ``--tmux``).
 
 ``--tmux [ROOT ...]`` runs only 9, 5 and 10, for each ROOT given (a worktree of an older
 commit: ``git worktree add /tmp/old HASH``) and then this tree, one after the other in one run.
@@ -709,7 +712,13 @@ def main() -> None:
                         "quiet and beside a burner) for this tree and each ROOT given")
     parser.add_argument("--browser", action="store_true",
                         help="only part 8: servodesk serve's first render in headless Chromium")
+    parser.add_argument("--arm", action="store_true",
+                        help="only part 11: the arm's view, its frames a second and CPU beside "
+                             "the Scope's (benchmarks/arm_view.py)")
     args = parser.parse_args()
+    if args.arm:
+        arm_view_figures(3.0 if args.quick else 5.0)
+        return
     if args.tmux is not None:
         tmux_figures([*args.tmux, ROOT], 5, 10 if args.quick else 40)
         return
@@ -727,6 +736,17 @@ def main() -> None:
     startup(3 if args.quick else 5)
     asyncio.run(tab_pauses(not args.no_burner))
     browser_first_render()
+    arm_view_figures(3.0 if args.quick else 5.0)
+
+
+def arm_view_figures(seconds: float) -> None:
+    """Part 11: the arm's view (issue 28), drawn alone and live in a headless app, its frames a
+    second and CPU beside the Scope's in the same run."""
+    from benchmarks import arm_view
+
+    print("\n11. the arm's view (python benchmarks/arm_view.py, which also has --tmux)")
+    arm_view.drawing_alone(200 if seconds < 5.0 else 500)
+    arm_view.headless_figures(seconds)
 
 
 if __name__ == "__main__":
