@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 
+from app.tabs.jog import JogPad
 from app.tui import attached_app
 from app.widgets.dialogs import ConfirmScreen
 from app.widgets.live_text import LiveText
@@ -37,7 +38,9 @@ def test_two_attached_tuis_one_commands_the_other_observes(controller_service, t
             tui.post_key(first, "ctrl+y")  # taking command set T1, which refuses a duty jog
             await tui.until(lambda: isinstance(first.screen, ConfirmScreen), what="the question")
             tui.post_key(first, "y")
-            await tui.until(lambda: first.client.speed_mode == "automatic", what="automatic")
+            pad = first.query_one(JogPad)  # its duty mode back once it has seen automatic
+            await tui.until(lambda: first.client.speed_mode == "automatic" and pad.mode == "duty",
+                            what=lambda: f"automatic, the pad in duty mode: {pad.mode}")
             tui.post_key(first, "a")
             await tui.until(lambda: first.client.status().mode == Mode.MANUAL_ACTUATE
                             and first.client.status().duty[0] > 0, what="the commander's jog")
