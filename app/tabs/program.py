@@ -156,8 +156,6 @@ class ProgramTab(TabPage):
         self._generation = 0
         self._single_armed = False  # T1: n pressed, the enabling key will run one step
         self._release_seen = -math.inf  # the release check's last look (-inf: not looking)
-        self._release_timer: Timer | None = None
-        self._watch_timer: Timer | None = None
         self._paused_seen = False  # the controller's feed hold as last seen (^F's edges)
 
     def compose(self) -> ComposeResult:
@@ -174,9 +172,9 @@ class ProgramTab(TabPage):
         table = self.query_one("#program-table", DataTable)
         for key, label in COLUMNS:
             table.add_column(label, key=key)
-        self._release_timer = self.set_interval(RELEASE_CHECK_S, self._check_release,
+        self._release_timer: Timer = self.set_interval(RELEASE_CHECK_S, self._check_release,
                                                 pause=True)
-        self._watch_timer = self.set_interval(1.0 / WATCH_HZ, self._watch, pause=True)
+        self._watch_timer: Timer = self.set_interval(1.0 / WATCH_HZ, self._watch, pause=True)
         self._problems_text()
         self._find_examples()
 
@@ -560,7 +558,7 @@ class ProgramTab(TabPage):
         except RuntimeError as exc:
             self._refuse(str(exc))
             return
-        self._watch_timer.resume()  # type: ignore[union-attr]
+        self._watch_timer.resume()
         self._state_text()
 
     def _from_runner(self, report: Report) -> None:
@@ -691,7 +689,7 @@ class ProgramTab(TabPage):
         """Look for the enabling key's release from now on (every RELEASE_CHECK_S)."""
         if self._release_seen == -math.inf:  # not listening: its first look is on time
             self._release_seen = time.monotonic()
-        self._release_timer.resume()  # type: ignore[union-attr]
+        self._release_timer.resume()
 
     def _check_release(self) -> None:
         """Every RELEASE_CHECK_S while the enabling key is held: its release is a feed hold."""
@@ -703,7 +701,7 @@ class ProgramTab(TabPage):
         self.enabling.released(now)
         if self.enabling.held:
             return
-        self._release_timer.pause()  # type: ignore[union-attr]
+        self._release_timer.pause()
         self._release_seen = -math.inf
         self._hold_released("the enabling key was let go")
 
@@ -720,7 +718,7 @@ class ProgramTab(TabPage):
         mid-run, the tab left); the app's ^F hold and resume are the program's too."""
         runner = self.runner
         if runner is None or runner.state.over:
-            self._watch_timer.pause()  # type: ignore[union-attr]
+            self._watch_timer.pause()
             return
         status = self.status()
         if status is None:
