@@ -281,6 +281,7 @@ class Runner:
             return None
         if self.state in (RunnerState.READY, RunnerState.HELD):
             self.state = RunnerState.RUNNING
+        self._go_on.clear()  # a key before the prompt is not its answer; one after it is
         self._report(StepStarted(visit))
         result = self._visit(visit)
         self.results.append(result)
@@ -370,7 +371,6 @@ class Runner:
     def _wait(self, visit: Visit) -> StepResult:
         step = visit.step
         assert isinstance(step, Wait)
-        self._go_on.clear()
         waited, last = 0.0, self.client.status().time_s
         while True:
             if self._stop.is_set():

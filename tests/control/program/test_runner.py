@@ -228,6 +228,21 @@ def test_the_operators_wait_lasts_until_proceed(robot: ControlClient) -> None:
     assert outcome is not None and outcome.complete and len(outcome.results) == 2
 
 
+def test_an_answer_as_fast_as_the_prompt_is_not_lost(robot: ControlClient) -> None:
+    """The operator's go-on given the moment the wait is announced (a key typed ahead of a
+    slow runner thread, as a terminal's line can be) ends the wait."""
+    runner = Runner(robot, checked(robot, '[[step]]\nwait = "operator"\n[[step]]\nwait = 0.1\n'))
+
+    def answer(report: object) -> None:
+        if isinstance(report, StepStarted) and report.visit.index == 0:
+            runner.proceed()
+
+    runner.on_report = answer
+    runner.run()
+    outcome = runner.wait(END_S)
+    assert outcome is not None and outcome.complete and len(outcome.results) == 2
+
+
 def test_a_caller_drives_the_steps_itself(robot: ControlClient) -> None:
     runner = Runner(robot, checked(robot, '[[step]]\ngo = "home"\n[[step]]\nwait = 0.1\n'))
     first = runner.run_next()
