@@ -60,6 +60,7 @@ SLOW_PATHS = (
     "tests/control/test_client.py",    # the control subprocess, for real
     "tests/control/test_timing.py",    # the thesis's timing on the control subprocess
     "tests/control/test_settle_and_rest.py",  # fast moves and rest on both machines
+    "tests/control/test_two_khz.py",   # both machines at a 500 µs period
     "tests/control/identify/test_proposal_settles.py",  # identify, apply, move: both machines
     "tests/control/test_feed.py",      # feed override and hold on the control subprocess
     "tests/control/test_speed_mode.py",  # reduced speed (T1) on the control subprocess

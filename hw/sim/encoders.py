@@ -210,26 +210,34 @@ class GrayEncoderBoard:
         return binary_to_gray(b)
 
     def update(self, t0_ns: int, t1_ns: int, a0: Sequence[float], a1: Sequence[float]) -> None:
-        """Latch every slot whose latch falls in (t0, t1]; ``a0``/``a1`` are positions then."""
+        """Latch every slot whose latch falls in (t0, t1]; ``a0``/``a1`` are positions then.
+
+        ``encode`` and ``_latch_time`` written out: the loop runs every joint every tick."""
         if self._next_ns <= t0_ns:
             self._skip_to(t0_ns)
         span = t1_ns - t0_ns
-        n = self.n
-        while self._next_ns <= t1_ns:
-            j = self._k % n
-            frac = (self._next_ns - t0_ns) / span
-            word = self.encode(j, a0[j] + (a1[j] - a0[j]) * frac)
-            if self._gap[j] <= 0.0:
+        n, top, gap, words = self.n, self.top, self._gap, self.words
+        constant, gradient = self.transmission.constant, self.transmission.gradient
+        origin, period, latch = self._origin_ns, self._period_ns, self._latch_ns
+        k, next_ns = self._k, self._next_ns
+        while next_ns <= t1_ns:
+            j = k % n
+            position = a0[j] + (a1[j] - a0[j]) * ((next_ns - t0_ns) / span)
+            b = math.floor((position - constant[j]) / gradient[j] + 0.5)
+            b = 0 if b < 0 else top if b > top else b
+            word = b ^ (b >> 1)  # binary_to_gray
+            if gap[j] <= 0.0:
                 dimmed = self._dim(j, word)
                 if dimmed != word:
                     self.wrong_readings[j] += 1
                 word = dimmed
-                self._gap[j] = self._draw_gap(j)
+                gap[j] = self._draw_gap(j)
             else:
-                self._gap[j] -= 1.0
-            self.words[j] = word
-            self._k += 1
-            self._next_ns = self._latch_time(self._k)
+                gap[j] -= 1.0
+            words[j] = word
+            k += 1
+            next_ns = origin + k * period // n + latch
+        self._k, self._next_ns = k, next_ns
 
     def _skip_to(self, t_ns: int) -> None:
         """Move the scan on to the first latch after ``t_ns`` (time jumped)."""
