@@ -62,6 +62,7 @@ is how the app, ``servodesk fk/ik``, the benchmarks and the tests get theirs.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -93,6 +94,8 @@ SAME_TOL = 1e-6
 DH_ORDER = (1, 2, 0, 3, 4, 5)  # DH joint i is actuator DH_ORDER[i]: θ1, θ2, d3, θ4, θ5, θ6
 _WEIGHTS = np.array([1.0 / MM_PER_DEGREE, 1.0, 1.0, 1.0, 1.0, 1.0])
 _CHUNK = 8192  # poses solved at once by inverse_batch: bounded, cache-sized temporaries
+_RAD, _DEG = math.pi / 180.0, 180.0 / math.pi  # math.radians and math.degrees' factors
+_HALF_TURN = np.array([0.0, math.pi])  # the two θ1 branches
 
 
 class Unreachable(ValueError):
@@ -175,7 +178,7 @@ class Unimate2000B:
                     f"2000B's closed form needs {_row(form)}")
         return model
 
-    @property
+    @functools.cached_property
     def mid_range(self) -> tuple[float, ...]:
         """The middle of each joint's limits (mm, deg): the default ``near``."""
         return tuple((lo + hi) / 2 for lo, hi in zip(self.lower, self.upper, strict=True))
@@ -262,19 +265,22 @@ class Unimate2000B:
 
         A scalar ``math`` transcription of ``inverse_batch`` (numpy's per-call
         overhead would cost ~10× more for one pose); the tests hold the two to
-        each other.
+        each other. A branch is dropped at the first joint found outside its
+        limits, before the joints after it are solved; only an unreachable pose
+        is solved again in full (``_branches``) for the reason.
         """
         target = _vector(p, "pose")
         ref = self._reference(near)
-        raw, radius, singular = self._branches(target, ref)
-        if not all(math.isfinite(v) for v in (radius, *(v for b in raw for v in b))):
-            raise ValueError(_overflow(target))
-        fitted = [q for q in (self._fit(b, ref) for b in raw) if q is not None]
-        if not fitted:
+        fitted, singular = self._solutions(target, ref)
+        if not fitted:  # solved again with every branch kept, to say why
+            raw, radius, singular = self._branches(target, ref)
+            if not all(math.isfinite(v) for v in (radius, *(v for b in raw for v in b))):
+                raise ValueError(_overflow(target))
             raise Unreachable(self._why(raw, radius, ref if singular else None))
         if singular:  # the two held joints can pick the same member of the family
             fitted = [q for i, q in enumerate(fitted) if not any(_same(q, u) for u in fitted[:i])]
-        fitted.sort(key=lambda q: _distance(q, ref))
+        if len(fitted) > 1:
+            fitted.sort(key=lambda q: _distance(q, ref))
         return np.array(fitted)
 
     def inverse_batch(self, p: ArrayLike, near: ArrayLike | None = None) -> InverseBatch:
@@ -294,13 +300,11 @@ class Unimate2000B:
         p = p.reshape(-1, 6)
         ref = np.broadcast_to(self._reference_batch(near, shape), (*shape, 6)).reshape(-1, 6)
         solutions, valid = np.empty((len(p), 8, 6)), np.empty((len(p), 8), dtype=bool)
+        best = np.empty((len(p), 6))
         for start in range(0, len(p), _CHUNK):
             rows = slice(start, start + _CHUNK)
-            solutions[rows], valid[rows] = self._solve_batch(p[rows], ref[rows])
-        travel = np.where(valid, distance(solutions, ref[:, None]), np.inf)
+            self._solve_batch(p[rows], ref[rows], solutions[rows], valid[rows], best[rows])
         reachable = valid.any(axis=-1)
-        nearest = solutions[np.arange(len(p)), travel.argmin(axis=-1)]
-        best = np.where(reachable[:, None], nearest, np.nan)
         return InverseBatch(
             solutions=solutions.reshape(*shape, 8, 6),
             valid=valid.reshape(*shape, 8),
@@ -308,13 +312,106 @@ class Unimate2000B:
             reachable=reachable.reshape(shape),
         )
 
-    def _solve_batch(self, p: np.ndarray, near: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Fitted branches of poses ``p: (N, 6)`` → ``(N, 8, 6)`` (NaN where invalid), valid."""
-        raw, exists, singular = self._branches_batch(p, near)
-        fitted, inside = self._fit_batch(raw, near)
-        valid = exists & inside
-        valid[singular] &= ~_repeats(fitted[singular], valid[singular])
-        return np.where(valid[..., None], fitted, np.nan), valid
+    def _solve_batch(self, p: np.ndarray, near: np.ndarray, out: np.ndarray,
+                     valid: np.ndarray, best: np.ndarray) -> None:
+        """Fitted branches of poses ``p: (N, 6)`` into ``out: (N, 8, 6)`` (NaN where
+        invalid), ``valid: (N, 8)`` and the nearest valid one into ``best: (N, 6)`` (NaN
+        where none).
+
+        The equations of ``_branches`` and the limits of ``_fit`` on arrays of one joint
+        and one wrist and root branch each, ``(θ1 branch, N)`` (N last, so that numpy
+        loops over it), written into their slots; a root that no pose of the chunk has
+        inside In/Out's limits is not solved further. The second wrist branch (−θ5,
+        θ6 + 180°) negates z4, and Swivel's sine and cosine are −z1·o / sθ5 and
+        z1·n / sθ5; the slots of a singular wrist's held Bend are solved apart
+        (``_hold_bend_batch``) and written over theirs.
+        """
+        x, y, z, g, b, al = p.T
+        g, b, al = np.radians(g), np.radians(b), np.radians(al)
+        cg, sg, cb, sb, ca, sa = np.cos(g), np.sin(g), np.cos(b), np.sin(b), np.cos(al), np.sin(al)
+        n = (ca * cb, sa * cb, -sb)  # eq. 4.04, as xyz_fixed.rotation
+        o = (ca * sb * sg - sa * cg, sa * sb * sg + ca * cg, cb * sg)
+        a = (ca * sb * cg + sa * sg, sa * sb * cg - ca * sg, cb * cg)
+        w = (x - self.ly * a[0], y - self.ly * a[1], z - self.ly * a[2])  # eq. 4.14
+        ref = near.T.copy()  # joint, N
+        on_axis = np.maximum(np.abs(w[0]), np.abs(w[1])) <= ARM_TOL  # hypot ≥ the larger
+        if on_axis.any():
+            on_axis &= np.hypot(w[0], w[1]) <= ARM_TOL
+        phi = np.where(on_axis, np.radians(ref[1]), np.arctan2(w[1], w[0]))
+        t1 = phi + _HALF_TURN[:, None]  # axes (θ1 branch, N) from here on
+        s1, c1 = np.sin(t1), np.cos(t1)
+        zn = s1 * n[0] - c1 * n[1]
+        zo = s1 * o[0] - c1 * o[1]
+        za = s1 * a[0] - c1 * a[1]
+        s5 = np.sqrt(zn * zn + zo * zo)
+        singular = s5 <= WRIST_TOL
+        t5 = np.arctan2(s5, za)  # eq. 4.16
+        t6 = np.arctan2(-zo, zn)  # eq. 4.15
+        if singular.any():  # Swivel held at near's
+            t6 = np.where(singular, np.radians(ref[5]), t6)
+            s5 = np.where(singular, 1.0, s5)
+            zn = np.where(singular, np.cos(t6), zn)
+            zo = np.where(singular, -np.sin(t6), zo)
+        s6, c6 = -zo / s5, zn / s5
+        z4 = [-(s6 * n[k] + c6 * o[k]) for k in range(3)]
+
+        rotate, ok_rotate = self._fit_joint(1, np.degrees(t1), ref[1])
+        near_rotate = np.abs(rotate - ref[1])
+        q = out.reshape(-1, 2, 2, 2, 6).transpose(1, 2, 3, 4, 0)  # θ1, wrist, root, joint, N
+        ok = valid.reshape(-1, 2, 2, 2).transpose(1, 2, 3, 0)
+        travel = np.empty(valid.shape)
+        each = travel.reshape(-1, 2, 2, 2).transpose(1, 2, 3, 0)
+        for i, sign in enumerate((1.0, -1.0)):  # wrist branches: θ5, then −θ5, θ6 + 180°
+            zx, zy, zz = (z4 if i == 0 else [-v for v in z4])
+            rho = c1 * (w[0] - self.lb * zx) + s1 * (w[1] - self.lb * zy)  # App. A (8)
+            h = w[2] - self.lb * zz - self.d1  # App. A (9)
+            disc = rho * rho + h * h - self.a2 * self.a2
+            root = np.sqrt(np.maximum(disc, 0.0))
+            yaw, ok_yaw = self._fit_joint(4, np.degrees(sign * t5), ref[4])
+            swivel, ok_swivel = self._fit_joint(5, np.degrees(t6 if i == 0 else t6 + np.pi),
+                                                ref[5])
+            ok_wrist = ok_rotate & ok_yaw & ok_swivel & (disc >= 0.0)
+            common = near_rotate + np.abs(yaw - ref[4]) + np.abs(swivel - ref[5])
+            t24 = shoulder = None
+            for k, d3 in enumerate((root, -root)):  # eq. 4.17's two roots
+                in_out, ok_root = self._fit_joint(0, d3, ref[0])
+                ok_root &= ok_wrist if k == 0 else ok_wrist & (root > ROOT_TOL)
+                if not ok_root.any():  # e.g. −√ on an arm whose In/Out is positive
+                    q[:, i, k] = np.nan
+                    ok[:, i, k] = False
+                    continue
+                if t24 is None or shoulder is None:
+                    t24 = np.arctan2(zz, c1 * zx + s1 * zy)  # eq. 4.18
+                    shoulder = np.arctan2(h, rho)
+                t2 = shoulder - np.arctan2(self.a2, d3)  # errata #8
+                up, ok_up = self._fit_joint(2, np.degrees(t2), ref[2])
+                bend, ok_bend = self._fit_joint(3, np.degrees(t24 - t2), ref[3])
+                ok_slot = ok_root & ok_up & ok_bend
+                ok[:, i, k] = ok_slot
+                nan = np.where(ok_slot, 0.0, np.nan)  # x + 0.0 is x: NaN where invalid
+                for j, value in enumerate((in_out, rotate, up, bend, yaw, swivel)):
+                    np.add(value, nan, out=q[:, i, k, j])
+                each[:, i, k] = (np.abs(in_out - ref[0]) * _WEIGHTS[0] + common
+                                 + np.abs(up - ref[2]) + np.abs(bend - ref[3]))
+        travel[~valid] = np.inf
+        if singular.any():
+            branch, rows = np.nonzero(singular)
+            held, inside = self._hold_bend_batch(
+                *(np.stack([v[rows] for v in vector], axis=-1) for vector in (w, n, o)),
+                t1[branch, rows], t5[branch, rows], near[rows, 3])
+            for j in range(6):
+                held[..., j], within = self._fit_joint(j, held[..., j], near[rows, j, None])
+                inside &= within
+            out.reshape(-1, 2, 2, 2, 6)[rows, branch, 1] = held
+            valid.reshape(-1, 2, 2, 2)[rows, branch, 1] = inside
+            many = np.flatnonzero(singular.any(axis=0))
+            repeated = _repeats(out[many], valid[many])
+            valid[many] &= ~repeated
+            solutions = np.where(valid[many, :, None], out[many], np.nan)
+            out[many] = solutions
+            travel[many] = np.where(valid[many], distance(solutions, near[many, None]), np.inf)
+        # NaN where no slot is valid
+        best[...] = out.reshape(-1, 6)[np.arange(0, 8 * len(p), 8) + travel.argmin(axis=-1)]
 
     def _reference(self, near: ArrayLike | None) -> list[float]:
         """``near`` of ``inverse`` as 6 floats, the middle of the limits if None."""
@@ -330,6 +427,74 @@ class Unimate2000B:
         if not np.isfinite(ref).all():
             raise ValueError("near must be finite numbers; got NaN or inf")
         return ref
+
+    def _solutions(self, target: list[float], near: list[float]) -> tuple[list[list[float]], bool]:
+        """The in-limit branches of one pose in slot order, fitted (``_fit``), and whether
+        the wrist is singular: ``_branches`` and ``_fit`` with the same arithmetic, each
+        branch given up at its first joint outside the limits."""
+        lo, hi = self.lower, self.upper
+        x, y, z = target[:3]
+        g, b, al = target[3] * _RAD, target[4] * _RAD, target[5] * _RAD
+        cg, sg, cb, sb, ca, sa = (
+            math.cos(g), math.sin(g), math.cos(b), math.sin(b), math.cos(al), math.sin(al),
+        )
+        n0, n1, n2 = ca * cb, sa * cb, -sb  # eq. 4.04
+        o0, o1, o2 = ca * sb * sg - sa * cg, sa * sb * sg + ca * cg, cb * sg
+        a0, a1, a2 = ca * sb * cg + sa * sg, sa * sb * cg - ca * sg, cb * cg
+        ly, lb = self.ly, self.lb
+        w0, w1, w2 = x - ly * a0, y - ly * a1, z - ly * a2  # eq. 4.14
+        phi = near[1] * _RAD if math.hypot(w0, w1) <= ARM_TOL else math.atan2(w1, w0)
+        in_lo, in_hi = lo[0] - LIMIT_TOL, hi[0] + LIMIT_TOL
+        offset = self.a2
+        out: list[list[float]] = []
+        singular = False
+        for t1 in (phi, phi + math.pi):
+            s1, c1 = math.sin(t1), math.cos(t1)
+            zn, zo, za = s1 * n0 - c1 * n1, s1 * o0 - c1 * o1, s1 * a0 - c1 * a1
+            s5 = math.hypot(zn, zo)
+            t5 = math.atan2(s5, za)  # eq. 4.16
+            if s5 > WRIST_TOL:
+                t6 = math.atan2(-zo, zn)  # eq. 4.15
+                wrists: tuple[tuple[float, float], ...] = ((t5, t6), (-t5, t6 + math.pi))
+            else:
+                singular = True
+                wrists = ((t5, near[5] * _RAD),)
+            rotate = _wrap(t1 * _DEG, lo[1], hi[1], near[1])
+            if rotate is None:
+                continue
+            for t5w, t6w in wrists:
+                yaw = _wrap(t5w * _DEG, lo[4], hi[4], near[4])
+                swivel = None if yaw is None else _wrap(t6w * _DEG, lo[5], hi[5], near[5])
+                if swivel is None:
+                    continue
+                s6, c6 = math.sin(t6w), math.cos(t6w)
+                z40, z41, z42 = -s6 * n0 - c6 * o0, -s6 * n1 - c6 * o1, -s6 * n2 - c6 * o2
+                rho = c1 * (w0 - lb * z40) + s1 * (w1 - lb * z41)  # App. A (8)
+                h = w2 - lb * z42 - self.d1  # App. A (9)
+                disc = rho * rho + h * h - offset * offset
+                if disc < 0.0:
+                    continue
+                root = math.sqrt(disc)
+                t24 = None
+                for d3 in (root, -root) if root > ROOT_TOL else (root,):
+                    if not in_lo <= d3 <= in_hi:
+                        continue
+                    t2 = math.atan2(h, rho) - math.atan2(offset, d3)  # eq. 4.17, errata #8
+                    up = _wrap(t2 * _DEG, lo[2], hi[2], near[2])
+                    if up is None:
+                        continue
+                    if t24 is None:
+                        t24 = math.atan2(z42, c1 * z40 + s1 * z41)  # eq. 4.18
+                    bend = _wrap((t24 - t2) * _DEG, lo[3], hi[3], near[3])
+                    if bend is not None:
+                        out.append([min(max(d3, lo[0]), hi[0]), rotate, up, bend, yaw, swivel])
+            if s5 <= WRIST_TOL:
+                for q in self._hold_bend((w0, w1, w2), (n0, n1, n2), (o0, o1, o2), t1, t5,
+                                         near[3]):
+                    fitted = self._fit(q, near)
+                    if fitted is not None:
+                        out.append(fitted)
+        return out, singular
 
     def _branches(
         self, target: list[float], near: list[float]
@@ -410,57 +575,6 @@ class Unimate2000B:
                         math.degrees(t5), math.degrees(t6)])
         return out
 
-    def _branches_batch(
-        self, p: np.ndarray, near: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Raw branches of poses ``p: (N, 6)`` → ``(N, 8, 6)`` (deg, unwrapped), exists
-        ``(N, 8)``, and which poses have a singular wrist ``(N,)``.
-
-        Axes while solving: (N, θ1 branch, wrist branch, root).
-        """
-        r = xyz_fixed.rotation(*np.radians(p[:, 3:]).T)  # eq. 4.04
-        n, o, a = r[..., 0], r[..., 1], r[..., 2]
-        w = p[:, :3] - self.ly * a  # eq. 4.14
-        on_axis = np.hypot(w[:, 0], w[:, 1]) <= ARM_TOL
-        phi = np.where(on_axis, np.radians(near[:, 1]), np.arctan2(w[:, 1], w[:, 0]))
-        t1 = phi[:, None] + np.array([0.0, np.pi])
-        s1, c1 = np.sin(t1), np.cos(t1)
-
-        def across(v: np.ndarray) -> np.ndarray:
-            """z1·v for both θ1 branches, ``(N, 2)``."""
-            return s1 * v[:, None, 0] - c1 * v[:, None, 1]
-
-        zn, zo, za = across(n), across(o), across(a)
-        s5 = np.hypot(zn, zo)
-        singular = s5 <= WRIST_TOL
-        t5 = np.arctan2(s5, za)  # eq. 4.16
-        t6 = np.where(singular, np.radians(near[:, None, 5]), np.arctan2(-zo, zn))  # eq. 4.15
-        t5w = np.stack([t5, -t5], axis=-1)
-        t6 = np.stack([t6, t6 + np.pi], axis=-1)
-
-        s6, c6 = np.sin(t6)[..., None], np.cos(t6)[..., None]
-        z4 = -(s6 * n[:, None, None] + c6 * o[:, None, None])
-        arm = w[:, None, None] - self.lb * z4
-        s1w, c1w = s1[..., None], c1[..., None]
-        rho = c1w * arm[..., 0] + s1w * arm[..., 1]  # App. A (8)
-        h = arm[..., 2] - self.d1  # App. A (9)
-        disc = rho * rho + h * h - self.a2 * self.a2
-        root = np.sqrt(np.maximum(disc, 0.0))
-        d3 = root[..., None] * np.array([1.0, -1.0])
-        t2 = np.arctan2(h, rho)[..., None] - np.arctan2(self.a2, d3)  # eq. 4.17, errata #8
-        t24 = np.arctan2(z4[..., 2], c1w * z4[..., 0] + s1w * z4[..., 1])  # eq. 4.18
-        t4 = t24[..., None] - t2
-        exists = np.stack([disc >= 0.0, root > ROOT_TOL], axis=-1)
-
-        angles = np.degrees(np.broadcast_arrays(t1[:, :, None, None], t2, t4,
-                                                t5w[..., None], t6[..., None]))
-        q = np.stack([d3, *angles], axis=-1)
-        if singular.any():
-            rows, branch = np.nonzero(singular)
-            q[rows, branch, 1], exists[rows, branch, 1] = self._hold_bend_batch(
-                w[rows], n[rows], o[rows], t1[rows, branch], t5[rows, branch], near[rows, 3])
-        return q.reshape(-1, 8, 6), exists.reshape(-1, 8), singular.any(axis=-1)
-
     def _hold_bend_batch(self, w: np.ndarray, n: np.ndarray, o: np.ndarray, t1: np.ndarray,
                          t5: np.ndarray, bend: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``_hold_bend`` of K singular wrists → ``(K, 2, 6)`` (deg), exists ``(K, 2)``."""
@@ -495,20 +609,21 @@ class Unimate2000B:
             out.append(v)
         return out
 
-    def _fit_batch(self, q: np.ndarray, near: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``_fit`` of ``q: (N, 8, 6)`` → fitted ``(N, 8, 6)``, inside ``(N, 8)``."""
-        lo, hi = np.array(self.lower), np.array(self.upper)
-        base, top = lo[1:] - LIMIT_TOL, hi[1:] + LIMIT_TOL
-        angle = q[..., 1:]
-        low_copy = angle - 360.0 * np.floor((angle - base) / 360.0)
-        turns = np.clip(np.round((near[:, None, 1:] - low_copy) / 360.0),
+    def _fit_joint(self, j: int, value: np.ndarray, near: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray]:
+        """``_fit`` of joint ``j``'s values (mm, deg; any shape, ``near`` broadcast with
+        them) → fitted, inside: ``_wrap``'s arithmetic, elementwise."""
+        lo, hi = self.lower[j], self.upper[j]
+        base, top = lo - LIMIT_TOL, hi + LIMIT_TOL
+        if j == 0:
+            return np.clip(value, lo, hi) + 0.0, (value >= base) & (value <= top)
+        low_copy = value - 360.0 * np.floor((value - base) / 360.0)
+        inside = low_copy <= top
+        if top - base < 359.0:  # one copy at most is inside: no turns to add
+            return np.clip(low_copy, lo, hi) + 0.0, inside  # + 0.0 turns -0.0 into 0.0
+        turns = np.clip(np.round((near - low_copy) / 360.0),
                         0.0, np.floor((top - low_copy) / 360.0))
-        inside = ((low_copy <= top).all(axis=-1)
-                  & (q[..., 0] >= lo[0] - LIMIT_TOL) & (q[..., 0] <= hi[0] + LIMIT_TOL))
-        fitted = np.empty_like(q)
-        fitted[..., 0] = q[..., 0]
-        fitted[..., 1:] = low_copy + 360.0 * turns
-        return np.clip(fitted, lo, hi) + 0.0, inside  # + 0.0 turns -0.0 into 0.0
+        return np.clip(low_copy + 360.0 * turns, lo, hi) + 0.0, inside
 
     def _why(self, raw: list[list[float]], radius: float, held: list[float] | None) -> str:
         """The reason no branch of a pose is usable, for Unreachable; ``held`` is
@@ -607,10 +722,13 @@ def _row(link: DHLink) -> str:
 
 def _vector(v: ArrayLike, what: str) -> list[float]:
     """One finite 6-vector as floats; ValueError naming ``what`` otherwise."""
-    arr = np.asarray(v, dtype=float)
-    if arr.shape != (6,):
-        raise ValueError(f"{what} must have 6 values, got shape {arr.shape}")
-    values = arr.tolist()
+    if type(v) is np.ndarray and v.dtype == np.float64 and v.shape == (6,):
+        values = v.tolist()  # what a caller usually passes, without asarray's cost
+    else:
+        arr = np.asarray(v, dtype=float)
+        if arr.shape != (6,):
+            raise ValueError(f"{what} must have 6 values, got shape {arr.shape}")
+        values = arr.tolist()
     if not all(map(math.isfinite, values)):
         raise ValueError(f"{what} must be finite numbers, got {values}")
     return values
