@@ -26,6 +26,11 @@ Taps are newest first (errata #21). With ``w`` empty, ``kp = [Kp]`` and the
 filter (11, −18, 9, −2)/6 it is the PID of eq. 3.3; with ``w`` non-empty, the
 observer controller of section 3.6.2.
 
+The sample time Δt is the machine file's ``sample_time_ms`` (0.5: 2 kHz): the integral
+(ki·Δt) and the derivative (kd/(p·Δt)) are of seconds, so a P.I.D. set means the same at any
+rate; the ``w`` taps and a ``kp`` of more than one tap (the observer controller) are a
+discrete design for one Δt and must be designed again for another.
+
 Inputs per tick: joint index and error e(k) = desired − actual in joint units
 (mm, deg). Output: u(k+1) in percent, before down-scaling and polarity, which the
 machine's transmission (``hw.transmission``) applies. The tick path uses plain

@@ -342,3 +342,15 @@ def test_the_integral_does_not_wind_up_while_saturated() -> None:
     assert printed.state(0).integral == pytest.approx(100 * 0.01 * 4000 * 1e-3)
     law.update(0, 1.0)  # unsaturated (0.75 % per count): it integrates again
     assert law.state(0).integral == pytest.approx(0.01 * 10 * 1e-3)
+
+
+@pytest.mark.parametrize("dt", [0.001, 0.0005])
+def test_the_integral_and_the_derivative_are_of_seconds_whatever_the_sample_time(dt) -> None:
+    """At 1 kHz or 2 kHz (``sample_time_ms`` 1 or 0.5) the same error signal in time gives
+    the same integral and derivative terms: ki·Δt and kd/(p·Δt) carry the period."""
+    integral = DifferenceLaw(plain_machine(), one_joint(ki=10.0), dt)
+    steps = round(0.1 / dt)  # e = 2 for 0.1 s: ∫ki·e dt = 10·2·0.1 = 2
+    assert run(integral, [2.0] * steps)[-1] == pytest.approx(2.0)
+    derivative = DifferenceLaw(plain_machine(), one_joint(kd=0.01), dt)
+    ramp = [300.0 * dt * k for k in range(1, 11)]  # 300 units/s: kd·de/dt = 3
+    assert run(derivative, ramp)[-1] == pytest.approx(3.0)
