@@ -1,8 +1,10 @@
 """Control quality per joint on both machines: the default controller beside the thesis P.I.
 
 Run: ``PYTHONPATH=. python benchmarks/control_quality.py [--machines unimate2000b rig]
-[--rest 5] [--svg docs/wrist_response.svg]`` (2-4 min on a busy two-core machine: every move
-runs the real control subprocess on the lockstep simulator; each rest is real time).
+[--rest 5] [--svg docs/wrist_response.svg] [--sample-time-ms 0.5]`` (2-4 min on a busy
+two-core machine: every move runs the real control subprocess on the lockstep simulator; each
+rest is real time). ``--sample-time-ms`` runs copies of the machine files with that loop period
+(0.5: 2 kHz; the gains' Δt terms scale with it, ``control/rt/law.py``).
 
 Controllers: ``default`` is the machine file's hold and track sets; ``thesis P.I.`` is the
 Unimate's ``thesis_pi`` (section 5.4.2) as both sets, and the rig's ``thesis_hold`` and
@@ -41,6 +43,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # ahead of benchmarks/hw.py
 
+from loop import machine_at
+
 from control import ControlClient
 from control.motion import form_plans, moves
 from hw.machine import Coefficients, Machine, load_machine
@@ -77,7 +81,7 @@ def controllers(machine: Machine) -> dict[str, tuple[Coefficients, Coefficients]
 
 def start_client(machine: Machine, sets: tuple[Coefficients, Coefficients],
                  data: str) -> tuple[ControlClient, np.ndarray]:
-    robot = ControlClient(machine.name, lockstep=True, data_dir=data, heartbeat_timeout_s=5.0)
+    robot = ControlClient(machine, lockstep=True, data_dir=data, heartbeat_timeout_s=5.0)
     robot.set_coefficients("hold", sets[0], override="benchmark")
     robot.set_coefficients("track", sets[1], override="benchmark")
     if machine.encoder_kind != "gray":
@@ -213,7 +217,8 @@ def _worst(run, joints: tuple[int, ...], unit: str) -> Response:
 
 def print_table(machine: Machine, results: dict[str, dict[str, dict[str, object]]]) -> None:
     names = list(results)
-    print(f"\n{machine.title} ({machine.name}): {' | '.join(names)} per cell; over and rms in "
+    print(f"\n{machine.title} ({machine.name}) at {1e-3 / machine.sample_time_s:g} kHz: "
+          f"{' | '.join(names)} per cell; over and rms in "
           f"the joint's unit, settle in s after the path arrives (±0.5° / ±1 mm)")
     head = ["joint", "move", *names]
     lines = [head]
@@ -272,15 +277,18 @@ def main() -> None:
     parser.add_argument("--machines", nargs="+", default=["unimate2000b", "rig"])
     parser.add_argument("--rest", type=float, default=REST_S, help="seconds of rest measured")
     parser.add_argument("--svg", type=Path, default=None, help="write the wrist figure here")
+    parser.add_argument("--sample-time-ms", type=float, default=None,
+                        help="run the machine files with this sample_time_ms (0.5: 2 kHz)")
     args = parser.parse_args()
     started = time.monotonic()
     for name in args.machines:
-        machine = load_machine(name)
-        results, wrist = {}, {}
-        for label, sets in controllers(machine).items():
-            results[label], run = measure(machine, sets, args.rest)
-            if run is not None:
-                wrist[label] = run
+        with tempfile.TemporaryDirectory() as copies:
+            machine = load_machine(machine_at(name, args.sample_time_ms, copies))
+            results, wrist = {}, {}
+            for label, sets in controllers(machine).items():
+                results[label], run = measure(machine, sets, args.rest)
+                if run is not None:
+                    wrist[label] = run
         print_table(machine, results)
         if args.svg is not None and wrist:
             write_svg(args.svg, wrist, machine)

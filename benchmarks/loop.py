@@ -3,14 +3,23 @@
 Runs the real control subprocess on the simulator for ``--seconds`` and, when
 Debian's ``cyclictest`` (rt-tests) is installed, runs it at the same period in
 the same window on the other core, then prints both side by side with the
-thesis's Table 2.1 (486-66, RTL 1.0). Prints figures; asserts nothing.
+thesis's Table 2.1 (486-66, RTL 1.0). Beside it, the same ticks in a tight loop
+(``tight_compute``: the controller's ``tick`` on a lockstep simulator, back to back
+on the controller's core): live ÷ tight says what the wake-up costs the work. Prints
+figures; asserts nothing.
 
     python benchmarks/loop.py --seconds 20
+    python benchmarks/loop.py --sample-time-ms 0.5 --spin-us 0   # 2 kHz, no spin
+
+``--sample-time-ms`` runs a copy of the machine file with its ``sample_time_ms`` changed.
+The code measured is the first of ``PYTHONPATH``'s entries (another checkout: ``git worktree
+add /tmp/old <rev>``, then ``PYTHONPATH=/tmp/old``), else this file's repository.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import platform
 import re
@@ -24,11 +33,15 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+# ahead of benchmarks/, whose hw.py would shadow the hw package: PYTHONPATH's checkout, or ours
+sys.path.insert(0, os.environ.get("PYTHONPATH", "").split(os.pathsep)[0]
+                or str(Path(__file__).resolve().parents[1]))
+
 
 from control import ControlClient
 from control.client import SPIN_US
 from control.rt.layout import HIST_BIN_NS
+from hw.machine import load_machine
 from hw.transmission import valve_duty
 
 TABLE_2_1 = {"min_us": 11.5, "mean_us": 13.97, "max_us": 54.0, "ticks": 100_290}
@@ -93,6 +106,79 @@ def parse_cyclictest(output: str) -> Lateness:
                                    summary["Avg"])
 
 
+def machine_at(name: str, sample_time_ms: float | None, directory: str) -> str:
+    """The machine file ``name``, or a copy in ``directory`` whose ``sample_time_ms`` is
+    ``sample_time_ms`` (the loop's period: 0.5 runs it at 2 kHz)."""
+    if sample_time_ms is None:
+        return name
+    path = load_machine(name).path
+    text, count = re.subn(r"(?m)^sample_time_ms\s*=\s*[0-9.]+",
+                          f"sample_time_ms = {sample_time_ms!r}", path.read_text())
+    if count != 1:
+        raise SystemExit(f"{path}: no sample_time_ms line to change")
+    copy = Path(directory) / path.name
+    copy.write_text(text)
+    return str(copy)
+
+
+def tight_compute(machine: str, batches: int = 7, ticks: int = 1000) -> tuple[float, float]:
+    """Compute and backend read/write per tick (µs) of the controller's own ``tick`` back to
+    back on a lockstep simulator, holding as the live loop does in ``measure``: in a child
+    made real-time as the control process is (``enter_realtime``), timed by the wall clock
+    over the span the live loop times (wake-up to the valves written); the median of
+    ``batches`` means of ``ticks`` ticks, as a busy machine's other work lands in some."""
+    code = (f"import json, sys; sys.path.insert(0, {sys.path[0]!r}); "
+            f"import loop; print(json.dumps(loop.tight_child({machine!r}, {batches}, {ticks})))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         cwd=Path(__file__).parent, check=True).stdout
+    compute, io = json.loads(out.splitlines()[-1])
+    return compute, io
+
+
+def tight_child(machine_name: str, batches: int, ticks: int) -> tuple[float, float]:
+    """``tight_compute``'s child: a batch to warm up, the batches, their median means (µs)."""
+    import socket
+
+    from control.rt import shm
+    from control.rt.channel import controller_end
+    from control.rt.layout import ControlLayout
+    from control.rt.loop import Controller, LoopConfig
+    from control.rt.realtime import enter_realtime
+    from hw.backend import RealClock
+    from hw.sim.backend import SimBackend
+
+    machine = load_machine(machine_name)
+    backend = SimBackend(machine, lockstep=True)
+    period = round(machine.sample_time_s * 1e9)
+    ours, theirs = socket.socketpair()
+    layout = ControlLayout(machine.n_joints)
+    segment = shm.create("tight", layout.size)
+    layout.write_header(segment.buf)
+    controller = Controller(machine, backend, controller_end(theirs), segment.buf,
+                            LoopConfig(period_ns=period, heartbeat_timeout_ns=10**15,
+                                       orphan_timeout_ns=10**15))
+    try:
+        backend.open()
+        controller.start()
+        controller.clock = RealClock()  # the controller times itself; the plant steps lockstep
+        enter_realtime()
+        step, latency = backend.clock, controller.latency
+        means = []
+        for _ in range(batches + 1):
+            compute0, io0 = latency.compute_total_ns, latency.io_total_ns
+            for _ in range(ticks):
+                step.sleep_until(step.now_ns() + period)
+                controller.deadline = woke = time.monotonic_ns()
+                controller.tick(woke)
+            means.append(((latency.compute_total_ns - compute0) / ticks / 1e3,
+                          (latency.io_total_ns - io0) / ticks / 1e3))
+        return sorted(means[1:])[batches // 2]
+    finally:
+        controller.release()
+        shm.release(segment, unlink=True)
+        ours.close()
+
+
 def command_latency(client: ControlClient, samples: int = 300) -> np.ndarray:
     """Seconds from ``client.jog`` to that duty at the backend (the status' valve field)."""
     joint = client.machine.joints[0]
@@ -112,7 +198,7 @@ def command_latency(client: ControlClient, samples: int = 300) -> np.ndarray:
 
 
 def measure(seconds: float = 10.0, machine: str = "unimate2000b", spin_us: float = SPIN_US,
-            warmup: float = 1.0) -> dict:
+            warmup: float = 1.0, sample_time_ms: float | None = None) -> dict:
     """Run the controller for ``seconds`` (cyclictest alongside) and return the figures.
 
     Keys: ``realtime``, ``notice``, ``period_us``, ``ticks``, ``compute_mean_us``,
@@ -120,10 +206,19 @@ def measure(seconds: float = 10.0, machine: str = "unimate2000b", spin_us: float
     ``client.jog`` → duty at the backend, ms), ``servodesk`` and ``cyclictest``
     (``Lateness`` in µs; servodesk's mean and percentiles cover the window, its min and
     max the whole run, as the histogram keeps them; ``cyclictest`` None when not installed),
-    ``whole_run`` (min, mean, max µs and ticks since the controller started).
+    ``whole_run`` (min, mean, max µs and ticks since the controller started), ``tight_us``
+    and ``tight_io_us`` (``tight_compute``'s compute and backend read/write per tick).
     """
-    with tempfile.TemporaryDirectory() as data, \
-            ControlClient(machine, data_dir=data, spin_us=spin_us) as client:
+    with tempfile.TemporaryDirectory() as data:
+        path = machine_at(machine, sample_time_ms, data)
+        tight, tight_io = tight_compute(path)
+        live = measure_live(seconds, path, spin_us, warmup, data)
+    return {**live, "machine": machine, "tight_us": tight, "tight_io_us": tight_io}
+
+
+def measure_live(seconds: float, machine: str, spin_us: float, warmup: float, data: str) -> dict:
+    """``measure``'s live part: the control subprocess for ``seconds``, cyclictest beside it."""
+    with ControlClient(machine, data_dir=data, spin_us=spin_us) as client:
         realtime, notice, pid = client.realtime, client.notice, client.pid
         period_us = round(client.dt * 1e6)
         time.sleep(warmup)
@@ -160,10 +255,12 @@ def measure(seconds: float = 10.0, machine: str = "unimate2000b", spin_us: float
     }
 
 
-def run(seconds: float, machine: str, spin_us: float, warmup: float) -> None:
+def run(seconds: float, machine: str, spin_us: float, warmup: float,
+        sample_time_ms: float | None) -> None:
     print(f"machine: {platform.node()} {platform.machine()}, {os.cpu_count()} CPUs, "
           f"{platform.system()} {platform.release()}, Python {platform.python_version()}")
-    m = measure(seconds, machine, spin_us, warmup)
+    print(f"code measured: {Path(sys.modules['control'].__file__).parents[1]}")
+    m = measure(seconds, machine, spin_us, warmup, sample_time_ms)
     fifo = "granted" if m["realtime"] else "refused"
     print(f"control process pid {m['pid']}: SCHED_FIFO {fifo}"
           f"{' - ' + m['notice'] if m['notice'] else ''}; spin {spin_us:g} µs")
@@ -173,7 +270,12 @@ def run(seconds: float, machine: str, spin_us: float, warmup: float) -> None:
     control_us = m["compute_mean_us"] - m["io_mean_us"]
     print(f"  compute per six-joint tick: mean {m['compute_mean_us']:.1f} µs (controller "
           f"{control_us:.1f} µs + backend read/write {m['io_mean_us']:.1f} µs), "
-          f"max {m['compute_max_us']:.0f} µs")
+          f"max {m['compute_max_us']:.0f} µs; {100 * m['compute_mean_us'] / m['period_us']:.0f} % "
+          f"of the period (target <= 25 %)")
+    print(f"  the same ticks in a tight loop: {m['tight_us']:.1f} µs (backend read/write "
+          f"{m['tight_io_us']:.1f} µs); live / tight {m['compute_mean_us'] / m['tight_us']:.2f} "
+          f"(target <= 1.5), backend {m['io_mean_us'] / m['tight_io_us']:.2f}, controller "
+          f"{control_us / (m['tight_us'] - m['tight_io_us']):.2f}")
     print(f"  CPU use of the control process: {m['cpu_pct']:.1f} % of a core")
     print(f"  overruns: {m['overruns']}")
     print(f"  client.jog -> duty at the backend: median {median:.2f} ms, "
@@ -205,8 +307,10 @@ def main() -> None:
     parser.add_argument("--spin-us", type=float, default=SPIN_US,
                         help=f"spin this long before each deadline (default {SPIN_US:g})")
     parser.add_argument("--warmup", type=float, default=1.0)
+    parser.add_argument("--sample-time-ms", type=float, default=None,
+                        help="run the machine file with this sample_time_ms (0.5: 2 kHz)")
     args = parser.parse_args()
-    run(args.seconds, args.machine, args.spin_us, args.warmup)
+    run(args.seconds, args.machine, args.spin_us, args.warmup, args.sample_time_ms)
 
 
 if __name__ == "__main__":
