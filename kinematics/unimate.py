@@ -183,6 +183,14 @@ class Unimate2000B:
         """The middle of each joint's limits (mm, deg): the default ``near``."""
         return tuple((lo + hi) / 2 for lo, hi in zip(self.lower, self.upper, strict=True))
 
+    @functools.cached_property
+    def _unwrapped(self) -> tuple[tuple[float, float], ...]:
+        """Per joint, the range lo…hi where ``_wrap`` gives an angle back as it is (+ 0.0):
+        all of it for a joint whose limits (with LIMIT_TOL) span less than a turn (one
+        copy at most is inside), none of it (an empty range) for the others."""
+        return tuple((lo, hi) if hi - lo < 359.0 else (math.inf, -math.inf)
+                     for lo, hi in zip(self.lower, self.upper, strict=True))
+
     def links(self) -> tuple[DHLink, ...]:
         """Table 4.1 as standard DH rows in DH order (θ1, θ2, d3, θ4, θ5, θ6).
 
@@ -318,13 +326,13 @@ class Unimate2000B:
         invalid), ``valid: (N, 8)`` and the nearest valid one into ``best: (N, 6)`` (NaN
         where none).
 
-        The equations of ``_branches`` and the limits of ``_fit`` on arrays of one joint
-        and one wrist and root branch each, ``(θ1 branch, N)`` (N last, so that numpy
-        loops over it), written into their slots; a root that no pose of the chunk has
-        inside In/Out's limits is not solved further. The second wrist branch (−θ5,
-        θ6 + 180°) negates z4, and Swivel's sine and cosine are −z1·o / sθ5 and
-        z1·n / sθ5; the slots of a singular wrist's held Bend are solved apart
-        (``_hold_bend_batch``) and written over theirs.
+        The equations of ``_branches`` and the limits of ``_fit``, on arrays of one
+        joint each: the wrist per θ1 branch ``(2, N)``, then the arm only for the pairs
+        of θ1 branch and pose whose Rotate is inside its limits, one wrist and root
+        branch at a time, written into their slots; a root that none of them has inside
+        In/Out's limits is not solved further. The second wrist branch (−θ5, θ6 + 180°)
+        negates z4, and Swivel's sine and cosine are −z1·o / sθ5 and z1·n / sθ5; the
+        slots of a singular wrist's held Bend are solved apart (``_hold_bend_into``).
         """
         x, y, z, g, b, al = p.T
         g, b, al = np.radians(g), np.radians(b), np.radians(al)
@@ -338,7 +346,7 @@ class Unimate2000B:
         if on_axis.any():
             on_axis &= np.hypot(w[0], w[1]) <= ARM_TOL
         phi = np.where(on_axis, np.radians(ref[1]), np.arctan2(w[1], w[0]))
-        t1 = phi + _HALF_TURN[:, None]  # axes (θ1 branch, N) from here on
+        t1 = phi + _HALF_TURN[:, None]  # axes (θ1 branch, N)
         s1, c1 = np.sin(t1), np.cos(t1)
         zn = s1 * n[0] - c1 * n[1]
         zo = s1 * o[0] - c1 * o[1]
@@ -354,64 +362,76 @@ class Unimate2000B:
             zo = np.where(singular, -np.sin(t6), zo)
         s6, c6 = -zo / s5, zn / s5
         z4 = [-(s6 * n[k] + c6 * o[k]) for k in range(3)]
-
         rotate, ok_rotate = self._fit_joint(1, np.degrees(t1), ref[1])
-        near_rotate = np.abs(rotate - ref[1])
-        q = out.reshape(-1, 2, 2, 2, 6).transpose(1, 2, 3, 4, 0)  # θ1, wrist, root, joint, N
-        ok = valid.reshape(-1, 2, 2, 2).transpose(1, 2, 3, 0)
-        travel = np.empty(valid.shape)
-        each = travel.reshape(-1, 2, 2, 2).transpose(1, 2, 3, 0)
+
+        live = np.flatnonzero(ok_rotate)  # (θ1 branch, pose) pairs, one axis from here on
+        pose = live % len(p)
+        lc1, ls1, lt5, lt6, rotate = (np.take(v, live) for v in (c1, s1, t5, t6, rotate))
+        lz4 = [np.take(v, live) for v in z4]
+        lw, lref = [v[pose] for v in w], ref[:, pose]
+        near_rotate = np.abs(rotate - lref[1])
+        first = pose * 8 + (live >= len(p)) * 4  # slot of wrist branch 0, root 0
+        out.fill(np.nan)
+        valid.fill(False)
+        travel = np.full(valid.shape, np.inf)
         for i, sign in enumerate((1.0, -1.0)):  # wrist branches: θ5, then −θ5, θ6 + 180°
-            zx, zy, zz = (z4 if i == 0 else [-v for v in z4])
-            rho = c1 * (w[0] - self.lb * zx) + s1 * (w[1] - self.lb * zy)  # App. A (8)
-            h = w[2] - self.lb * zz - self.d1  # App. A (9)
+            zx, zy, zz = (lz4 if i == 0 else [-v for v in lz4])
+            rho = lc1 * (lw[0] - self.lb * zx) + ls1 * (lw[1] - self.lb * zy)  # App. A (8)
+            h = lw[2] - self.lb * zz - self.d1  # App. A (9)
             disc = rho * rho + h * h - self.a2 * self.a2
             root = np.sqrt(np.maximum(disc, 0.0))
-            yaw, ok_yaw = self._fit_joint(4, np.degrees(sign * t5), ref[4])
-            swivel, ok_swivel = self._fit_joint(5, np.degrees(t6 if i == 0 else t6 + np.pi),
-                                                ref[5])
-            ok_wrist = ok_rotate & ok_yaw & ok_swivel & (disc >= 0.0)
-            common = near_rotate + np.abs(yaw - ref[4]) + np.abs(swivel - ref[5])
+            yaw, ok_yaw = self._fit_joint(4, np.degrees(sign * lt5), lref[4])
+            swivel, ok_swivel = self._fit_joint(5, np.degrees(lt6 if i == 0 else lt6 + np.pi),
+                                                lref[5])
+            ok_wrist = ok_yaw & ok_swivel & (disc >= 0.0)
+            common = near_rotate + np.abs(yaw - lref[4]) + np.abs(swivel - lref[5])
             t24 = shoulder = None
             for k, d3 in enumerate((root, -root)):  # eq. 4.17's two roots
-                in_out, ok_root = self._fit_joint(0, d3, ref[0])
+                in_out, ok_root = self._fit_joint(0, d3, lref[0])
                 ok_root &= ok_wrist if k == 0 else ok_wrist & (root > ROOT_TOL)
                 if not ok_root.any():  # e.g. −√ on an arm whose In/Out is positive
-                    q[:, i, k] = np.nan
-                    ok[:, i, k] = False
                     continue
                 if t24 is None or shoulder is None:
-                    t24 = np.arctan2(zz, c1 * zx + s1 * zy)  # eq. 4.18
+                    t24 = np.arctan2(zz, lc1 * zx + ls1 * zy)  # eq. 4.18
                     shoulder = np.arctan2(h, rho)
                 t2 = shoulder - np.arctan2(self.a2, d3)  # errata #8
-                up, ok_up = self._fit_joint(2, np.degrees(t2), ref[2])
-                bend, ok_bend = self._fit_joint(3, np.degrees(t24 - t2), ref[3])
-                ok_slot = ok_root & ok_up & ok_bend
-                ok[:, i, k] = ok_slot
-                nan = np.where(ok_slot, 0.0, np.nan)  # x + 0.0 is x: NaN where invalid
+                up, ok_up = self._fit_joint(2, np.degrees(t2), lref[2])
+                bend, ok_bend = self._fit_joint(3, np.degrees(t24 - t2), lref[3])
+                ok = ok_root & ok_up & ok_bend
+                slot = first + (2 * i + k)
+                valid.ravel()[slot] = ok
+                nan = np.where(ok, 0.0, np.nan)  # x + 0.0 is x: NaN where invalid
                 for j, value in enumerate((in_out, rotate, up, bend, yaw, swivel)):
-                    np.add(value, nan, out=q[:, i, k, j])
-                each[:, i, k] = (np.abs(in_out - ref[0]) * _WEIGHTS[0] + common
-                                 + np.abs(up - ref[2]) + np.abs(bend - ref[3]))
-        travel[~valid] = np.inf
+                    out.ravel()[slot * 6 + j] = value + nan
+                travel.ravel()[slot] = np.where(
+                    ok, np.abs(in_out - lref[0]) * _WEIGHTS[0] + common
+                    + np.abs(up - lref[2]) + np.abs(bend - lref[3]), np.inf)
         if singular.any():
-            branch, rows = np.nonzero(singular)
-            held, inside = self._hold_bend_batch(
-                *(np.stack([v[rows] for v in vector], axis=-1) for vector in (w, n, o)),
-                t1[branch, rows], t5[branch, rows], near[rows, 3])
-            for j in range(6):
-                held[..., j], within = self._fit_joint(j, held[..., j], near[rows, j, None])
-                inside &= within
-            out.reshape(-1, 2, 2, 2, 6)[rows, branch, 1] = held
-            valid.reshape(-1, 2, 2, 2)[rows, branch, 1] = inside
-            many = np.flatnonzero(singular.any(axis=0))
-            repeated = _repeats(out[many], valid[many])
-            valid[many] &= ~repeated
-            solutions = np.where(valid[many, :, None], out[many], np.nan)
-            out[many] = solutions
-            travel[many] = np.where(valid[many], distance(solutions, near[many, None]), np.inf)
+            self._hold_bend_into(out, valid, travel, near, singular, np.stack(w, axis=-1),
+                                 np.stack(n, axis=-1), np.stack(o, axis=-1), t1, t5)
         # NaN where no slot is valid
         best[...] = out.reshape(-1, 6)[np.arange(0, 8 * len(p), 8) + travel.argmin(axis=-1)]
+
+    def _hold_bend_into(self, out: np.ndarray, valid: np.ndarray, travel: np.ndarray,
+                        near: np.ndarray, singular: np.ndarray, w: np.ndarray, n: np.ndarray,
+                        o: np.ndarray, t1: np.ndarray, t5: np.ndarray) -> None:
+        """``_solve_batch``'s slots of wrist branch 1 where the wrist is ``singular: (2, N)``
+        (θ1 branch, pose) solved with Bend held at near's, fitted and written over theirs,
+        and the repeats of the two held joints made invalid: ``out``, ``valid``,
+        ``travel: (N, 8)`` updated."""
+        branch, rows = np.nonzero(singular)
+        held, inside = self._hold_bend_batch(w[rows], n[rows], o[rows], t1[branch, rows],
+                                             t5[branch, rows], near[rows, 3])
+        for j in range(6):
+            held[..., j], within = self._fit_joint(j, held[..., j], near[rows, j, None])
+            inside &= within
+        out.reshape(-1, 2, 2, 2, 6)[rows, branch, 1] = held
+        valid.reshape(-1, 2, 2, 2)[rows, branch, 1] = inside
+        many = np.flatnonzero(singular.any(axis=0))
+        valid[many] &= ~_repeats(out[many], valid[many])
+        solutions = np.where(valid[many, :, None], out[many], np.nan)
+        out[many] = solutions
+        travel[many] = np.where(valid[many], distance(solutions, near[many, None]), np.inf)
 
     def _reference(self, near: ArrayLike | None) -> list[float]:
         """``near`` of ``inverse`` as 6 floats, the middle of the limits if None."""
@@ -432,7 +452,7 @@ class Unimate2000B:
         """The in-limit branches of one pose in slot order, fitted (``_fit``), and whether
         the wrist is singular: ``_branches`` and ``_fit`` with the same arithmetic, each
         branch given up at its first joint outside the limits."""
-        lo, hi = self.lower, self.upper
+        lo, hi, fast = self.lower, self.upper, self._unwrapped
         x, y, z = target[:3]
         g, b, al = target[3] * _RAD, target[4] * _RAD, target[5] * _RAD
         cg, sg, cb, sb, ca, sa = (
@@ -459,12 +479,18 @@ class Unimate2000B:
             else:
                 singular = True
                 wrists = ((t5, near[5] * _RAD),)
-            rotate = _wrap(t1 * _DEG, lo[1], hi[1], near[1])
+            v = t1 * _DEG
+            rotate = v + 0.0 if fast[1][0] <= v <= fast[1][1] else _wrap(v, lo[1], hi[1], near[1])
             if rotate is None:
                 continue
             for t5w, t6w in wrists:
-                yaw = _wrap(t5w * _DEG, lo[4], hi[4], near[4])
-                swivel = None if yaw is None else _wrap(t6w * _DEG, lo[5], hi[5], near[5])
+                v = t5w * _DEG
+                yaw = v + 0.0 if fast[4][0] <= v <= fast[4][1] else _wrap(v, lo[4], hi[4], near[4])
+                if yaw is None:
+                    continue
+                v = t6w * _DEG
+                swivel = (v + 0.0 if fast[5][0] <= v <= fast[5][1]
+                          else _wrap(v, lo[5], hi[5], near[5]))
                 if swivel is None:
                     continue
                 s6, c6 = math.sin(t6w), math.cos(t6w)
@@ -480,12 +506,16 @@ class Unimate2000B:
                     if not in_lo <= d3 <= in_hi:
                         continue
                     t2 = math.atan2(h, rho) - math.atan2(offset, d3)  # eq. 4.17, errata #8
-                    up = _wrap(t2 * _DEG, lo[2], hi[2], near[2])
+                    v = t2 * _DEG
+                    up = (v + 0.0 if fast[2][0] <= v <= fast[2][1]
+                          else _wrap(v, lo[2], hi[2], near[2]))
                     if up is None:
                         continue
                     if t24 is None:
                         t24 = math.atan2(z42, c1 * z40 + s1 * z41)  # eq. 4.18
-                    bend = _wrap((t24 - t2) * _DEG, lo[3], hi[3], near[3])
+                    v = (t24 - t2) * _DEG
+                    bend = (v + 0.0 if fast[3][0] <= v <= fast[3][1]
+                            else _wrap(v, lo[3], hi[3], near[3]))
                     if bend is not None:
                         out.append([min(max(d3, lo[0]), hi[0]), rotate, up, bend, yaw, swivel])
             if s5 <= WRIST_TOL:
