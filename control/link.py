@@ -5,13 +5,13 @@ what differs between a client that started its own controller (``EmbeddedLink``,
 ``control/embedded.py``) and one attached to a controller service (``ServiceLink``,
 ``control/attached.py``): the wire its commands go out on and its events come in on, the
 control segment it maps, what it was told at the start, whether it may command, how its
-heartbeat reaches the controller, and what closing it means. Commands go out in order on
-the link's own sender thread, so no caller ever waits on the wire.
+heartbeat reaches the controller, and what closing it means. Commands go out in order,
+from the caller's thread when the wire takes them at once, else from the link's own sender
+thread, so no caller ever waits on the wire (``control/outgoing.py``).
 """
 
 from __future__ import annotations
 
-import queue
 import threading
 from abc import ABC, abstractmethod
 from collections.abc import Callable
@@ -19,10 +19,11 @@ from dataclasses import dataclass
 from multiprocessing.shared_memory import SharedMemory
 from pathlib import Path
 
+from control.outgoing import Outgoing
 from control.rt.commands import Command
 from control.rt.layout import ControlLayout
 from control.rt.seqlock import SeqlockReader, SeqlockWriter
-from control.rt.wire import Broken, Message, Wire
+from control.rt.wire import Message, Wire
 from control.timing import Timing
 from hw.machine import Coefficients, Machine
 
@@ -70,32 +71,18 @@ class Link(ABC):
         self.segment = segment
         self.setting = setting
         self.layout = ControlLayout(setting.machine.n_joints)
-        self.outgoing: queue.Queue[Message] = queue.Queue(OUTGOING)
-        self.closing = threading.Event()
-        self._sender = threading.Thread(target=self._deliver, name="servodesk-commands",
+        self.outgoing = Outgoing(wire, OUTGOING)
+        self._sender = threading.Thread(target=self.outgoing.run, name="servodesk-commands",
                                         daemon=True)
 
     def start(self) -> None:
         self._sender.start()
 
     def put(self, message: Message) -> None:
-        """Queue ``message`` for the wire; ``queue.Full`` when the last ``OUTGOING`` are
-        still waiting (the other end frozen or flooded)."""
+        """Send ``message`` now, or queue it behind the others, never waiting on the wire;
+        ``queue.Full`` when the last ``OUTGOING`` are still waiting (the other end frozen or
+        flooded)."""
         self.outgoing.put_nowait(message)
-
-    def _deliver(self) -> None:
-        """Send queued messages in order; only this thread ever waits on the wire."""
-        while not self.closing.is_set():
-            try:
-                message = self.outgoing.get(timeout=0.05)
-            except queue.Empty:
-                continue
-            try:
-                self.wire.send(message.record, message.fds)
-            except Broken:
-                return  # the wire is gone: the client's monitor thread reports it
-            finally:
-                message.close_fds()
 
     def write_coefficients(self, which: str, coefficients: Coefficients) -> None:
         """Write a packed set where the controller reads it on ``SetCoefficients``. The writer
@@ -119,7 +106,7 @@ class Link(ABC):
 
     def close(self) -> None:
         """Stop sending (what is queued stays, for ``release`` to drop)."""
-        self.closing.set()
+        self.outgoing.close()
         if self._sender.is_alive():
             self._sender.join(timeout=0.2)
 
@@ -127,8 +114,7 @@ class Link(ABC):
         """After the client's last use: close the wire, drop what was never sent (closing its
         descriptors); a subclass then lets go of the segment and the process."""
         self.wire.close()
-        while not self.outgoing.empty():
-            self.outgoing.get_nowait().close_fds()
+        self.outgoing.drop()
 
     # -- what a subclass says ---------------------------------------------------------------
 

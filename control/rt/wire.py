@@ -102,7 +102,7 @@ class Wire:
 
     ``limit`` bounds a frame received, in bytes. ``send`` may be called from one thread
     while another receives. Sending blocks while the peer does not read (as long as the
-    socket's own timeout, if it has one)."""
+    socket's own timeout, if it has one); ``offer`` sends only what the socket takes now."""
 
     def __init__(self, sock: socket.socket, codec: Codec, limit: int,
                  frame_s: float = FRAME_S) -> None:
@@ -122,17 +122,34 @@ class Wire:
 
     def send(self, record: object, fds: Sequence[int] = ()) -> None:
         """Send ``record`` (and ``fds``, which stay the caller's to close)."""
-        self.send_bytes(self.codec.encode(record), fds)
+        self.send_frame(self.frame(record), fds)
 
     def send_bytes(self, body: bytes, fds: Sequence[int] = ()) -> None:
-        frame = HEADER.pack(len(body)) + body
-        ancillary = ([(socket.SOL_SOCKET, socket.SCM_RIGHTS, array.array("i", fds))]
-                     if fds else [])
+        self.send_frame(HEADER.pack(len(body)) + body, fds)
+
+    def frame(self, record: object) -> bytes:
+        """``record`` as it goes on the wire: its length, then its JSON."""
+        body = self.codec.encode(record)
+        return HEADER.pack(len(body)) + body
+
+    def send_frame(self, frame: bytes, fds: Sequence[int] = ()) -> None:
+        """Send all of ``frame``, waiting while the peer does not read; ``fds`` go with its
+        first byte."""
         try:
-            sent = self.sock.sendmsg([frame], ancillary)
+            sent = self.sock.sendmsg([frame], _rights(fds))
             if sent < len(frame):
                 self.sock.sendall(frame[sent:])
         except (OSError, ValueError) as exc:  # ValueError: the socket was closed here
+            raise Broken(f"cannot send: {exc}") from None
+
+    def offer(self, frame: bytes, fds: Sequence[int] = ()) -> int:
+        """Send what of ``frame`` the socket takes now, never waiting (on a socket with no
+        timeout): the bytes sent, 0 if none; ``fds`` go with the first byte."""
+        try:
+            return self.sock.sendmsg([frame], _rights(fds), socket.MSG_DONTWAIT)
+        except BlockingIOError:
+            return 0
+        except (OSError, ValueError) as exc:
             raise Broken(f"cannot send: {exc}") from None
 
     def recv(self) -> Message:
@@ -184,6 +201,11 @@ class Wire:
     def close(self) -> None:
         with contextlib.suppress(OSError):
             self.sock.close()
+
+
+def _rights(fds: Sequence[int]) -> list[tuple[int, int, array.array]]:
+    """The ancillary data that passes ``fds`` (``SCM_RIGHTS``)."""
+    return [(socket.SOL_SOCKET, socket.SCM_RIGHTS, array.array("i", fds))] if fds else []
 
 
 def _descriptors(ancillary: list[tuple[int, int, bytes]]) -> list[int]:
