@@ -368,12 +368,13 @@ class Unimate2000B:
         pose = live % len(p)
         lc1, ls1, lt5, lt6, rotate = (np.take(v, live) for v in (c1, s1, t5, t6, rotate))
         lz4 = [np.take(v, live) for v in z4]
-        lw, lref = [v[pose] for v in w], ref[:, pose]
+        lw, lref = [v[pose] for v in w], np.take(ref, pose, axis=1)
         near_rotate = np.abs(rotate - lref[1])
         first = pose * 8 + (live >= len(p)) * 4  # slot of wrist branch 0, root 0
+        order = (live >= len(p)) * (4 * len(p)) + pose  # the same in travel's order
         out.fill(np.nan)
         valid.fill(False)
-        travel = np.full(valid.shape, np.inf)
+        travel = np.full((8, len(p)), np.inf)  # slot, pose
         for i, sign in enumerate((1.0, -1.0)):  # wrist branches: θ5, then −θ5, θ6 + 180°
             zx, zy, zz = (lz4 if i == 0 else [-v for v in lz4])
             rho = lc1 * (lw[0] - self.lb * zx) + ls1 * (lw[1] - self.lb * zy)  # App. A (8)
@@ -403,14 +404,18 @@ class Unimate2000B:
                 nan = np.where(ok, 0.0, np.nan)  # x + 0.0 is x: NaN where invalid
                 for j, value in enumerate((in_out, rotate, up, bend, yaw, swivel)):
                     out.ravel()[slot * 6 + j] = value + nan
-                travel.ravel()[slot] = np.where(
+                travel.ravel()[order + (2 * i + k) * len(p)] = np.where(
                     ok, np.abs(in_out - lref[0]) * _WEIGHTS[0] + common
                     + np.abs(up - lref[2]) + np.abs(bend - lref[3]), np.inf)
         if singular.any():
             self._hold_bend_into(out, valid, travel, near, singular, np.stack(w, axis=-1),
                                  np.stack(n, axis=-1), np.stack(o, axis=-1), t1, t5)
+        nearest, shortest = np.zeros(len(p), dtype=np.intp), travel[0]
+        for k in range(1, 8):  # argmin over the slots, the first of equals, along the poses
+            shorter = travel[k] < shortest
+            nearest[shorter], shortest = k, np.where(shorter, travel[k], shortest)
         # NaN where no slot is valid
-        best[...] = out.reshape(-1, 6)[np.arange(0, 8 * len(p), 8) + travel.argmin(axis=-1)]
+        best[...] = out.reshape(-1, 6)[np.arange(0, 8 * len(p), 8) + nearest]
 
     def _hold_bend_into(self, out: np.ndarray, valid: np.ndarray, travel: np.ndarray,
                         near: np.ndarray, singular: np.ndarray, w: np.ndarray, n: np.ndarray,
@@ -418,7 +423,7 @@ class Unimate2000B:
         """``_solve_batch``'s slots of wrist branch 1 where the wrist is ``singular: (2, N)``
         (θ1 branch, pose) solved with Bend held at near's, fitted and written over theirs,
         and the repeats of the two held joints made invalid: ``out``, ``valid``,
-        ``travel: (N, 8)`` updated."""
+        ``travel: (8, N)`` updated."""
         branch, rows = np.nonzero(singular)
         held, inside = self._hold_bend_batch(w[rows], n[rows], o[rows], t1[branch, rows],
                                              t5[branch, rows], near[rows, 3])
@@ -431,7 +436,7 @@ class Unimate2000B:
         valid[many] &= ~_repeats(out[many], valid[many])
         solutions = np.where(valid[many, :, None], out[many], np.nan)
         out[many] = solutions
-        travel[many] = np.where(valid[many], distance(solutions, near[many, None]), np.inf)
+        travel[:, many] = np.where(valid[many], distance(solutions, near[many, None]), np.inf).T
 
     def _reference(self, near: ArrayLike | None) -> list[float]:
         """``near`` of ``inverse`` as 6 floats, the middle of the limits if None."""

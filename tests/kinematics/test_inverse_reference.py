@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 from control.motion.robot_model import builtin_unimate
-from kinematics import Unreachable, xyz_fixed
+from kinematics import Unreachable, unimate, xyz_fixed
 from kinematics.unimate import Unimate2000B
 
 REFERENCE = Path(__file__).with_name("inverse_reference.npz")
@@ -173,6 +173,22 @@ def test_batch_inverse_gives_the_stored_branches(reference: tuple, now: dict) ->
     np.testing.assert_allclose(now["batch"], reference["batch"], rtol=0, atol=TOL)
     assert now["nan_elsewhere"]
     np.testing.assert_array_equal(now["best"], reference["best"])
+
+
+def test_a_batch_of_several_chunks_gives_the_stored_branches(reference: tuple) -> None:
+    """The cases over and over, two chunks of ``inverse_batch``'s and more: each pose gets
+    its own answers wherever a chunk begins."""
+    model, reference = reference
+    rows = np.flatnonzero(~reference["default"])
+    copies = -(-2 * unimate._CHUNK // len(rows))
+    result = model.inverse_batch(np.tile(reference["pose"][rows], (copies, 1)),
+                                 near=np.tile(reference["near"][rows], (copies, 1)))
+    want = np.tile(reference["valid"][rows], (copies, 1))
+    np.testing.assert_array_equal(result.valid, want)
+    stored = np.full((len(reference["pose"]), 8, 6), np.nan)
+    stored[reference["valid"]] = reference["batch"]
+    np.testing.assert_allclose(result.solutions, np.tile(stored[rows], (copies, 1, 1)),
+                               rtol=0, atol=TOL)
 
 
 def test_the_cases_cover_every_kind_of_branch() -> None:
