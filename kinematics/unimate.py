@@ -475,19 +475,19 @@ class Unimate2000B:
         singular = False
         for t1 in (phi, phi + math.pi):
             s1, c1 = math.sin(t1), math.cos(t1)
-            zn, zo, za = s1 * n0 - c1 * n1, s1 * o0 - c1 * o1, s1 * a0 - c1 * a1
+            zn, zo = s1 * n0 - c1 * n1, s1 * o0 - c1 * o1
             s5 = math.hypot(zn, zo)
-            t5 = math.atan2(s5, za)  # eq. 4.16
-            if s5 > WRIST_TOL:
-                t6 = math.atan2(-zo, zn)  # eq. 4.15
-                wrists: tuple[tuple[float, float], ...] = ((t5, t6), (-t5, t6 + math.pi))
-            else:
-                singular = True
-                wrists = ((t5, near[5] * _RAD),)
+            singular = singular or s5 <= WRIST_TOL
             v = t1 * _DEG
             rotate = v + 0.0 if fast[1][0] <= v <= fast[1][1] else _wrap(v, lo[1], hi[1], near[1])
             if rotate is None:
                 continue
+            t5 = math.atan2(s5, s1 * a0 - c1 * a1)  # eq. 4.16
+            if s5 > WRIST_TOL:
+                t6 = math.atan2(-zo, zn)  # eq. 4.15
+                wrists: tuple[tuple[float, float], ...] = ((t5, t6), (-t5, t6 + math.pi))
+            else:  # Swivel held at near's
+                wrists = ((t5, near[5] * _RAD),)
             for t5w, t6w in wrists:
                 v = t5w * _DEG
                 yaw = v + 0.0 if fast[4][0] <= v <= fast[4][1] else _wrap(v, lo[4], hi[4], near[4])
