@@ -172,7 +172,7 @@ def own_modules(pop: bool) -> dict[str, ModuleType]:
 
 
 def best_pair(run: Callable[[], object], other: Callable[[], object] | None,
-              repeats: int = 3) -> tuple[float, float]:
+              repeats: int = 5) -> tuple[float, float]:
     """Shortest of ``repeats`` wall-clock runs (s) of ``run`` and of ``other`` (inf if None),
     taken turn about."""
     best, best_other = float("inf"), float("inf")

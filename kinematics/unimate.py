@@ -327,8 +327,8 @@ class Unimate2000B:
         where none).
 
         The equations of ``_branches`` and the limits of ``_fit``, on arrays of one
-        joint each: the wrist per θ1 branch ``(2, N)``, then the arm only for the pairs
-        of θ1 branch and pose whose Rotate is inside its limits, one wrist and root
+        joint each: Rotate for both θ1 branches ``(2, N)``, then the rest only for the
+        pairs of θ1 branch and pose whose Rotate is inside its limits, one wrist and root
         branch at a time, written into their slots; a root that none of them has inside
         In/Out's limits is not solved further. The second wrist branch (−θ5, θ6 + 180°)
         negates z4, and Swivel's sine and cosine are −z1·o / sθ5 and z1·n / sθ5; the
@@ -347,6 +347,13 @@ class Unimate2000B:
             on_axis &= np.hypot(w[0], w[1]) <= ARM_TOL
         phi = np.where(on_axis, np.radians(ref[1]), np.arctan2(w[1], w[0]))
         t1 = phi + _HALF_TURN[:, None]  # axes (θ1 branch, N)
+        rotate, ok_rotate = self._fit_joint(1, np.degrees(t1), ref[1])
+
+        live = np.flatnonzero(ok_rotate)  # (θ1 branch, pose) pairs, one axis from here on
+        pose = live % len(p)
+        t1, rotate = np.take(t1, live), np.take(rotate, live)
+        n, o, a, w = ([v[pose] for v in vector] for vector in (n, o, a, w))
+        ref = np.take(ref, pose, axis=1)
         s1, c1 = np.sin(t1), np.cos(t1)
         zn = s1 * n[0] - c1 * n[1]
         zo = s1 * o[0] - c1 * o[1]
@@ -362,42 +369,35 @@ class Unimate2000B:
             zo = np.where(singular, -np.sin(t6), zo)
         s6, c6 = -zo / s5, zn / s5
         z4 = [-(s6 * n[k] + c6 * o[k]) for k in range(3)]
-        rotate, ok_rotate = self._fit_joint(1, np.degrees(t1), ref[1])
-
-        live = np.flatnonzero(ok_rotate)  # (θ1 branch, pose) pairs, one axis from here on
-        pose = live % len(p)
-        lc1, ls1, lt5, lt6, rotate = (np.take(v, live) for v in (c1, s1, t5, t6, rotate))
-        lz4 = [np.take(v, live) for v in z4]
-        lw, lref = [v[pose] for v in w], np.take(ref, pose, axis=1)
-        near_rotate = np.abs(rotate - lref[1])
+        near_rotate = np.abs(rotate - ref[1])
         first = pose * 8 + (live >= len(p)) * 4  # slot of wrist branch 0, root 0
         order = (live >= len(p)) * (4 * len(p)) + pose  # the same in travel's order
         out.fill(np.nan)
         valid.fill(False)
         travel = np.full((8, len(p)), np.inf)  # slot, pose
         for i, sign in enumerate((1.0, -1.0)):  # wrist branches: θ5, then −θ5, θ6 + 180°
-            zx, zy, zz = (lz4 if i == 0 else [-v for v in lz4])
-            rho = lc1 * (lw[0] - self.lb * zx) + ls1 * (lw[1] - self.lb * zy)  # App. A (8)
-            h = lw[2] - self.lb * zz - self.d1  # App. A (9)
+            zx, zy, zz = (z4 if i == 0 else [-v for v in z4])
+            rho = c1 * (w[0] - self.lb * zx) + s1 * (w[1] - self.lb * zy)  # App. A (8)
+            h = w[2] - self.lb * zz - self.d1  # App. A (9)
             disc = rho * rho + h * h - self.a2 * self.a2
             root = np.sqrt(np.maximum(disc, 0.0))
-            yaw, ok_yaw = self._fit_joint(4, np.degrees(sign * lt5), lref[4])
-            swivel, ok_swivel = self._fit_joint(5, np.degrees(lt6 if i == 0 else lt6 + np.pi),
-                                                lref[5])
+            yaw, ok_yaw = self._fit_joint(4, np.degrees(sign * t5), ref[4])
+            swivel, ok_swivel = self._fit_joint(5, np.degrees(t6 if i == 0 else t6 + np.pi),
+                                                ref[5])
             ok_wrist = ok_yaw & ok_swivel & (disc >= 0.0)
-            common = near_rotate + np.abs(yaw - lref[4]) + np.abs(swivel - lref[5])
+            common = near_rotate + np.abs(yaw - ref[4]) + np.abs(swivel - ref[5])
             t24 = shoulder = None
             for k, d3 in enumerate((root, -root)):  # eq. 4.17's two roots
-                in_out, ok_root = self._fit_joint(0, d3, lref[0])
+                in_out, ok_root = self._fit_joint(0, d3, ref[0])
                 ok_root &= ok_wrist if k == 0 else ok_wrist & (root > ROOT_TOL)
                 if not ok_root.any():  # e.g. −√ on an arm whose In/Out is positive
                     continue
                 if t24 is None or shoulder is None:
-                    t24 = np.arctan2(zz, lc1 * zx + ls1 * zy)  # eq. 4.18
+                    t24 = np.arctan2(zz, c1 * zx + s1 * zy)  # eq. 4.18
                     shoulder = np.arctan2(h, rho)
                 t2 = shoulder - np.arctan2(self.a2, d3)  # errata #8
-                up, ok_up = self._fit_joint(2, np.degrees(t2), lref[2])
-                bend, ok_bend = self._fit_joint(3, np.degrees(t24 - t2), lref[3])
+                up, ok_up = self._fit_joint(2, np.degrees(t2), ref[2])
+                bend, ok_bend = self._fit_joint(3, np.degrees(t24 - t2), ref[3])
                 ok = ok_root & ok_up & ok_bend
                 slot = first + (2 * i + k)
                 valid.ravel()[slot] = ok
@@ -405,11 +405,13 @@ class Unimate2000B:
                 for j, value in enumerate((in_out, rotate, up, bend, yaw, swivel)):
                     out.ravel()[slot * 6 + j] = value + nan
                 travel.ravel()[order + (2 * i + k) * len(p)] = np.where(
-                    ok, np.abs(in_out - lref[0]) * _WEIGHTS[0] + common
-                    + np.abs(up - lref[2]) + np.abs(bend - lref[3]), np.inf)
+                    ok, np.abs(in_out - ref[0]) * _WEIGHTS[0] + common
+                    + np.abs(up - ref[2]) + np.abs(bend - ref[3]), np.inf)
         if singular.any():
-            self._hold_bend_into(out, valid, travel, near, singular, np.stack(w, axis=-1),
-                                 np.stack(n, axis=-1), np.stack(o, axis=-1), t1, t5)
+            held = np.flatnonzero(singular)
+            self._hold_bend_into(out, valid, travel, near, pose[held], live[held] >= len(p),
+                                 *(np.stack(v, axis=-1)[held] for v in (w, n, o)), t1[held],
+                                 t5[held])
         nearest, shortest = np.zeros(len(p), dtype=np.intp), travel[0]
         for k in range(1, 8):  # argmin over the slots, the first of equals, along the poses
             shorter = travel[k] < shortest
@@ -418,21 +420,20 @@ class Unimate2000B:
         best[...] = out.reshape(-1, 6)[np.arange(0, 8 * len(p), 8) + nearest]
 
     def _hold_bend_into(self, out: np.ndarray, valid: np.ndarray, travel: np.ndarray,
-                        near: np.ndarray, singular: np.ndarray, w: np.ndarray, n: np.ndarray,
-                        o: np.ndarray, t1: np.ndarray, t5: np.ndarray) -> None:
-        """``_solve_batch``'s slots of wrist branch 1 where the wrist is ``singular: (2, N)``
-        (θ1 branch, pose) solved with Bend held at near's, fitted and written over theirs,
-        and the repeats of the two held joints made invalid: ``out``, ``valid``,
-        ``travel: (8, N)`` updated."""
-        branch, rows = np.nonzero(singular)
-        held, inside = self._hold_bend_batch(w[rows], n[rows], o[rows], t1[branch, rows],
-                                             t5[branch, rows], near[rows, 3])
+                        near: np.ndarray, rows: np.ndarray, branch: np.ndarray, w: np.ndarray,
+                        n: np.ndarray, o: np.ndarray, t1: np.ndarray, t5: np.ndarray) -> None:
+        """``_solve_batch``'s slots of wrist branch 1 of the poses ``rows: (K,)`` whose wrist
+        is singular on θ1 ``branch``, solved with Bend held at near's (``_hold_bend_batch``
+        from their w, n, o ``(K, 3)``, θ1 and θ5), fitted and written over theirs, and the
+        repeats of the two held joints made invalid: ``out``, ``valid``, ``travel: (8, N)``
+        updated."""
+        held, inside = self._hold_bend_batch(w, n, o, t1, t5, near[rows, 3])
         for j in range(6):
             held[..., j], within = self._fit_joint(j, held[..., j], near[rows, j, None])
             inside &= within
-        out.reshape(-1, 2, 2, 2, 6)[rows, branch, 1] = held
-        valid.reshape(-1, 2, 2, 2)[rows, branch, 1] = inside
-        many = np.flatnonzero(singular.any(axis=0))
+        out.reshape(-1, 2, 2, 2, 6)[rows, branch.astype(np.intp), 1] = held
+        valid.reshape(-1, 2, 2, 2)[rows, branch.astype(np.intp), 1] = inside
+        many = np.unique(rows)
         valid[many] &= ~_repeats(out[many], valid[many])
         solutions = np.where(valid[many, :, None], out[many], np.nan)
         out[many] = solutions
