@@ -65,7 +65,9 @@ def main(argv: list[str] | None = None) -> int:
     if isinstance(rtb, dict):
         print(f"              ik_LM's median is {rtb['median_us'] / m['ik_single_us']:.1f}× this"
               + ("" if old is None else
-                 f" ({rtb['median_us'] / old['ik_single_us']:.1f}× {old['rev']}'s)"))
+                 f" ({rtb['median_us'] / old['ik_single_us']:.1f}× {old['rev']}'s)")
+              + f"; the batch solves {m['ik_batch_poses_s'] / rtb['poses_s']:.0f}× the poses a "
+              "second of ik_LM one at a time")
     print(f"IK success    {m['success_batch_pct']:>11.3f} %  batch; "
           f"{m['success_single_pct']:.3f} % single; original configuration "
           f"first with near = itself: {m['recovered_pct']:.3f} %")
