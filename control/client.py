@@ -90,10 +90,7 @@ HEARTBEAT_S = 0.05
 KEEP_WAIT_S = 30.0  # close(): how long the runs in hand may take to be saved (600 s: under 5)
 DEATH_S = 0.25
 _MOVES = itertools.count(1)  # a move's segment is named apart (it may outlive its client)
-# no spin before each deadline: on this VM it bought no warmer tick, and at 2 kHz a worse
-# wake-up p99, for 8-20 points of a core that it takes from every other real-time task
-# on the core (benchmarks/loop.py --spin-us 150 beside --spin-us 0; issue 29)
-SPIN_US = 0.0
+SPIN_US = 150.0  # spin before each deadline: keeps the core and its caches (benchmarks/loop.py)
 
 
 @dataclass(frozen=True)
