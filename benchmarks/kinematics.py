@@ -126,7 +126,7 @@ def measure(n: int = 100_000, single: int = 2000, rtb_poses: int = 200, seed: in
         median_us = statistics.median(rtb["times_us"])
         rtb = {**rtb, "median_us": median_us, "poses_s": 1e6 / median_us}
     out = {
-        "n": n, "single": single, "seed": seed,
+        "n": n, "single": min(single, n), "seed": seed,
         "fk_poses_s": n / fk_s, "ik_batch_poses_s": n / ik_s,
         "ik_single_us": statistics.median(times_us),
         "ik_single_p99_us": float(np.percentile(times_us, 99)),
