@@ -37,7 +37,7 @@ import numpy as np
 sys.path.insert(0, os.environ.get("PYTHONPATH", "").split(os.pathsep)[0]
                 or str(Path(__file__).resolve().parents[1]))
 
-
+from app.priority import UI_NICE, raise_priority, restore
 from control import ControlClient
 from control.client import SPIN_US
 from control.rt.layout import HIST_BIN_NS
@@ -184,10 +184,13 @@ def tight_child(machine_name: str, batches: int, ticks: int) -> tuple[float, flo
 class CommandLatency:
     """Milliseconds from the call of ``client.jog_joint`` to its duty, one entry a command:
     ``backend`` to the status of the tick that wrote it to the backend (stamped by the
-    controller as it published it, ``Status.wall_ns``), ``seen`` until the client read it."""
+    controller as it published it, ``Status.wall_ns``), ``seen`` until the client read it.
+    ``exact``: the client read the tick before too; where it did not (it was not scheduled),
+    ``backend`` is the stamp of the first tick it read with the duty, an upper bound."""
 
     backend: np.ndarray
     seen: np.ndarray
+    exact: np.ndarray
 
     @staticmethod
     def figures(ms: np.ndarray) -> tuple[float, float, float, int]:
@@ -195,29 +198,39 @@ class CommandLatency:
         return float(np.median(ms)), float(np.percentile(ms, 99)), float(ms.max()), len(ms)
 
 
-def command_latency(client: ControlClient, seconds: float = JOG_S,
+def command_latency(client: ControlClient, seconds: float = JOG_S, nice: int | None = None,
                     seed: int = 29) -> CommandLatency:
     """Jog joint 0 between two small duties for ``seconds`` (the joint barely moves), each
     command a random fraction of a tick more than 2 ms after the last was seen, so that
-    commands arrive at every phase of the loop's tick, as an operator's do."""
+    commands arrive at every phase of the loop's tick, as an operator's do. The caller spins
+    on the status meanwhile, keeping the GIL as a busy UI does. ``nice``: the calling
+    thread's priority meanwhile (the TUI's, ``UI_NICE``), if the OS allows it."""
     joint = client.machine.joints[0]
     rng = np.random.default_rng(seed)
-    backend, seen = [], []
+    backend, seen, exact = [], [], []
+    priority = raise_priority(nice) if nice is not None else None
     end = time.monotonic() + seconds
-    while time.monotonic() < end:
-        duty = 5.0 + len(seen) % 2
-        target = valve_duty(joint, duty)
-        t0 = time.monotonic_ns()
-        client.jog_joint(0, duty)
-        while (status := client.status()).valve[0] != target:
-            if time.monotonic_ns() - t0 > 1e9:
-                break
-        t1 = time.monotonic_ns()
-        backend.append(status.wall_ns - t0 if status.valve[0] == target else t1 - t0)
-        seen.append(t1 - t0)
-        time.sleep(0.002 + rng.random() * client.dt)
+    try:
+        while time.monotonic() < end:
+            duty = 5.0 + len(seen) % 2
+            target = valve_duty(joint, duty)
+            t0 = time.monotonic_ns()
+            client.jog_joint(0, duty)
+            before = client.status().tick
+            while (status := client.status()).valve[0] != target:
+                before = status.tick
+                if time.monotonic_ns() - t0 > 1e9:
+                    break
+            t1 = time.monotonic_ns()
+            backend.append(status.wall_ns - t0 if status.valve[0] == target else t1 - t0)
+            seen.append(t1 - t0)
+            exact.append(status.tick == before + 1)
+            time.sleep(0.002 + rng.random() * client.dt)
+    finally:
+        if priority is not None:
+            restore(priority)
     client.hold()
-    return CommandLatency(np.array(backend) / 1e6, np.array(seen) / 1e6)
+    return CommandLatency(np.array(backend) / 1e6, np.array(seen) / 1e6, np.array(exact))
 
 
 def measure(seconds: float = 10.0, machine: str = "unimate2000b", spin_us: float = SPIN_US,
@@ -227,8 +240,10 @@ def measure(seconds: float = 10.0, machine: str = "unimate2000b", spin_us: float
     Keys: ``realtime``, ``notice``, ``period_us``, ``ticks``, ``compute_mean_us``,
     ``compute_max_us``, ``cpu_pct``, ``overruns``, ``jog_ms`` (median, p99, max and count of
     ``client.jog`` → duty at the backend, ms, timed for ``JOG_S`` after the window;
-    ``jog_seen_ms`` the same until the client saw it, ``jog_cyclictest`` cyclictest's
-    ``Lateness`` beside them, None when not installed), ``servodesk`` and ``cyclictest``
+    ``jog_seen_ms`` the same until the client saw it, ``jog_exact`` the share of exact
+    ones, ``jog_ui_ms`` … ``jog_ui_exact`` the same at the TUI's priority, ``jog_cyclictest``
+    cyclictest's ``Lateness`` beside them, None when not installed), ``servodesk`` and
+    ``cyclictest``
     (``Lateness`` in µs; servodesk's mean and percentiles cover the window, its min and
     max the whole run, as the histogram keeps them; ``cyclictest`` None when not installed),
     ``whole_run`` (min, mean, max µs and ticks since the controller started), ``tight_us``
@@ -255,9 +270,11 @@ def measure_live(seconds: float, machine: str, spin_us: float, warmup: float, da
         after, status1, cpu1, wall1 = client.histogram(), client.status(), cpu_seconds(
             client.pid), time.monotonic()
         cyclic_out = cyclic.communicate(timeout=seconds + 30)[0] if cyclic else ""
-        cyclic_jog = start_cyclictest(period_us, JOG_S, others[0])
+        cyclic_jog = start_cyclictest(period_us, 2 * JOG_S, others[0])
         latency = command_latency(client)
-        cyclic_jog_out = cyclic_jog.communicate(timeout=JOG_S + 30)[0] if cyclic_jog else ""
+        ui = command_latency(client, nice=UI_NICE)
+        cyclic_jog_out = (cyclic_jog.communicate(timeout=2 * JOG_S + 30)[0] if cyclic_jog
+                          else "")
     ticks = status1.tick - status0.tick
     counts = after.counts - before.counts
     edges = (np.arange(len(counts)) + 1) * HIST_BIN_NS / 1e3
@@ -273,6 +290,10 @@ def measure_live(seconds: float, machine: str, spin_us: float, warmup: float, da
         "overruns": status1.overruns - status0.overruns,
         "jog_ms": CommandLatency.figures(latency.backend),
         "jog_seen_ms": CommandLatency.figures(latency.seen),
+        "jog_exact": float(latency.exact.mean()),
+        "jog_ui_ms": CommandLatency.figures(ui.backend),
+        "jog_ui_seen_ms": CommandLatency.figures(ui.seen),
+        "jog_ui_exact": float(ui.exact.mean()),
         "jog_cyclictest": parse_cyclictest(cyclic_jog_out) if cyclic_jog_out else None,
         "servodesk": Lateness.from_histogram(
             edges, counts, after.max_us, after.min_us,
@@ -308,12 +329,18 @@ def run(seconds: float, machine: str, spin_us: float, warmup: float,
     print(f"  overruns: {m['overruns']}")
     print(f"  client.jog -> duty at the backend: median {median:.2f} ms, p99 {p99:.2f} ms, "
           f"max {worst:.2f} ms over {n} commands (target: median <= 1, p99 <= 2)")
-    seen_median, seen_p99, seen_worst, _ = m["jog_seen_ms"]
+    for label, key in (("", "jog"), (f"  at the TUI's priority (nice {UI_NICE}): ", "jog_ui")):
+        if label:
+            ui_median, ui_p99, ui_worst, ui_n = m[f"{key}_ms"]
+            print(f"   {label}median {ui_median:.2f} ms, p99 {ui_p99:.2f} ms, max "
+                  f"{ui_worst:.2f} ms over {ui_n} commands")
+        seen_median, seen_p99, seen_worst, _ = m[f"{key}_seen_ms"]
+        print(f"      seen by the client polling the status: median {seen_median:.2f} ms, p99 "
+              f"{seen_p99:.2f} ms, max {seen_worst:.2f} ms; {100 * m[f'{key}_exact']:.0f} % "
+              "exact (the rest: the client missed the tick before, an upper bound)")
     jog_ct = m["jog_cyclictest"]
-    print(f"    seen by the client polling the status: median {seen_median:.2f} ms, p99 "
-          f"{seen_p99:.2f} ms, max {seen_worst:.2f} ms; cyclictest beside them: "
-          + (f"p99 {jog_ct.p99:.0f} µs, max {jog_ct.max_us:.0f} µs" if jog_ct is not None
-             else "not installed"))
+    print("    cyclictest beside them: " + (f"p99 {jog_ct.p99:.0f} µs, max {jog_ct.max_us:.0f} µs"
+                                          if jog_ct is not None else "not installed"))
     ours, ct = m["servodesk"], m["cyclictest"]
     header = f"  {'':<22}{'p50':>8}{'p99':>8}{'p99.9':>8}{'max':>9}{'>1 ms':>8}"
     print("\nwake-up lateness (µs; servodesk in 5 µs bins, upper edges)")
