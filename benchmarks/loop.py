@@ -27,6 +27,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,7 +38,7 @@ import numpy as np
 sys.path.insert(0, os.environ.get("PYTHONPATH", "").split(os.pathsep)[0]
                 or str(Path(__file__).resolve().parents[1]))
 
-from app.priority import UI_NICE, raise_priority, restore
+from app.priority import UI_NICE
 from control import ControlClient
 from control.client import SPIN_US
 from control.rt.layout import HIST_BIN_NS
@@ -203,12 +204,16 @@ def command_latency(client: ControlClient, seconds: float = JOG_S, nice: int | N
     """Jog joint 0 between two small duties for ``seconds`` (the joint barely moves), each
     command a random fraction of a tick more than 2 ms after the last was seen, so that
     commands arrive at every phase of the loop's tick, as an operator's do. The caller spins
-    on the status meanwhile, keeping the GIL as a busy UI does. ``nice``: the calling
-    thread's priority meanwhile (the TUI's, ``UI_NICE``), if the OS allows it."""
+    on the status meanwhile, keeping the GIL as a busy UI does. ``nice``: the priority of
+    every thread of this process meanwhile (the TUI's, ``UI_NICE``, which its threads
+    inherit: the one that calls alone would wait for the others to hand the GIL back)."""
     joint = client.machine.joints[0]
     rng = np.random.default_rng(seed)
     backend, seen, exact = [], [], []
-    priority = raise_priority(nice) if nice is not None else None
+    priorities = {t.native_id: os.getpriority(os.PRIO_PROCESS, t.native_id)
+                  for t in threading.enumerate() if nice is not None and t.native_id is not None}
+    for thread in priorities:
+        os.setpriority(os.PRIO_PROCESS, thread, nice)
     end = time.monotonic() + seconds
     try:
         while time.monotonic() < end:
@@ -216,19 +221,19 @@ def command_latency(client: ControlClient, seconds: float = JOG_S, nice: int | N
             target = valve_duty(joint, duty)
             t0 = time.monotonic_ns()
             client.jog_joint(0, duty)
-            before = client.status().tick
+            last = client.status().tick  # the last tick read without the duty
             while (status := client.status()).valve[0] != target:
-                before = status.tick
+                last = status.tick
                 if time.monotonic_ns() - t0 > 1e9:
                     break
             t1 = time.monotonic_ns()
             backend.append(status.wall_ns - t0 if status.valve[0] == target else t1 - t0)
             seen.append(t1 - t0)
-            exact.append(status.tick == before + 1)
+            exact.append(status.tick == last + 1)
             time.sleep(0.002 + rng.random() * client.dt)
     finally:
-        if priority is not None:
-            restore(priority)
+        for thread, priority in priorities.items():
+            os.setpriority(os.PRIO_PROCESS, thread, priority)
     client.hold()
     return CommandLatency(np.array(backend) / 1e6, np.array(seen) / 1e6, np.array(exact))
 
