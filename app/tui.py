@@ -356,12 +356,14 @@ class ServodeskApp(App[None]):
     def _start_building(self) -> None:
         if not self._rest_started:
             self._rest_started = True
-            self.call_after_refresh(self._build_the_rest)
+            self.run_worker(self._build_the_rest(), group="build")
 
     async def _build_the_rest(self) -> None:
         """Build the tabs not shown yet, one at a time, keys and frames served between: a
         tab is then ready when first chosen, and neither the first frame nor the first live
-        one waited for them."""
+        one waited for them. A worker, not a callback: a callback holds the screen's (or
+        the app's) messages until it returns, so nothing was painted (or no key served)
+        while every tab was built."""
         for name, _ in TABS:
             if not self.is_running or self._quitting:
                 return
@@ -630,7 +632,7 @@ class ServodeskApp(App[None]):
             self._active.hidden()
             self._active = None
         if not tab.is_attached or name in self._building:  # first shown: once mounted
-            self.call_next(self._build_and_show, name)
+            self.run_worker(self._build_and_show(name), group="build")
             return
         self._active = tab
         self._pace_sampler()
@@ -654,9 +656,13 @@ class ServodeskApp(App[None]):
         The app chooses the tab; the focus must not choose it again: TabbedContent shows
         the pane its TabPane.Focused names, and that message can arrive after the operator
         has chosen another tab (F2 just after start), switching back to this one."""
-        if self._active is not None and not isinstance(self.screen, ModalScreen):
-            with self.prevent(TabPane.Focused):
-                self._active.focus_main()
+        tab = self._active
+        if tab is None or isinstance(self.screen, ModalScreen):
+            return
+        if self.focused is not None and tab in self.focused.ancestors:
+            return  # the operator chose a field of it already: the keys typed next go there
+        with self.prevent(TabPane.Focused):
+            tab.focus_main()
 
     def _shown(self, name: str) -> bool:
         """Whether tab ``name`` is the one shown."""

@@ -381,3 +381,58 @@ def test_after_a_jog_the_forms_show_the_new_pose_and_run_from_it(tui) -> None:
             assert f"→{elsewhere:.2f}°" in title.render().plain
 
     asyncio.run(scenario())
+
+
+def test_a_field_chosen_while_the_tabs_build_keeps_the_focus(tui, monkeypatch) -> None:
+    """Moves chosen at once after start, on a machine slow to build the tab behind it (the
+    Positions tab's code, which the Moves forms wait for, held back here): the Moves tab is
+    painted, the operator clicks into a field and types, and the build finishing does not
+    take the focus back to the menu, where the keys typed next were lost (the intermittent
+    failure of test_typing_tmux). Before, the build held the screen's messages, so nothing
+    was painted until every tab was built, and a focus for the tab shown, queued behind the
+    build, came after the operator's click."""
+    import threading
+
+    from app import tui as tui_module
+
+    held = threading.Event()
+    positions = dict(tui_module.TABS)["positions"]
+
+    class HeldBack(tui_module.TabKind):
+        def load(self):  # the import finishes when the test lets it
+            held.wait(60)
+            return positions.load()
+
+    monkeypatch.setattr(tui_module, "TABS", tuple(
+        (name, HeldBack(kind.title, kind.module, kind.name) if name == "positions" else kind)
+        for name, kind in tui_module.TABS))
+
+    async def scenario() -> None:
+        app = tui.app()
+        try:
+            async with app.run_test(size=SIZE) as pilot:
+                tui.post_key(app, "f2")
+                await tui.until(lambda: app.query("#form-step #start")
+                                and field(app, "step", "start").region.area > 0,
+                                timeout=30, what="the Moves tab's step form painted")
+                start = field(app, "step", "start")
+                await pilot.click(start.input)
+                await pilot.press("5")
+                await tui.until(lambda: start.text.endswith("5"),
+                                what=lambda: f"5 in the start field (the focus: {app.focused!r})")
+                assert app.tabs.made_tab("positions") is None, "the build was not held back"
+                held.set()
+                await tui.until(lambda: app.tab("positions").is_mounted and not app._building
+                                and app._active is app.tab("moves"), timeout=30,
+                                what="the Positions tab built and Moves shown")
+                await pilot.pause()
+                await pilot.press("0")
+                assert app.focused is not None and start in app.focused.ancestors_with_self
+                assert start.text.endswith("50")
+                app._focus_active()  # a late focus for the tab shown, as a build's can come
+                await pilot.press("1")
+                assert start.text.endswith("501"), f"the focus went to {app.focused!r}"
+        finally:
+            held.set()
+
+    asyncio.run(scenario())
