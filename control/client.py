@@ -520,9 +520,10 @@ class ControlClient:
     # -- commands ------------------------------------------------------------------------
 
     def _send(self, command: Command, fds: tuple[int, ...] = ()) -> None:
-        """Queue ``command`` (and descriptors to send with it, closed once sent) for the
-        channel; never waits. ControllerError if the controller is dead or has not taken the
-        last ``OUTGOING`` commands (frozen or flooded)."""
+        """Send ``command`` (and descriptors to send with it, closed once sent) on the
+        channel from this thread, or queue it behind those still waiting (``control/outgoing.py``);
+        never waits. ControllerError if the controller is dead or has not taken the last
+        ``OUTGOING`` commands (frozen or flooded)."""
         if self.dead:
             raise ControllerError(self.dead)
         self.link.may_send(command)
@@ -538,7 +539,7 @@ class ControlClient:
         self._manual = [0.0] * self.machine.n_joints
 
     def send(self, command: Command, fds: tuple[int, ...] = ()) -> None:
-        """Queue a typed command (``control.rt.commands``) as it is, with the descriptors that
+        """Send a typed command (``control.rt.commands``) as it is, with the descriptors that
         came with it (a move's sealed path), which are closed once sent: the controller checks
         it (a controller service relays its clients' commands this way)."""
         self._send(command, fds)
