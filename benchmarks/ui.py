@@ -30,8 +30,9 @@ Unimate 2000B. Parts:
    ``servodesk serve`` started (its own controller), then three times a fresh headless
    Chromium opened on it (tests/app/browser.py): the time from asking for the page to the
    first bytes of the TUI's output, and to its first live frame (the header's tick count);
-9. idle UI CPU (``--tmux``): ``python -m app`` in tmux, its own process's CPU time (/proc)
-   over 10 s on each of Jog, Scope (drawing at its rate) and Status, nothing pressed;
+9. idle UI CPU (``--tmux``, ``--idle``): ``python -m app`` in tmux, its own process's CPU time
+   (/proc), and its main thread's, over 10 s on each of Jog, Scope (drawing at its rate) and
+   Status, nothing pressed;
 10. key to the screen (``--tmux``): an increment key sent with ``tmux send-keys`` on the Jog
    tab until the screen shows the new increment, quiet and beside a CPU burner;
 11. the arm's view (``--arm`` alone; also in the full run): a frame's drawing alone, and the
@@ -39,7 +40,9 @@ Unimate 2000B. Parts:
    a Scope plot fed at the same rate (``benchmarks/arm_view.py``, which also has ``--tmux``).
 
 ``--tmux [ROOT ...]`` runs only 9, 5 and 10, for each ROOT given (a worktree of an older
-commit: ``git worktree add /tmp/old HASH``) and then this tree, one after the other in one run.
+commit: ``git worktree add /tmp/old HASH``) and then this tree, one after the other in one run;
+``--idle [ROOT ...]`` only 9, for each ROOT and this tree by turns, ``--rounds`` times, and
+prints each tab's median (the process and its main thread, the event loop that draws).
 """
 
 from __future__ import annotations
@@ -513,9 +516,12 @@ class TmuxApp:
     def keys(self, *keys: str) -> None:
         subprocess.run([*self.tmux, "send-keys", "-t", self.name, *keys], check=True)
 
-    def cpu_s(self) -> float:
-        """The app's CPU time so far (user + system), its own process only."""
-        fields = Path(f"/proc/{self.pid}/stat").read_text().rsplit(")", 1)[1].split()
+    def cpu_s(self, main_thread: bool = False) -> float:
+        """The app's CPU time so far (user + system), its own process only (or its main
+        thread's alone: the event loop's, without the sampler's and the client's threads)."""
+        stat = Path(f"/proc/{self.pid}/task/{self.pid}/stat" if main_thread
+                    else f"/proc/{self.pid}/stat")
+        fields = stat.read_text().rsplit(")", 1)[1].split()
         return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
     def close(self) -> None:
@@ -573,9 +579,10 @@ def startup(repeats: int, root: Path = ROOT, burn: bool = False, peer: bool = Fa
     return times
 
 
-def idle_cpu(root: Path = ROOT) -> dict[str, float]:
+def idle_cpu(root: Path = ROOT) -> dict[str, tuple[float, float]]:
     """The app's CPU, % of one core, idle on each of Jog, Scope (drawing at its rate) and
-    Status, in tmux; nothing else pressed."""
+    Status, in tmux; nothing else pressed: the process's and its main thread's (the event
+    loop: drawing), by tab."""
     cost = {}
     with tempfile.TemporaryDirectory() as data_dir:
         app = TmuxApp(root, data_dir, "idle")
@@ -584,15 +591,33 @@ def idle_cpu(root: Path = ROOT) -> dict[str, float]:
             for name, key in IDLE_TABS:
                 app.keys(key)
                 time.sleep(IDLE_SETTLE_S)
-                cpu, wall = app.cpu_s(), time.monotonic()
+                cpu, main, wall = app.cpu_s(), app.cpu_s(main_thread=True), time.monotonic()
                 time.sleep(IDLE_S)
-                cost[name] = 100 * (app.cpu_s() - cpu) / (time.monotonic() - wall)
+                elapsed = time.monotonic() - wall
+                cost[name] = (100 * (app.cpu_s() - cpu) / elapsed,
+                              100 * (app.cpu_s(main_thread=True) - main) / elapsed)
         finally:
             app.close()
     print(f"\n9. idle UI CPU (tmux 160×48, {IDLE_S:g} s a tab, {root}): "
-          + ", ".join(f"{name} {pct:.1f} %" for name, pct in cost.items())
+          + ", ".join(f"{name} {pct:.1f} % (main thread {main:.1f})"
+                      for name, (pct, main) in cost.items())
           + f" of a core; {load()}")
     return cost
+
+
+def idle_rounds(roots: list[Path], rounds: int) -> None:
+    """Part 9 for each of ``roots`` by turns, ``rounds`` times (the machine's load drifts: by
+    turns, each root sees the same), then each tab's median per root."""
+    seen: dict[Path, list[dict[str, tuple[float, float]]]] = {root: [] for root in roots}
+    for _ in range(rounds):
+        for root in roots:
+            seen[root].append(idle_cpu(root))
+    print(f"\n9. idle UI CPU, median of {rounds} rounds by turns, % of a core (process / "
+          "main thread)")
+    for root, runs in seen.items():
+        print(f"   {root!s:<28}" + "".join(
+            f"  {name} {statistics.median(r[name][0] for r in runs):5.1f} / "
+            f"{statistics.median(r[name][1] for r in runs):4.1f}" for name, _ in IDLE_TABS))
 
 
 def peer_idle_cpu() -> float:
@@ -710,6 +735,10 @@ def main() -> None:
     parser.add_argument("--tmux", nargs="*", type=Path, metavar="ROOT",
                         help="only parts 5, 9 and 10 (idle CPU, start and key to screen, "
                         "quiet and beside a burner) for this tree and each ROOT given")
+    parser.add_argument("--idle", nargs="*", type=Path, metavar="ROOT",
+                        help="only part 9 (idle CPU on Jog, Scope and Status) for each ROOT "
+                        "given and this tree, by turns, --rounds times")
+    parser.add_argument("--rounds", type=int, default=3, help="rounds of --idle (3)")
     parser.add_argument("--browser", action="store_true",
                         help="only part 8: servodesk serve's first render in headless Chromium")
     parser.add_argument("--arm", action="store_true",
@@ -718,6 +747,9 @@ def main() -> None:
     args = parser.parse_args()
     if args.arm:
         arm_view_figures(3.0 if args.quick else 5.0)
+        return
+    if args.idle is not None:
+        idle_rounds([*args.idle, ROOT], args.rounds)
         return
     if args.tmux is not None:
         tmux_figures([*args.tmux, ROOT], 5, 10 if args.quick else 40)

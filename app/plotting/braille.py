@@ -40,40 +40,60 @@ def columns(x: np.ndarray, y: np.ndarray, x_range: tuple[float, float],
 
     Row 0 is the top. A column the trace does not reach has ``low > high``.
     """
+    low, high = columns_many(x, y[:, None], x_range, np.array([y_range], dtype=float),
+                             np.array([height_px]), width_px)
+    return low[0], high[0]
+
+
+def columns_many(x: np.ndarray, ys: np.ndarray, x_range: tuple[float, float],
+                 y_ranges: np.ndarray, heights_px: np.ndarray, width_px: int
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """``columns`` of the ``K`` traces ``ys: (N, K)`` over one ``x``, each with its y range
+    (``y_ranges: (K, 2)``) and height (``heights_px: (K,)``), in one pass of array operations:
+    ``(low, high)``, ``(K, width_px)`` each, the same rows as ``columns`` of each."""
+    k = ys.shape[1]
+    heights = np.asarray(heights_px, dtype=np.int64)
+    low = np.repeat(heights[:, None], width_px, axis=1)
+    high = np.full((k, width_px), -1, dtype=np.int64)
     x0, x1 = x_range
-    y0, y1 = y_range
-    low = np.full(width_px, height_px, dtype=np.int64)
-    high = np.full(width_px, -1, dtype=np.int64)
-    if len(x) == 0 or x1 <= x0 or y1 <= y0:
+    y0, y1 = y_ranges[:, 0], y_ranges[:, 1]
+    drawn = y1 > y0
+    if len(x) == 0 or x1 <= x0 or not drawn.any():
+        return low, high
+    if not drawn.all():  # an empty range draws nothing; the others as they are
+        some = np.flatnonzero(drawn)
+        low[some], high[some] = columns_many(x, ys[:, some], x_range, y_ranges[some],
+                                             heights[some], width_px)
         return low, high
     x_scale = width_px / (x1 - x0)
     if len(x) < 2 * width_px:
         # Sparse: sample the line at every pixel column, so gaps between samples are drawn.
         centres = x0 + (np.arange(width_px) + 0.5) / x_scale
         inside = (centres >= x[0]) & (centres <= x[-1])
-        values = np.full(width_px, np.nan)
-        values[inside] = np.interp(centres[inside], x, y)
-        first = last = _rows(values, y0, y1, height_px)
+        values = np.full((k, width_px), np.nan)
+        for j in range(k):
+            values[j, inside] = np.interp(centres[inside], x, ys[:, j])
+        first = last = _rows(values, y0[:, None], y1[:, None], heights[:, None])
     else:
         bins = _bins(x, x_range, width_px)
-        values = y[bins.inside]
-        if np.isfinite(values).all():  # the columns' samples as binned for every such trace
-            starts, cols, ends = bins.starts, bins.cols, bins.ends
-        else:
-            col = bins.col[np.isfinite(values)]
-            values = values[np.isfinite(values)]
-            starts, cols, ends = _runs(col)
-        if len(values) == 0:
-            return low, high
-        rows = _rows(values, y0, y1, height_px)
-        low[cols] = np.minimum.reduceat(rows, starts)
-        high[cols] = np.maximum.reduceat(rows, starts)
-        first = np.full(width_px, np.nan)
-        last = np.full(width_px, np.nan)
-        first[cols] = rows[starts]
-        last[cols] = rows[ends]
+        values = ys if bins.everything else ys[bins.inside]
+        first = np.full((k, width_px), np.nan)
+        last = np.full((k, width_px), np.nan)
+        finite = np.isfinite(values)
+        whole = finite.all(axis=0)  # the traces without a gap: binned as every such trace
+        if whole.any() and len(values):
+            some = np.flatnonzero(whole)
+            rows = _rows(values[:, some], y0[some], y1[some], heights[some])
+            _spans(rows, bins.starts, bins.cols, bins.ends, some, low, high, first, last)
+        for j in np.flatnonzero(~whole):  # a gap: its own runs of columns
+            col = bins.col[finite[:, j]]
+            if len(col) == 0:
+                continue
+            rows = _rows(values[finite[:, j], j][:, None], y0[j], y1[j], heights[j])
+            _spans(rows, *_runs(col), np.array([j]), low, high, first, last)
     present = np.isfinite(first)
-    previous = np.r_[np.nan, last[:-1]]
+    previous = np.full((k, width_px), np.nan)
+    previous[:, 1:] = last[:, :-1]
     join = present & np.isfinite(previous)
     with np.errstate(invalid="ignore"):
         span_low = np.where(present, np.fmin(first, previous), np.nan)
@@ -83,6 +103,18 @@ def columns(x: np.ndarray, y: np.ndarray, x_range: tuple[float, float],
     low[present] = np.minimum(low[present], span_low[present].astype(np.int64))
     high[present] = np.maximum(high[present], span_high[present].astype(np.int64))
     return low, high
+
+
+def _spans(rows: np.ndarray, starts: np.ndarray, cols: np.ndarray, ends: np.ndarray,
+           traces: np.ndarray, low: np.ndarray, high: np.ndarray, first: np.ndarray,
+           last: np.ndarray) -> None:
+    """Each run's rows ``(n, len(traces))`` into the traces' columns: the lowest and highest
+    row a column reaches, and its first and last sample's."""
+    at = np.ix_(traces, cols)
+    low[at] = np.minimum.reduceat(rows, starts, axis=0).T
+    high[at] = np.maximum.reduceat(rows, starts, axis=0).T
+    first[at] = rows[starts].T
+    last[at] = rows[ends].T
 
 
 @dataclass(frozen=True)
@@ -95,6 +127,7 @@ class _Bins:
     starts: np.ndarray
     cols: np.ndarray
     ends: np.ndarray
+    everything: bool  # every sample inside (a live window): no copy of the inside ones
 
 
 # The last few binnings, by the very array binned (held, so that its id is not reused): the
@@ -111,7 +144,7 @@ def _bins(x: np.ndarray, x_range: tuple[float, float], width_px: int) -> _Bins:
     col = np.floor((x - x0) * (width_px / (x1 - x0))).astype(np.int64)
     inside = (col >= 0) & (col < width_px)
     col = col[inside]
-    bins = _Bins(inside, col, *_runs(col))
+    bins = _Bins(inside, col, *_runs(col), bool(inside.all()))
     _BINNED.insert(0, (x, x_range, width_px, bins))
     del _BINNED[BINNED_KEPT:]
     return bins
@@ -124,26 +157,47 @@ def _runs(col: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return starts, col[starts], ends
 
 
-def _rows(values: np.ndarray, y0: float, y1: float, height_px: int) -> np.ndarray:
+def _rows(values: np.ndarray, y0: float | np.ndarray, y1: float | np.ndarray,
+          height_px: int | np.ndarray) -> np.ndarray:
     """Pixel row of each value (top row 0), the nearest, clipped onto the plot; NaN stays NaN.
+    (The range and height per trace broadcast along the last axis.)
 
     The middle of the range is a row's middle, not the edge between two: a flat line in the
     middle of an auto-scaled plot (a joint at rest) stays on its row however its noise goes,
     where flooring flipped it between two rows, and the row was drawn again, every frame."""
     with np.errstate(invalid="ignore"):
         rows = np.floor((y1 - values) * (height_px / (y1 - y0)) + 0.5)
-    return np.clip(rows, 0, height_px - 1)
+    return np.clip(rows, 0, np.asarray(height_px) - 1)
 
 
 def raster(trace: Trace, x_range: tuple[float, float], y_range: tuple[float, float],
            cols: int, rows: int) -> np.ndarray:
     """Braille dot bits of one trace, ``(rows, cols)`` uint16 (0: empty cell)."""
-    height_px = 4 * rows
-    low, high = columns(trace.x, trace.y, x_range, y_range, 2 * cols, height_px)
-    pixel_rows = np.arange(height_px)[:, None]
-    mask = (pixel_rows >= low[None, :]) & (pixel_rows <= high[None, :])
-    cells = mask.reshape(rows, 4, cols, 2).astype(np.uint16) * _DOT_BITS[None, :, None, :]
-    return cells.sum(axis=(1, 3), dtype=np.uint16)
+    low, high = columns(trace.x, trace.y, x_range, y_range, 2 * cols, 4 * rows)
+    return _cells(low[None], high[None], rows, cols)[0]
+
+
+def _cells(low: np.ndarray, high: np.ndarray, rows: int, cols: int) -> np.ndarray:
+    """Braille dot bits ``(K, rows, cols)`` of ``K`` traces' pixel spans ``(K, 2·cols)``: in
+    each cell row, the span's first and end pixel rows there pick its dots from a table."""
+    top = 4 * np.arange(rows)[None, :, None]
+    first = np.clip(low[:, None, :] - top, 0, 4)
+    end = np.clip(high[:, None, :] - top + 1, 0, 4)
+    dots = first * 5 + end
+    return _SPAN_DOTS[0][dots[..., 0::2]] | _SPAN_DOTS[1][dots[..., 1::2]]
+
+
+def _span_dots() -> np.ndarray:
+    """``[column within cell, 5·first + end]``: the dots of pixel rows first…end−1 of a cell."""
+    table = np.zeros((2, 25), dtype=np.uint16)
+    for side in (0, 1):
+        for first in range(5):
+            for end in range(first + 1, 5):
+                table[side, first * 5 + end] = np.bitwise_or.reduce(_DOT_BITS[first:end, side])
+    return table
+
+
+_SPAN_DOTS = _span_dots()
 
 
 def hline(y: float, y_range: tuple[float, float], cols: int, rows: int) -> np.ndarray:
@@ -179,6 +233,9 @@ class Rows:
         self.styles: list[Style] = []
         self.strips: list[Strip] = []
         self.framed: list[tuple[Strip, str, Strip]] = []  # a row, its label, the two as one
+        # the plot's title row and time axis as last drawn, each with what it was drawn from
+        self.title: tuple[object, Strip] | None = None
+        self.axis: tuple[object, Strip] | None = None
 
     def changed(self, codes: np.ndarray, owner: np.ndarray, styles: list[Style]) -> np.ndarray:
         """Which rows differ from the last drawn (every row, if the plot's shape changed)."""
@@ -186,6 +243,24 @@ class Rows:
                 or self.styles != styles):
             return np.ones(codes.shape[0], dtype=bool)
         return (self.codes != codes).any(axis=1) | (self.owner != owner).any(axis=1)
+
+
+@dataclass(frozen=True)
+class Canvas:
+    """One plot of ``render_many``: its traces (later ones on top) over ``x_range`` and
+    ``y_range`` in ``cols × rows`` cells, a dotted line at ``guide_y`` (a zero line) in
+    ``guide``, each of ``marks`` a dotted vertical line at its time in its style beneath the
+    traces, and ``drawn``: its rows as last drawn, whose unchanged strips are used again."""
+
+    traces: Sequence[Trace]
+    x_range: tuple[float, float]
+    y_range: tuple[float, float]
+    cols: int
+    rows: int
+    guide: Style | None = None
+    guide_y: float | None = None
+    marks: Sequence[tuple[float, Style]] = ()
+    drawn: Rows | None = None
 
 
 def render(traces: Sequence[Trace], x_range: tuple[float, float],
@@ -200,28 +275,75 @@ def render(traces: Sequence[Trace], x_range: tuple[float, float],
     each of ``marks`` a dotted vertical line at its time in its style, beneath the traces;
     ``drawn``: the plot's rows as last drawn, whose unchanged strips are used again.
     """
-    if cols <= 0 or rows <= 0:
-        return [Strip.blank(max(cols, 0)) for _ in range(max(rows, 0))]
-    codes = np.zeros((rows, cols), dtype=np.uint16)
-    owner = np.full((rows, cols), -1, dtype=np.int16)
-    styles: list[Style] = [t.style for t in traces]
-    if guide_y is not None:
-        bits = hline(guide_y, y_range, cols, rows)
-        codes |= bits
-        owner[bits > 0] = len(styles)
-        styles.append(guide or Style(dim=True))
-    for x, style in marks:
-        bits = vline(x, x_range, cols, rows)
-        codes |= bits
-        owner[bits > 0] = len(styles)
-        styles.append(style)
-    for index, trace in enumerate(traces):
-        bits = raster(trace, x_range, y_range, cols, rows)
-        codes |= bits
-        owner[bits > 0] = index
+    return render_many([Canvas(traces, x_range, y_range, cols, rows, guide, guide_y, marks,
+                               drawn)])[0]
+
+
+def render_many(canvases: Sequence[Canvas]) -> list[list[Strip]]:
+    """``render`` of each canvas, their traces rastered together: those over the same time
+    axis and width in one pass of array operations (the Scope's twelve plots, a frame), not
+    a pass a trace; then a strip made for each row that changed."""
+    bits = _raster_all(canvases)
+    out = []
+    for c, canvas in enumerate(canvases):
+        cols, rows = canvas.cols, canvas.rows
+        if cols <= 0 or rows <= 0:
+            out.append([Strip.blank(max(cols, 0)) for _ in range(max(rows, 0))])
+            continue
+        codes = np.zeros((rows, cols), dtype=np.uint16)
+        owner = np.full((rows, cols), -1, dtype=np.int16)
+        styles: list[Style] = [t.style for t in canvas.traces]
+        if canvas.guide_y is not None:
+            line = hline(canvas.guide_y, canvas.y_range, cols, rows)
+            codes |= line
+            owner[line > 0] = len(styles)
+            styles.append(canvas.guide or Style(dim=True))
+        for x, style in canvas.marks:
+            line = vline(x, canvas.x_range, cols, rows)
+            codes |= line
+            owner[line > 0] = len(styles)
+            styles.append(style)
+        for index in range(len(canvas.traces)):
+            trace_bits = bits[c, index]
+            codes |= trace_bits
+            owner[trace_bits > 0] = index
+        out.append(_strips_of(codes, owner, styles, canvas.drawn))
+    return out
+
+
+def _raster_all(canvases: Sequence[Canvas]) -> dict[tuple[int, int], np.ndarray]:
+    """Each trace's dot bits, by (canvas, trace): the traces grouped by their time axis (the
+    array itself), x range and width, each group rastered at once."""
+    groups: dict[tuple[int, tuple[float, float], int], list[tuple[int, int]]] = {}
+    for c, canvas in enumerate(canvases):
+        if canvas.cols <= 0 or canvas.rows <= 0:
+            continue
+        for index, trace in enumerate(canvas.traces):
+            key = (id(trace.x), canvas.x_range, canvas.cols)
+            groups.setdefault(key, []).append((c, index))
+    bits: dict[tuple[int, int], np.ndarray] = {}
+    for (_, x_range, cols), members in groups.items():
+        traces = [canvases[c].traces[index] for c, index in members]
+        ys = np.stack([t.y for t in traces], axis=1)
+        y_ranges = np.array([canvases[c].y_range for c, _ in members], dtype=float)
+        rows = [canvases[c].rows for c, _ in members]
+        low, high = columns_many(traces[0].x, ys, x_range, y_ranges, 4 * np.array(rows),
+                                 2 * cols)
+        cells = _cells(low, high, max(rows), cols)
+        for k, member in enumerate(members):
+            bits[member] = cells[k, :rows[k]]
+    return bits
+
+
+def _strips_of(codes: np.ndarray, owner: np.ndarray, styles: list[Style], drawn: Rows | None
+               ) -> list[Strip]:
+    """The strips of a canvas's cells; with ``drawn``, made only for the rows that changed."""
     if drawn is None:
         return strips(codes, owner, styles)
+    rows = codes.shape[0]
     changed = drawn.changed(codes, owner, styles)
+    if not changed.any() and len(drawn.strips) == rows:  # a plot at rest: as drawn
+        return drawn.strips
     made = iter(strips(codes[changed], owner[changed], styles))
     before = drawn.strips if len(drawn.strips) == rows else [None] * rows
     drawn.strips = [next(made) if new else old for new, old in zip(changed, before, strict=True)]

@@ -9,6 +9,7 @@ from __future__ import annotations
 import io
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 from rich.console import Console
 from rich.segment import Segment
@@ -17,7 +18,7 @@ from rich.text import Text
 from textual.geometry import Size
 from textual.strip import Strip
 
-from app.plotting.braille import Rows, Trace, render
+from app.plotting.braille import Canvas, Rows, Trace, render_many
 from app.plotting.figure import Figure, Panel
 
 LABEL_WIDTH = 8
@@ -33,6 +34,24 @@ def tick_label(value: float, span: float) -> str:
     return f"{value:.{digits}f}"
 
 
+@dataclass(frozen=True)
+class Plot:
+    """One panel of ``plots_strips``: traces over ``x_range`` and ``y_range`` under ``title``
+    in ``width × height`` cells, a zero line, the time axis's labels, the ``marks``' vertical
+    lines, and ``drawn``: its rows as last drawn (``braille.Rows``)."""
+
+    traces: Sequence[Trace]
+    x_range: tuple[float, float]
+    y_range: tuple[float, float]
+    title: Text
+    width: int
+    height: int
+    zero_line: bool = False
+    x_labels: tuple[str, str, str] = ("", "", "")
+    marks: Sequence[tuple[float, Style]] = ()
+    drawn: Rows | None = None
+
+
 def plot_strips(traces: Sequence[Trace], x_range: tuple[float, float],
                 y_range: tuple[float, float], title: Text, width: int, height: int,
                 console: Console, *, zero_line: bool = False,
@@ -43,13 +62,39 @@ def plot_strips(traces: Sequence[Trace], x_range: tuple[float, float],
     ``marks``' vertical lines), the time axis (blank strips when there is no room for a
     plot); ``drawn``: the traces' rows as last drawn (``braille.Rows``), made again only where
     they changed."""
-    if width <= LABEL_WIDTH + 2 or height < 3:
-        return [Strip.blank(width) for _ in range(height)]
-    cols, rows = width - LABEL_WIDTH - 1, height - 2
-    body = render(traces, x_range, y_range, cols, rows, guide=AXIS_STYLE,
-                  guide_y=0.0 if zero_line else None, marks=marks, drawn=drawn)
-    labels = _y_labels(y_range, rows)
-    lines = [Strip(list(title.render(console))).crop(0, width).adjust_cell_length(width)]
+    return plots_strips([Plot(traces, x_range, y_range, title, width, height, zero_line,
+                              x_labels, marks, drawn)], console)[0]
+
+
+def plots_strips(plots: Sequence[Plot], console: Console) -> list[list[Strip]]:
+    """``plot_strips`` of each plot, their traces rastered in one pass (``render_many``); a
+    plot's title row and time axis made again only when they changed."""
+    roomy = [p for p in plots if p.width > LABEL_WIDTH + 2 and p.height >= 3]
+    bodies = iter(render_many([Canvas(p.traces, p.x_range, p.y_range, p.width - LABEL_WIDTH - 1,
+                                      p.height - 2, AXIS_STYLE, 0.0 if p.zero_line else None,
+                                      p.marks, p.drawn) for p in roomy]))
+    out = []
+    for p in plots:
+        if p.width <= LABEL_WIDTH + 2 or p.height < 3:
+            out.append([Strip.blank(p.width) for _ in range(p.height)])
+            continue
+        out.append(_framed(p, next(bodies), console))
+    return out
+
+
+def _framed(p: Plot, body: list[Strip], console: Console) -> list[Strip]:
+    """A plot's rows of traces under its title, beside its y labels, over its time axis."""
+    width, drawn = p.width, p.drawn
+    cols, rows = width - LABEL_WIDTH - 1, p.height - 2
+    labels = _y_labels(p.y_range, rows)
+    key = (p.title.plain, tuple(p.title.spans), p.title.style, width)
+    if drawn is not None and drawn.title is not None and drawn.title[0] == key:
+        title = drawn.title[1]
+    else:
+        title = Strip(list(p.title.render(console))).crop(0, width).adjust_cell_length(width)
+        if drawn is not None:
+            drawn.title = (key, title)
+    lines = [title]
     before = drawn.framed if drawn is not None and len(drawn.framed) == rows else []
     framed = []
     for r, strip in enumerate(body):
@@ -60,9 +105,14 @@ def plot_strips(traces: Sequence[Trace], x_range: tuple[float, float],
             line = Strip([Segment(label, AXIS_STYLE), *strip], width)
         framed.append((strip, label, line))
         lines.append(line)
+    axis_key = (p.x_labels, width)
+    if drawn is not None and drawn.axis is not None and drawn.axis[0] == axis_key:
+        axis = drawn.axis[1]
+    else:
+        axis = _axis(p.x_labels, width, cols)
     if drawn is not None:
-        drawn.framed = framed
-    lines.append(_axis(x_labels, width, cols))
+        drawn.framed, drawn.axis = framed, (axis_key, axis)
+    lines.append(axis)
     return lines
 
 

@@ -1,6 +1,7 @@
 """A live plot widget drawn with the braille raster: a title row, y labels, the traces and
-a time axis (``app.plotting.strips.plot_strips``). ``plot`` replaces what is shown and repaints
-only the rows that changed; nothing is computed while the widget is hidden."""
+a time axis (``app.plotting.strips``). ``plot`` replaces what is shown and repaints only the
+rows that changed; ``draw_plots`` draws many plots at once, their traces rastered in one
+pass (the Scope's twelve, a frame); nothing is computed while the widget is hidden."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from textual.strip import Strip
 from textual.widget import Widget
 
 from app.plotting.braille import Rows, Trace
-from app.plotting.strips import plot_strips
+from app.plotting.strips import Plot, plots_strips
 
 
 class ScopePlot(Widget):
@@ -35,32 +36,42 @@ class ScopePlot(Widget):
              y_range: tuple[float, float], title: Text, *, zero_line: bool = False,
              x_labels: tuple[str, str, str] | None = None) -> None:
         """Show ``traces`` (later ones on top); ``x_labels`` left, middle, right of the axis."""
+        self.set(traces, x_range, y_range, title, zero_line=zero_line, x_labels=x_labels)
+        draw_plots([self])
+
+    def set(self, traces: Sequence[Trace], x_range: tuple[float, float],
+            y_range: tuple[float, float], title: Text, *, zero_line: bool = False,
+            x_labels: tuple[str, str, str] | None = None) -> None:
+        """What ``plot`` shows, drawn by the next ``draw_plots`` of this plot."""
         self._traces = traces
         self._x_range = x_range
         self._y_range = y_range
         self._title = title
         self._zero_line = zero_line
         self._x_labels = x_labels or (f"{x_range[0]:g}", "", f"{x_range[1]:g}")
-        before = self._lines
-        self._draw()
-        changed = [y for y, (old, new) in enumerate(zip(before, self._lines, strict=False))
-                   if old != new]
-        if len(before) != len(self._lines):
-            self.refresh()
-        elif changed:  # a plot at rest draws the same rows: only the rows that moved repaint
-            width = self.size.width
-            self.refresh(*(Region(0, y, width, 1) for y in changed))
-        self.repaints += bool(changed) or len(before) != len(self._lines)
 
     def on_resize(self) -> None:
         self._draw()
 
+    def _plot(self) -> Plot:
+        size = self._drawn_for = self.size
+        return Plot(self._traces, self._x_range, self._y_range, self._title, size.width,
+                    size.height, self._zero_line, self._x_labels, drawn=self._rows)
+
     def _draw(self) -> None:
-        self._drawn_for = self.size
-        self._lines = plot_strips(self._traces, self._x_range, self._y_range, self._title,
-                                  self.size.width, self.size.height, self.app.console,
-                                  zero_line=self._zero_line, x_labels=self._x_labels,
-                                  drawn=self._rows)
+        self._lines = plots_strips([self._plot()], self.app.console)[0]
+
+    def _show(self, lines: list[Strip]) -> None:
+        """Show ``lines``, a repaint of the rows that differ from those shown."""
+        before, self._lines = self._lines, lines
+        changed = [y for y, (old, new) in enumerate(zip(before, lines, strict=False))
+                   if old is not new and old != new]
+        if len(before) != len(lines):
+            self.refresh()
+        elif changed:  # a plot at rest draws the same rows: only the rows that moved repaint
+            width = self._drawn_for.width
+            self.refresh(*(Region(0, y, width, 1) for y in changed))
+        self.repaints += bool(changed) or len(before) != len(lines)
 
     def render_line(self, y: int) -> Strip:
         if self.size != self._drawn_for:
@@ -69,3 +80,12 @@ class ScopePlot(Widget):
             return self._lines[y]
         return Strip.blank(self.size.width)
 
+
+def draw_plots(plots: Sequence[ScopePlot]) -> None:
+    """Draw each of ``plots`` from what it was last ``set`` to, their traces rastered together
+    (those over one time axis in one pass of array operations, not a pass a trace)."""
+    if not plots:
+        return
+    drawn = plots_strips([plot._plot() for plot in plots], plots[0].app.console)
+    for plot, lines in zip(plots, drawn, strict=True):
+        plot._show(lines)

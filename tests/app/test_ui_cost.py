@@ -25,9 +25,12 @@ from textual.strip import Strip
 from textual.widget import Widget
 
 import app.tui
+from app.plotting import braille
 from app.plotting.braille import Rows, Trace, render
+from app.plotting.strips import plot_strips
 from app.tui import ServodeskApp
 from app.widgets.live_text import LiveLines, LiveText
+from app.widgets.scope import ScopePlot
 from tests.app.conftest import Tui
 from tests.app.terminal import (
     HEIGHT,
@@ -332,6 +335,38 @@ def test_a_plot_makes_again_only_the_rows_that_changed() -> None:
     remade = [r for r, (a, b) in enumerate(zip(again, third, strict=True)) if a is not b]
     assert remade and remade == list(range(remade[0], remade[-1] + 1)) and len(remade) < 8
     assert third == draw(stepped, None)
+
+
+def test_a_scope_frame_rasters_all_its_plots_in_one_pass(tui, monkeypatch) -> None:
+    """A Scope frame rasters the traces of its twelve plots (six joints' desired, actual and
+    duty over one time axis) in one pass of array operations, and each plot shows what it
+    would drawn alone. The old frame rastered them trace by trace: eighteen passes a frame,
+    most of the Scope's CPU."""
+    passes: list[int] = []
+    columns_many = braille.columns_many
+
+    def counted(x: np.ndarray, ys: np.ndarray, *args: object) -> tuple[np.ndarray, np.ndarray]:
+        passes.append(ys.shape[1])
+        return columns_many(x, ys, *args)  # type: ignore[arg-type]
+
+    async def scenario() -> None:
+        app = tui.app(lockstep=False)
+        async with app.run_test(size=(160, 48)) as pilot:
+            await tui.ready(app, pilot)
+            await pilot.press("f3")
+            scope = app.tab("scope")
+            await tui.until(lambda: scope.visible_now and len(app.history) > 50,
+                            what="samples in the scope")
+            monkeypatch.setattr(braille, "columns_many", counted)
+            scope.refresh_live()
+            assert passes == [18], passes  # desired, actual and duty of six joints at once
+            for plot in scope.query(ScopePlot):
+                alone = plot_strips(plot._traces, plot._x_range, plot._y_range, plot._title,
+                                    plot.size.width, plot.size.height, app.console,
+                                    zero_line=plot._zero_line, x_labels=plot._x_labels)
+                assert plot._lines == alone
+
+    asyncio.run(scenario())
 
 
 def test_a_flat_line_in_the_middle_of_its_plot_stays_on_its_row_through_noise() -> None:
