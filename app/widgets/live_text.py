@@ -103,6 +103,8 @@ class LiveLines(LiveText):
         self._style: Style | None = None
 
     def show(self, renderable: RenderableType) -> None:
+        if renderable is self._renderable and self._rows is not None:  # the very Text shown
+            return
         if not isinstance(renderable, Text):
             self._rows = None
             super().show(renderable)
@@ -118,8 +120,7 @@ class LiveLines(LiveText):
             return
         width = self.size.width
         changed = [Region(x, y, w, 1) for y, (old, new) in enumerate(zip(before, rows, strict=True))
-                   if fingerprint(old) != fingerprint(new)
-                   for x, w in [changed_cells(old, new, width)]]
+                   if not _same(old, new) for x, w in [changed_cells(old, new, width)]]
         for region in changed:
             self._strips[region.y] = None
         if changed:
@@ -151,6 +152,13 @@ class LiveLines(LiveText):
                      .crop(0, width).adjust_cell_length(width).apply_style(style))
             self._strips[y] = strip
         return strip
+
+
+def _same(a: Text, b: Text) -> bool:
+    """``fingerprint(a) == fingerprint(b)`` for two texts, the words compared first (most
+    lines of a live block read as before) and no tuple made of either."""
+    return (a.plain == b.plain and a.spans == b.spans and a.style == b.style
+            and a.justify == b.justify and a.no_wrap == b.no_wrap and a.overflow == b.overflow)
 
 
 def changed_cells(old: Text, new: Text, width: int) -> tuple[int, int]:

@@ -28,6 +28,7 @@ import app.tui
 from app.plotting import braille
 from app.plotting.braille import Rows, Trace, render
 from app.plotting.strips import plot_strips
+from app.tabs.status import StatusTab
 from app.tui import ServodeskApp
 from app.widgets.live_text import LiveLines, LiveText
 from app.widgets.scope import ScopePlot
@@ -118,6 +119,32 @@ def test_status_is_drawn_at_most_ten_times_a_second_and_only_what_changed(tui) -
                     name, counts, elapsed)
             assert tui.text(link) == shown  # the simulator's link counters stay at zero
             assert counts["link"] == 0, f"the link block: {counts['link']} lines drawn unchanged"
+
+    asyncio.run(scenario())
+
+
+def test_a_status_block_that_reads_the_same_is_not_made_again(tui, monkeypatch) -> None:
+    """The Status tab makes a block again only when what it is made of changed: the link's
+    counters stay at zero on the simulator, so its block is made once, not ten times a
+    second (the old tab made every block every tick and compared the lines it drew)."""
+    made: list[int] = []
+    link = StatusTab._link
+
+    def counted(self: StatusTab, status: object) -> Text:
+        made.append(1)
+        return link(self, status)  # type: ignore[arg-type]
+
+    async def scenario() -> None:
+        app = tui.app(lockstep=False)
+        async with app.run_test(size=(160, 48)) as pilot:
+            await tui.ready(app, pilot)
+            await pilot.press("f4")
+            block = app.query_one("#status-link", LiveText)
+            await tui.until(lambda: "crc errors" in tui.text(block), what="the link block")
+            monkeypatch.setattr(StatusTab, "_link", counted)
+            await watch_ticks(app, OBSERVED_TICKS)
+            assert len(made) <= 1, f"the link block made {len(made)} times unchanged"
+            assert "crc errors" in tui.text(block)
 
     asyncio.run(scenario())
 
