@@ -79,18 +79,20 @@ def columns_many(x: np.ndarray, ys: np.ndarray, x_range: tuple[float, float],
         values = ys if bins.everything else ys[bins.inside]
         first = np.full((k, width_px), np.nan)
         last = np.full((k, width_px), np.nan)
-        finite = np.isfinite(values)
-        whole = finite.all(axis=0)  # the traces without a gap: binned as every such trace
+        # the traces without a gap (a sum is finite only if every term is), binned as every
+        # such trace; a trace with a NaN or an overflowing sum by its own runs of columns
+        whole = np.isfinite(values.sum(axis=0))
         if whole.any() and len(values):
             some = np.flatnonzero(whole)
-            rows = _rows(values[:, some], y0[some], y1[some], heights[some])
-            _spans(rows, bins.starts, bins.cols, bins.ends, some, low, high, first, last)
-        for j in np.flatnonzero(~whole):  # a gap: its own runs of columns
-            col = bins.col[finite[:, j]]
+            _spans(values[:, some], y0[some], y1[some], heights[some], bins.starts, bins.cols,
+                   bins.ends, some, low, high, first, last)
+        for j in np.flatnonzero(~whole):
+            finite = np.isfinite(values[:, j])
+            col = bins.col[finite]
             if len(col) == 0:
                 continue
-            rows = _rows(values[finite[:, j], j][:, None], y0[j], y1[j], heights[j])
-            _spans(rows, *_runs(col), np.array([j]), low, high, first, last)
+            _spans(values[finite, j][:, None], y0[j], y1[j], heights[j], *_runs(col),
+                   np.array([j]), low, high, first, last)
     present = np.isfinite(first)
     previous = np.full((k, width_px), np.nan)
     previous[:, 1:] = last[:, :-1]
@@ -105,16 +107,18 @@ def columns_many(x: np.ndarray, ys: np.ndarray, x_range: tuple[float, float],
     return low, high
 
 
-def _spans(rows: np.ndarray, starts: np.ndarray, cols: np.ndarray, ends: np.ndarray,
-           traces: np.ndarray, low: np.ndarray, high: np.ndarray, first: np.ndarray,
-           last: np.ndarray) -> None:
-    """Each run's rows ``(n, len(traces))`` into the traces' columns: the lowest and highest
-    row a column reaches, and its first and last sample's."""
+def _spans(values: np.ndarray, y0: np.ndarray, y1: np.ndarray, heights: np.ndarray,
+           starts: np.ndarray, cols: np.ndarray, ends: np.ndarray, traces: np.ndarray,
+           low: np.ndarray, high: np.ndarray, first: np.ndarray, last: np.ndarray) -> None:
+    """Each run's values ``(n, len(traces))`` into the traces' columns as pixel rows: the
+    lowest and highest row a column reaches, and its first and last sample's. A column's
+    highest value is its lowest row (``_rows`` never rises as a value does): the extremes
+    are found first, and only they, not every sample, are made rows."""
     at = np.ix_(traces, cols)
-    low[at] = np.minimum.reduceat(rows, starts, axis=0).T
-    high[at] = np.maximum.reduceat(rows, starts, axis=0).T
-    first[at] = rows[starts].T
-    last[at] = rows[ends].T
+    low[at] = _rows(np.maximum.reduceat(values, starts, axis=0), y0, y1, heights).T
+    high[at] = _rows(np.minimum.reduceat(values, starts, axis=0), y0, y1, heights).T
+    first[at] = _rows(values[starts], y0, y1, heights).T
+    last[at] = _rows(values[ends], y0, y1, heights).T
 
 
 @dataclass(frozen=True)

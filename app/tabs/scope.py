@@ -62,14 +62,20 @@ def position_ranges(window: Window, joints: Sequence[Joint], fixed: bool
     """Each joint's y range: auto-scaled around desired and actual (at least 4 tolerance
     bands), or the joint limits (fixed, or no value in the window); the window's extremes
     found for all joints at once."""
+    if not len(window) or fixed:
+        return [(joint.lower, joint.upper) for joint in joints]
     values = np.concatenate([window.position, window.desired])
-    finite = np.isfinite(values)
-    seen = finite.any(axis=0).tolist() if len(values) else [False] * len(joints)
-    los = np.where(finite, values, np.inf).min(axis=0, initial=np.inf).tolist()
-    his = np.where(finite, values, -np.inf).max(axis=0, initial=-np.inf).tolist()
+    if np.isfinite(values.sum()):  # every value finite (a live window): their extremes
+        los, his = values.min(axis=0).tolist(), values.max(axis=0).tolist()
+        seen = [True] * len(joints)
+    else:  # a joint without desired (NaN between moves): its finite values only
+        finite = np.isfinite(values)
+        seen = finite.any(axis=0).tolist()
+        los = np.where(finite, values, np.inf).min(axis=0).tolist()
+        his = np.where(finite, values, -np.inf).max(axis=0).tolist()
     out = []
     for joint, lo, hi, any_value in zip(joints, los, his, seen, strict=True):
-        if fixed or not any_value:
+        if not any_value:
             out.append((joint.lower, joint.upper))
             continue
         half = max((hi - lo) / 2 * 1.1, 2 * joint.tolerance)
