@@ -312,7 +312,7 @@ def test_a_step_on_the_serial_backend_through_the_emulator(
     done = move("step", "--backend", "serial", "--port", board.url, "--joint", "bend",
                 "--target", "5", "--duration", "1.5", "--json", data_dir=tmp_path,
                 lockstep=False)
-    assert done.returncode == 0, done.stderr
+    assert done.returncode == 0, done.stderr + done.stdout
     report = json.loads(done.stdout)
     assert (report["status"], report["backend"]) == ("complete", "serial")
     shown = json.loads(servodesk("runs", "show", "latest", "--json", data_dir=tmp_path).stdout)
