@@ -13,14 +13,13 @@ The read/write path allocates no lists; it is meant to be called from one thread
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 
 from hw.backend import LinkCounters, RealClock, StepClock
 from hw.machine import Machine
 from hw.sim.encoders import GrayEncoderBoard, QuadratureEncoder
 from hw.sim.plant import STEP_S, Plant
-from hw.sim.valve import next_period_ns
+from hw.sim.valve import next_period_ns, quantise_duty
 
 MAX_CATCH_UP_NS = 1_000_000_000  # a plant left alone longer is simulated for the last second only
 
@@ -138,14 +137,7 @@ class SimBackend:
         delay_s = (self._switch_ns - self._t_ns) * 1e-9
         resolution, duties, opened, estop = self._resolution, self._duty, self._open, self._estop
         for i, actuator in enumerate(self.plant.actuators):
-            duty = duty_pct[i]  # quantise_duty, written out: six joints every tick
-            if duty != duty:
-                duty = 0.0
-            elif duty > 100.0:
-                duty = 100.0
-            elif duty < -100.0:
-                duty = -100.0
-            duty = math.trunc(duty / resolution) * resolution
+            duty = quantise_duty(duty_pct[i], resolution)
             duties[i] = duty
             if not estop:
                 actuator.command(opened[i] * duty, delay_s)
