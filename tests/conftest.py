@@ -94,6 +94,8 @@ SLOW_TESTS = (
     "tests/app/test_arm_view.py::test_an_idle_view_draws_once_and_a_new_pose_draws_again",  # Pilot
     "tests/app/test_arm_view.py::test_the_full_view_works_in_the_browser",  # serve, Chromium
     "tests/control/rt/test_seqlock.py::test_reader_never_sees_a_torn_record",  # spawned writer
+    "tests/control/rt/test_realtime.py::test_a_claim_ends_with_its_process",  # a claim's holder
+    "tests/control/rt/test_realtime.py::test_two_controllers_run_on_two_cores",
     "tests/control/rt/test_shm.py::test_orphan_of_a_killed_process_is_cleaned_up",
     "tests/control/test_recorder.py::test_a_read_only_directory_raises_and_leaves_nothing",
     "tests/app/test_priority.py::"

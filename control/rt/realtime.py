@@ -4,13 +4,23 @@ Pinned to one core, SCHED_FIFO with SCHED_RESET_ON_FORK (children of the loop
 do not inherit real-time priority), garbage collection frozen and disabled.
 Where the OS refuses (no root, no CAP_SYS_NICE), the loop still runs and the
 operator sees a notice saying so.
+
+The core is the highest-numbered one no other servodesk controller on this host has
+claimed (a lock file per core, held for the process's life): two controllers (a rig
+and a robot, or a service beside a TUI's own) at the same priority on one core wait
+for each other's ticks, which late wake-ups and overruns show, while another core
+serves neither. When every core is claimed, the last is shared, as before.
 """
 
 from __future__ import annotations
 
+import fcntl
 import gc
 import os
 from dataclasses import dataclass
+from pathlib import Path
+
+CLAIMS = Path("/dev/shm")  # every controller on the host sees the same claims
 
 
 @dataclass(frozen=True)
@@ -25,8 +35,7 @@ def enter_realtime(cpu: int | None = None, priority: int = 80, fifo: bool = True
     """Pin, raise priority, freeze gc; never raises for lack of privilege."""
     notices = []
     pinned = None
-    cpus = sorted(os.sched_getaffinity(0))
-    target = cpus[-1] if cpu is None else cpu
+    target = claim_cpu(sorted(os.sched_getaffinity(0))) if cpu is None else cpu
     try:
         os.sched_setaffinity(0, {target})
         pinned = target
@@ -46,3 +55,23 @@ def enter_realtime(cpu: int | None = None, priority: int = 80, fifo: bool = True
     gc.disable()
     return RealtimeReport(fifo=got_fifo, cpu=pinned, priority=priority if got_fifo else 0,
                           notice="; ".join(notices))
+
+
+def claim_cpu(cpus: list[int], where: Path = CLAIMS) -> int:
+    """The highest-numbered of ``cpus`` no other process holds the claim of, claimed for
+    this process's life (the lock goes with it, however it ends); the last when every one
+    is held or none can be claimed. A claim file is opened read-only and never read: one
+    another user made is as good a lock as ours, and a symbolic link is refused."""
+    for cpu in reversed(cpus):
+        try:
+            fd = os.open(where / f"servodesk-rt-cpu{cpu}.lock",
+                         os.O_RDONLY | os.O_CREAT | os.O_NOFOLLOW, 0o444)
+        except OSError:
+            continue
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            os.close(fd)
+            continue
+        return cpu  # the descriptor stays open (and the lock held) until the process ends
+    return cpus[-1]

@@ -1,0 +1,54 @@
+"""The control process's core: each controller on a host claims the highest-numbered core
+no other has claimed, the last is shared when all are, and a claim ends with its process."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from control import ControlClient
+from control.rt.realtime import claim_cpu
+from tests.control.waiting import wait_until
+
+
+def test_each_claim_takes_the_highest_free_core_and_the_last_is_shared(tmp_path: Path) -> None:
+    """Within one process each open is its own claim, as another process's would be."""
+    assert [claim_cpu([0, 1, 2], tmp_path) for _ in range(4)] == [2, 1, 0, 2]
+
+
+def test_a_symbolic_link_or_a_file_we_cannot_open_is_no_claim_of_ours(tmp_path: Path) -> None:
+    (tmp_path / "servodesk-rt-cpu1.lock").symlink_to(tmp_path / "elsewhere")
+    assert claim_cpu([0, 1], tmp_path) == 0
+    assert not (tmp_path / "elsewhere").exists()
+
+
+def test_a_claim_ends_with_its_process(tmp_path: Path) -> None:
+    holder = subprocess.Popen(
+        [sys.executable, "-c", "import sys, time\nfrom pathlib import Path\n"
+         "from control.rt.realtime import claim_cpu\n"
+         f"print(claim_cpu([0, 1], Path({str(tmp_path)!r})), flush=True)\ntime.sleep(60)\n"],
+        stdout=subprocess.PIPE, text=True, cwd=Path(__file__).parents[3])
+    try:
+        assert holder.stdout is not None and holder.stdout.readline().strip() == "1"
+        assert claim_cpu([0, 1], tmp_path) == 0  # (this process holds 0 from now on)
+    finally:
+        holder.kill()
+        holder.wait(timeout=10)
+    assert claim_cpu([0, 1], tmp_path) == 1
+
+
+@pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="one core: nothing to spread")
+def test_two_controllers_run_on_two_cores(tmp_path: Path) -> None:
+    """A real-time controller beside another (a rig and a robot on one host) takes a core
+    of its own rather than waiting for the other's ticks on the same one."""
+    with (ControlClient("rig", data_dir=tmp_path / "a") as one,
+          ControlClient("unimate2000b", data_dir=tmp_path / "b") as two):
+        if not (one.realtime and two.realtime):
+            pytest.skip("no SCHED_FIFO here (root or CAP_SYS_NICE): controllers are not pinned")
+        wait_until(lambda: len(os.sched_getaffinity(one.pid)) == 1
+                   and len(os.sched_getaffinity(two.pid)) == 1, 10, "both pinned")
+        assert os.sched_getaffinity(one.pid) != os.sched_getaffinity(two.pid)
