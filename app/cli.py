@@ -97,6 +97,7 @@ def parse_for_tui(argv: list[str] | None) -> argparse.Namespace | None:
 
 def main(argv: list[str] | None = None) -> int:
     priority = raise_priority()  # the TUI's from its first import; a command runs at its own
+    # (one that commands a real-time controller takes it again: cli_move.start_client)
     try:
         args = parse_for_tui(argv) or build_parser().parse_args(argv)
         if not hasattr(args, "func"):

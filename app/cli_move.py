@@ -483,11 +483,20 @@ def check_backend(args: argparse.Namespace) -> None:
 
 
 def start_client(args: argparse.Namespace, machine: Machine, data_dir: Path) -> ControlClient:
-    """The controller a command runs on, as its options say (``--lockstep``, ``--reduced``…)."""
+    """The controller a command runs on, as its options say (``--lockstep``, ``--reduced``…).
+
+    In real time the command then carries the controller's heartbeat and Ctrl+C's E-stop as
+    the TUI does, so it takes the TUI's priority first (its client's threads inherit it):
+    at its own, a busy machine can delay the heartbeat past 250 ms, and the move is held."""
+    from app.priority import raise_priority
     from control.client import ControlClient, ControllerError
 
     pace = ({"lockstep": True, "heartbeat_timeout_s": LOCKSTEP_HEARTBEAT_S} if args.lockstep
             else {})
+    if not args.lockstep:
+        notice = raise_priority(who="servodesk").notice
+        if notice:
+            print(f"servodesk: {notice}", file=sys.stderr)
     try:
         return ControlClient(machine, args.backend, port=args.port, seed=args.seed,
                              data_dir=data_dir, timing=Timing(args.timing, args.interrupt_ms,

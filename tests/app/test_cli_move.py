@@ -306,6 +306,27 @@ def test_ctrl_c_during_the_move_is_an_estop_the_run_is_saved_and_the_exit_is_1(
     assert (run["stem"], run["samples"]) == (report["run"]["stem"], report["samples"])
 
 
+@pytest.mark.skipif(os.geteuid() != 0, reason="raising a priority needs root or CAP_SYS_NICE")
+def test_a_real_time_move_runs_at_the_uis_priority(tmp_path: Path) -> None:
+    """It carries the heartbeat and Ctrl+C's E-stop as the TUI does: every thread of it is
+    at the TUI's nice value while the arm moves."""
+    from app.priority import UI_NICE
+
+    moving = Moving(["sine", "--joint", "updown", "--end", "10", "--period", "4",
+                     "--duration", "60"], tmp_path)
+    try:
+        moving.wait_for_line("running sine Up/Down")
+        tasks = Path(f"/proc/{moving.proc.pid}/task")
+        nice = {int(t.name): os.getpriority(os.PRIO_PROCESS, int(t.name))
+                for t in tasks.iterdir()}
+        moving.proc.send_signal(signal.SIGINT)
+        moving.finish()
+    finally:
+        if moving.proc.poll() is None:
+            moving.proc.kill()
+    assert len(nice) > 1 and set(nice.values()) == {UI_NICE}, nice
+
+
 def test_a_step_on_the_serial_backend_through_the_emulator(
         emulator: Callable[..., EmulatorProcess], tmp_path: Path) -> None:
     board = emulator("--glitch-scale", "0")
