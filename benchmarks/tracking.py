@@ -188,8 +188,8 @@ def print_errors(machine: Machine, desired: np.ndarray, columns: dict[str, Run])
     print("  " + " " * 11 + "".join(f"{name:>28s}" for name in columns))
     for j, joint in enumerate(machine.joints):
         cells = []
-        for run in columns.values():
-            e = desired[:, j] - run.actual[:, j]
+        for run in columns.values():  # a run goes on past its path until the arm is in
+            e = desired[:, j] - run.actual[:len(desired), j]  # position: the same span each
             cells.append(f"{np.sqrt(np.mean(e ** 2)):.3f} / {np.max(np.abs(e)):.3f}")
         print(f"  {joint.name + ' ' + joint.unit:11s}" + "".join(f"{c:>28s}" for c in cells))
     print()

@@ -203,7 +203,10 @@ async def scope_and_keys(seconds: float, presses: int) -> None:
     clock = FrameClock()
     clock.install()
     with tempfile.TemporaryDirectory() as data_dir:
-        app = ServodeskApp("unimate2000b", data_dir=data_dir)
+        # automatic: part 4 times duty keys, and in T1 (the TUI's start) the pad steps
+        # positions, whose valve changes on its own as the joint settles
+        app = ServodeskApp("unimate2000b", data_dir=data_dir,
+                           client_options={"speed_mode": "automatic"})
         async with app.run_test(size=SIZE) as pilot:
             await ready(app, pilot)
             assert app.client is not None
