@@ -208,7 +208,12 @@ class MovesTab(TabPage):
         self.schedule_preview()
 
     def on_option_list_option_selected(self, event: OptionList.OptionSelected) -> None:
+        """The form's first field takes the keys, if they are still the menu's: on a loaded
+        machine a click on the menu is selected late, after the operator clicked a field and
+        typed, and focusing the first field then sent the next keys there (issue 26)."""
         event.stop()
+        if self.app.focused is not event.option_list:
+            return
         inputs = [w for w in self.form.query("Input, Select") if w.focusable]
         if inputs:
             inputs[0].focus()

@@ -436,3 +436,40 @@ def test_a_field_chosen_while_the_tabs_build_keeps_the_focus(tui, monkeypatch) -
             held.set()
 
     asyncio.run(scenario())
+
+
+def test_a_menu_choice_selected_late_leaves_the_field_the_operator_chose(tui) -> None:
+    """On a loaded machine a click on the Moves menu is selected late: the operator has
+    clicked a field and typed by then. That selection must not take the focus to the form's
+    first field (the joint chooser), where the keys typed next were lost: the failure of
+    test_typing_tmux under load, seen with a log of every focus change. Chosen from the menu
+    with the focus still on it, the first field takes the keys as before."""
+    async def scenario() -> None:
+        app = tui.app()
+        async with app.run_test(size=SIZE) as pilot:
+            await tui.ready(app, pilot)
+            await pilot.press("f2")
+            await tui.until(lambda: app.query("#form-step #start"), timeout=30,
+                            what="the Moves tab's step form")
+            menu = app.query_one("#move-kinds", OptionList)
+            start = field(app, "step", "start")
+            await pilot.click(start.input)
+            await pilot.press("5")
+            await tui.until(lambda: start.text.endswith("5"), what="5 in the start field")
+            index = menu.highlighted or 0
+            menu.post_message(OptionList.OptionSelected(menu, menu.get_option_at_index(index),
+                                                        index))
+            await pilot.pause()
+            await pilot.press("0")
+            assert app.focused is not None and start in app.focused.ancestors_with_self, \
+                app.focused
+            assert start.text.endswith("50")
+            menu.focus()
+            await pilot.pause()
+            await pilot.press("enter")
+            await tui.until(lambda: app.focused is not menu, what="a field after Enter")
+            first = next(w for w in app.query_one(MovesTab).form.query("Input, Select")
+                         if w.focusable)
+            assert app.focused is first
+
+    asyncio.run(scenario())
