@@ -23,6 +23,7 @@ from control.rt.events import Crash, Ready
 from control.rt.layout import ControlLayout
 from control.rt.loop import Controller, LoopConfig
 from control.rt.realtime import enter_realtime
+from control.rt.warmup import WarmUp
 from control.rt.wire import Broken, Wire
 from hw.backend import RealClock
 from hw.factory import make_backend
@@ -47,6 +48,7 @@ class ProcessConfig:
     sim_options: dict
     slots: int = 1  # ticks per sample (control/timing.py)
     slips: tuple[str, ...] = ()
+    warm_up: bool = True  # a shadow tick in the spin before each deadline (control/rt/warmup.py)
 
     def to_json(self) -> str:
         return json.dumps(asdict(self))
@@ -78,6 +80,8 @@ def main(config: ProcessConfig, wire: Wire) -> None:
         if isinstance(backend.clock, RealClock):
             backend.clock.spin_ns = round(config.spin_us * 1e3)
         controller = Controller(machine, backend, wire, segment.buf, loop_config)
+        if config.warm_up:
+            controller.warm_up = WarmUp.beside(controller)
         signal.signal(signal.SIGTERM, lambda *_: setattr(controller, "running", False))
         backend.open()
         try:
@@ -92,6 +96,8 @@ def main(config: ProcessConfig, wire: Wire) -> None:
             with contextlib.suppress(Exception):
                 controller.zero_valves()
             backend.close()
+            if controller.warm_up is not None:
+                controller.warm_up.close()
     except Exception as exc:
         with contextlib.suppress(Broken):
             wire.send(Crash(f"{type(exc).__name__}: {exc}", traceback.format_exc()))
