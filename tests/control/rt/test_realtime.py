@@ -42,9 +42,13 @@ def test_a_claim_ends_with_its_process(tmp_path: Path) -> None:
 
 
 @pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="one core: nothing to spread")
-def test_two_controllers_run_on_two_cores(tmp_path: Path) -> None:
+def test_two_controllers_run_on_two_cores(tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+                                          ) -> None:
     """A real-time controller beside another (a rig and a robot on one host) takes a core
-    of its own rather than waiting for the other's ticks on the same one."""
+    of its own rather than waiting for the other's ticks on the same one. Their claims are
+    kept apart from the host's: another test worker's controller, or a benchmark's, holding
+    the other core would rightly make them share the last (a failure seen at load)."""
+    monkeypatch.setenv("SERVODESK_CPU_CLAIMS", str(tmp_path))
     with (ControlClient("rig", data_dir=tmp_path / "a") as one,
           ControlClient("unimate2000b", data_dir=tmp_path / "b") as two):
         if not (one.realtime and two.realtime):
