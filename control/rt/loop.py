@@ -185,6 +185,13 @@ class Controller:
         self.zero_valves()
 
     def tick(self, woke: int) -> None:
+        self.compute(woke)
+        self.publish()
+        self.outbox.flush()
+        self.tick_count += 1
+
+    def compute(self, woke: int) -> None:
+        """The tick up to the valves written, the part it times (``LatencyStats.computed``)."""
         self.latency.woke(woke - self.deadline)
         self.modes.begin_tick(self.tick_count)
         self.read()
@@ -196,9 +203,6 @@ class Controller:
             self.record(self.clock.now_ns())
         self.write()
         self.latency.computed(self.clock.now_ns() - woke)
-        self.publish()
-        self.outbox.flush()
-        self.tick_count += 1
 
     def read(self) -> None:
         before = self.clock.now_ns()

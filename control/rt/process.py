@@ -29,6 +29,8 @@ from hw.backend import RealClock
 from hw.factory import make_backend
 from hw.machine import load_machine
 
+WARM_UP_ENV = "SERVODESK_WARM_UP"  # "0": no shadow ticks; "report": their counters at exit
+
 
 @dataclass(frozen=True)
 class ProcessConfig:
@@ -48,7 +50,6 @@ class ProcessConfig:
     sim_options: dict
     slots: int = 1  # ticks per sample (control/timing.py)
     slips: tuple[str, ...] = ()
-    warm_up: bool = True  # a shadow tick in the spin before each deadline (control/rt/warmup.py)
 
     def to_json(self) -> str:
         return json.dumps(asdict(self))
@@ -80,7 +81,7 @@ def main(config: ProcessConfig, wire: Wire) -> None:
         if isinstance(backend.clock, RealClock):
             backend.clock.spin_ns = round(config.spin_us * 1e3)
         controller = Controller(machine, backend, wire, segment.buf, loop_config)
-        if config.warm_up:
+        if os.environ.get(WARM_UP_ENV) != "0":
             controller.warm_up = WarmUp.beside(controller)
         signal.signal(signal.SIGTERM, lambda *_: setattr(controller, "running", False))
         backend.open()
@@ -97,6 +98,8 @@ def main(config: ProcessConfig, wire: Wire) -> None:
                 controller.zero_valves()
             backend.close()
             if controller.warm_up is not None:
+                if os.environ.get(WARM_UP_ENV) == "report":  # for benchmarks/loop.py
+                    print(controller.warm_up.report(), file=sys.stderr, flush=True)
                 controller.warm_up.close()
     except Exception as exc:
         with contextlib.suppress(Broken):

@@ -29,9 +29,8 @@ from hw.backend import RealClock, StepClock
 from hw.machine import MachineError
 from hw.sim.backend import SimBackend
 
-MARGIN_NS = 20_000  # a warm-up tick must be expected to end this long before the deadline,
-SLACK = 1.25  # its expected length this many times the mean
-WEIGHT = 1 / 16  # of each new tick in the mean lengths
+MARGIN_NS = 10_000  # a warm-up tick must be expected to end this long before the deadline
+SPREAD = 2  # expected: its mean length and this many mean deviations (TCP's timeout estimate)
 FOREVER_NS = 10**15  # the shadow's client is never lost: nobody writes its words
 
 
@@ -40,7 +39,7 @@ class WarmUp:
     ticks the shadow back to back while the next tick is expected to end ``MARGIN_NS``
     before ``deadline``, starting as late as lets as many end, so that the last ends just
     before the live tick begins (spinning cools the code too). A window's first tick runs
-    cold, its next ones warm: each kind has its mean length, and a live tick after a window
+    cold, its next ones warm: each kind has its ``Estimate``, and a live tick after a window
     with no warm-up counts as a cold one, so the estimate follows the machine's load even
     while every window is skipped. On a lockstep clock (tests) there is no window: the
     shadow ticks once a cycle. Counters: ``windows``, ``ran`` (shadow ticks), ``skipped``
@@ -64,7 +63,8 @@ class WarmUp:
         self.live_latency = live.latency  # read only: the live tick's compute
         clock = live.clock
         self.spin_ns = clock.spin_ns if isinstance(clock, RealClock) else None
-        self.cold_ns = self.warm_ns = float(self.spin_ns or 0)  # no room until ticks are seen
+        self.cold = Estimate(float(self.spin_ns or 0))  # no room until ticks are seen
+        self.warm = Estimate(float(self.spin_ns or 0))
         self.was_skipped = False
         self.windows = self.ran = self.skipped = self.late = self.late_max_ns = 0
         self.error = ""
@@ -88,32 +88,31 @@ class WarmUp:
             self.tick()
             return
         if self.was_skipped:  # the live tick since ran cold
-            self.cold_ns += WEIGHT * (self.live_latency.compute_ns - self.cold_ns)
+            self.cold.add(self.live_latency.compute_ns)
         now = time.monotonic_ns
         early = deadline - self.spin_ns - now()
         if early > 0:
             time.sleep(early / 1e9)
         self.windows += 1
         start = now()
-        cold = SLACK * self.cold_ns + MARGIN_NS
+        cold = self.cold.bound()
         self.was_skipped = deadline - start < cold
         if self.was_skipped:
             self.skipped += 1
             return
-        warm = max(SLACK * min(self.warm_ns, self.cold_ns), 1.0)
+        warm = min(self.warm.bound(), cold)
         begin = deadline - cold - (deadline - start - cold) // warm * warm
         while now() < begin:  # the ticks end as close to the deadline as they fit
             pass
         start = now()
         self.tick()
         end = now()
-        self.cold_ns += WEIGHT * (end - start - self.cold_ns)
-        while (deadline - end >= SLACK * min(self.warm_ns, self.cold_ns) + MARGIN_NS
-               and not self.error):
+        self.cold.add(end - start)
+        while deadline - end >= min(self.warm.bound(), self.cold.bound()) and not self.error:
             start = end
             self.tick()
             end = now()
-            self.warm_ns += WEIGHT * (end - start - self.warm_ns)
+            self.warm.add(end - start)
         if end > deadline:
             self.late += 1
             self.late_max_ns = max(self.late_max_ns, end - deadline)
@@ -123,14 +122,39 @@ class WarmUp:
         shadow, step = self.shadow, self.step
         try:
             step.sleep_until(shadow.deadline)
-            shadow.tick(step.now_ns())
+            shadow.compute(step.now_ns())
+            shadow.outbox.queue.clear()  # its events (and status) go nowhere
+            shadow.tick_count += 1
             shadow.deadline = shadow.latency.next_deadline(shadow.deadline, step.now_ns())
         except Exception as exc:  # the shadow's own bug: the live loop goes on without it
             self.error = f"{type(exc).__name__}: {exc}"
         self.ran += 1
+
+    def report(self) -> str:
+        """The counters, one line: ``warm-up: windows W, ran R, skipped S, late L, max M ns``."""
+        return (f"warm-up: windows {self.windows}, ran {self.ran}, skipped {self.skipped}, "
+                f"late {self.late}, max {self.late_max_ns} ns")
 
     def close(self) -> None:
         self.shadow.release()
         self.backend.close()
         for end in self.ends:
             end.close()
+
+
+class Estimate:
+    """How long a tick may take (ns): its mean and mean deviation, smoothed as TCP smooths
+    round trips (RFC 6298), ``bound`` the mean plus ``SPREAD`` deviations plus ``MARGIN_NS``:
+    a busy machine's scattered ticks widen it until no warm-up fits."""
+
+    def __init__(self, mean_ns: float) -> None:
+        self.mean = mean_ns
+        self.deviation = 0.0
+
+    def add(self, ns: float) -> None:
+        error = ns - self.mean
+        self.mean += error / 8
+        self.deviation += (abs(error) - self.deviation) / 4
+
+    def bound(self) -> float:
+        return self.mean + SPREAD * self.deviation + MARGIN_NS

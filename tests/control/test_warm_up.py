@@ -177,12 +177,12 @@ def test_a_warm_up_with_no_room_before_the_deadline_is_skipped() -> None:
     does not tick; with room for many it ticks."""
     with live_controller(warm=True, spin_ns=150_000) as (controller, _client, _segment,
                                                           warm_up):
-        warm_up.cold_ns = warm_up.warm_ns = 10e6
+        warm_up.cold.mean = warm_up.warm.mean = 10e6
         now = controller.clock.now_ns()
         warm_up.before(now + 1_000_000)
         assert (warm_up.windows, warm_up.skipped, warm_up.ran) == (1, 1, 0)
         warm_up.spin_ns = 50_000_000
-        warm_up.cold_ns = warm_up.warm_ns = 1_000.0
+        warm_up.cold.mean = warm_up.warm.mean = 1_000.0
         warm_up.was_skipped = False
         warm_up.before(controller.clock.now_ns() + 50_000_000)
         assert (warm_up.windows, warm_up.skipped) == (2, 1) and warm_up.ran >= 1
