@@ -54,7 +54,7 @@ from textual import events
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # ahead of benchmarks/hw.py
 
 from app.tui import ServodeskApp
-from control import ControlClient, Mode
+from control import ControlClient
 from control.motion.cartesian_jog import plan_jog
 from control.motion.robot_model import unimate_model
 from control.recorder import list_runs
@@ -110,8 +110,10 @@ def first_motion(robot: ControlClient, start: Callable[[], object]) -> float:
 
 
 def settle(robot: ControlClient) -> None:
-    """Wait until the last jog ended and the arm holds."""
-    while robot.status().mode != Mode.HOLD:
+    """Wait until the last jog has ended, in position: a step waits for the one before it to
+    come in position (steps add up exactly), and that wait is not the latency measured here
+    (waiting for HOLD alone put the last step's 160 ms settle into every figure)."""
+    while robot.status().moving:
         time.sleep(0.001)
     time.sleep(0.05)
 
@@ -148,7 +150,7 @@ def key_first_motion(jogs: int) -> dict[str, float]:
                 while robot.status().desired == before:
                     await asyncio.sleep(POLL_S)
                 times.append((time.perf_counter() - began) * 1e3)
-                while robot.status().mode != Mode.HOLD:
+                while robot.status().moving:  # in position, as settle() waits
                     await asyncio.sleep(0.001)
                 await asyncio.sleep(0.05)
         return times
