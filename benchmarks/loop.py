@@ -5,8 +5,11 @@ Debian's ``cyclictest`` (rt-tests) is installed, runs it at the same period in
 the same window on the other core, then prints both side by side with the
 thesis's Table 2.1 (486-66, RTL 1.0). Beside it, the same ticks in a tight loop
 (``tight_compute``: the controller's ``tick`` on a lockstep simulator, back to back
-on the controller's core): live ÷ tight says what the wake-up costs the work. Prints
-figures; asserts nothing.
+on the controller's core): live ÷ tight says what the wake-up costs the work. The control
+process ticks a shadow in the spin before each deadline to warm that work
+(control/rt/warmup.py): the live part runs again without it (``SERVODESK_WARM_UP=0``),
+and both by turns in one real-time child, with the warm-up's counters. Prints figures;
+asserts nothing.
 
     python benchmarks/loop.py --seconds 20
     python benchmarks/loop.py --sample-time-ms 0.5 --spin-us 0   # 2 kHz, no spin

@@ -8,7 +8,9 @@ law), ``guard`` (E-stop, feedback, limits, the supervisor), record the move,
 the next grid point; it never catches up with a burst of ticks, and it never
 blocks: no file I/O (a run whose client is gone is kept, and handed over to a saver
 after the loop, ``RunSaver``),
-events wait in the ``Outbox``. Each stage's state lives in its component:
+events wait in the ``Outbox``. In the spin before each deadline a shadow controller
+ticks (``WarmUp``, control/rt/warmup.py), so the live tick runs on warm code. Each stage's
+state lives in its component:
 ``EncoderInput``, ``ClientWatch``, ``ModeMachine``, ``Guards``, ``Supervisor``,
 ``LatencyStats``, ``Outbox``.
 """

@@ -23,6 +23,7 @@ import time
 from dataclasses import replace
 
 from control.rt.channel import controller_end
+from control.rt.commands import Reset
 from control.rt.layout import ControlLayout
 from control.rt.loop import Controller
 from hw.backend import RealClock, StepClock
@@ -31,6 +32,7 @@ from hw.sim.backend import SimBackend
 
 MARGIN_NS = 10_000  # a warm-up tick must be expected to end this long before the deadline
 SPREAD = 2  # expected: its mean length and this many mean deviations (TCP's timeout estimate)
+RESET = Reset()
 FOREVER_NS = 10**15  # the shadow's client is never lost: nobody writes its words
 
 
@@ -123,6 +125,8 @@ class WarmUp:
         try:
             step.sleep_until(shadow.deadline)
             shadow.compute(step.now_ns())
+            if shadow.guards.latched:  # a fault of its own simulator: hold again, to warm
+                shadow.on_reset(RESET)  # the code the live loop runs when all is well
             shadow.outbox.queue.clear()  # its events (and status) go nowhere
             shadow.tick_count += 1
             shadow.deadline = shadow.latency.next_deadline(shadow.deadline, step.now_ns())

@@ -200,3 +200,16 @@ def test_a_shadow_that_fails_is_dropped_and_the_live_loop_goes_on() -> None:
             received.append(client.recv().record)
         assert any(isinstance(e, Notice) and "warm-up tick off" in e.message
                    for e in received), received
+
+
+def test_a_shadow_whose_simulator_faults_holds_again() -> None:
+    """A fault of the shadow's own (a pressed E-stop on its simulator) is reset, so it goes
+    on warming the code of a loop that holds; the live loop sees nothing of it."""
+    with live_controller(warm=True) as (controller, client, _segment, warm_up):
+        warm_up.backend.press_estop(True)
+        controller.cycle()
+        assert warm_up.shadow.guards.latched
+        warm_up.backend.press_estop(False)
+        controller.cycle()
+        assert not warm_up.shadow.guards.latched and warm_up.error == ""
+        assert not controller.guards.latched and not client.poll(0)
