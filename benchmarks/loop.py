@@ -336,10 +336,15 @@ def measure(seconds: float = 10.0, machine: str = "unimate2000b", spin_us: float
     with tempfile.TemporaryDirectory() as data:
         path = machine_at(machine, sample_time_ms, data)
         tight, tight_io = tight_compute(path)
-        live = measure_live(seconds, path, spin_us, warmup, data)
-        warm = warm_compute(path, spin_us) if spin_us > 0 else None
-        cold = (measure_live(seconds, path, spin_us, warmup, data, warm_up=False)
-                if warm is not None else None)
+        home = os.getcwd()
+        os.chdir(data)  # ``python -m`` puts its cwd first: a checkout there would be measured
+        try:
+            live = measure_live(seconds, path, spin_us, warmup, data)
+            warm = warm_compute(path, spin_us) if spin_us > 0 else None
+            cold = (measure_live(seconds, path, spin_us, warmup, data, warm_up=False)
+                    if warm is not None else None)
+        finally:
+            os.chdir(home)
     return {**live, "machine": machine, "tight_us": tight, "tight_io_us": tight_io,
             "warm": warm, "cold": cold}
 
