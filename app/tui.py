@@ -204,16 +204,19 @@ class ServodeskApp(App[None]):
                  lockstep: bool = False, *, seed: int = 0, sim_options: dict | None = None,
                  client_options: dict | None = None, client: ControlClient | None = None,
                  observe_only: bool = False, take_command: bool = False,
-                 starting: ControllerStart | None = None) -> None:
+                 starting: ControllerStart | None = None, build_behind: bool = True) -> None:
         """``client``: one already attached to a controller service (``attached_app``),
         used instead of starting a controller; ``observe_only``: this TUI never takes command
         (^K says why); ``take_command``: it takes command as soon as it is attached;
-        ``starting``: the controller already being started for this app (``servodesk``)."""
+        ``starting``: the controller already being started for this app (``servodesk``);
+        ``build_behind``: the tabs not shown are built once the screen is live (False: each
+        when first shown or needed, as the tests that open few tabs want)."""
         super().__init__()
         self._attached = client
         self._starting = starting
         self.observe_only = observe_only
         self._take_at_start = take_command
+        self.build_behind = build_behind
         self.machine = machine if isinstance(machine, Machine) else load_machine(machine)
         self.model = model_of(self.machine)  # MachineError for a DH table of another form
         self.backend = backend
@@ -354,7 +357,7 @@ class ServodeskApp(App[None]):
         return tab
 
     def _start_building(self) -> None:
-        if not self._rest_started:
+        if self.build_behind and not self._rest_started:
             self._rest_started = True
             self.run_worker(self._build_the_rest(), group="build")
 

@@ -8,20 +8,52 @@ plain functions that ``asyncio.run`` a scenario (no async plugin needed).
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import inspect
 import time
-from collections.abc import Callable
+from collections.abc import AsyncGenerator, Callable
+from contextlib import asynccontextmanager
 from pathlib import Path
+from typing import ClassVar
 
 import pytest
 from textual import events
 from textual.pilot import Pilot
 from textual.widget import Widget
+from textual.worker import WorkerCancelled
 
 from app.tui import ServodeskApp
 from control.rt.layout import Status
 
 START_S = 30.0  # a loaded machine can take a while to spawn the controller
 SIZE = (160, 48)
+
+
+class TabPilot(Pilot):
+    """Pilot whose keys leave the tab they chose built and shown before the test goes on
+    (the tests' apps build a tab only when it is first shown)."""
+
+    async def press(self, *keys: str) -> None:
+        await super().press(*keys)
+        await Tui.built(self.app, self)
+
+    async def click(self, *args: object, **kwargs: object) -> bool:
+        clicked = await super().click(*args, **kwargs)
+        await Tui.built(self.app, self)  # a tab of the tab bar
+        return clicked
+
+
+class PilotedApp(ServodeskApp):
+    """The app as the tests drive it: its pilot is a ``TabPilot``."""
+
+    # Textual reads a class's stylesheets beside the module that defines it
+    CSS_PATH: ClassVar = [Path(inspect.getfile(ServodeskApp)).parent / path
+                          for path in ServodeskApp.CSS_PATH]
+
+    @asynccontextmanager
+    async def run_test(self, *args: object, **kwargs: object) -> AsyncGenerator[Pilot, None]:
+        async with super().run_test(*args, **kwargs):
+            yield TabPilot(self)
 
 
 class Tui:
@@ -31,7 +63,9 @@ class Tui:
         self.data_dir = data_dir
 
     def app(self, machine: str = "unimate2000b", lockstep: bool = True,
-            **options: object) -> ServodeskApp:
+            build_behind: bool = False, **options: object) -> ServodeskApp:
+        """An app that builds a tab when the test first shows it (``build_behind``: every
+        tab once the screen is live, as the operator's does)."""
         # A Pilot-driven app on a loaded two-core machine can pause its client's heartbeat
         # thread past 250 ms, and the controller would (rightly) abort the move. Heartbeat
         # loss is proven in tests/faults and tests/control; here the UI flows are.
@@ -39,25 +73,46 @@ class Tui:
         # (T1); tests/app/test_tui_speed_mode.py starts it as an operator does.
         client_options = {"heartbeat_timeout_s": 2.0, "speed_mode": "automatic",
                           **options.pop("client_options", {})}
-        return ServodeskApp(machine, "sim", None, self.data_dir, lockstep=lockstep,
-                            client_options=client_options, **options)
+        return PilotedApp(machine, "sim", None, self.data_dir, lockstep=lockstep,
+                          client_options=client_options, build_behind=build_behind, **options)
 
     @staticmethod
     async def ready(app: ServodeskApp, pilot: Pilot) -> Status:
-        """Wait until the controller runs, the first status was sampled, the first tab
-        has the focus (its keys work) and every tab is built; return the status."""
+        """Wait until the controller runs, the first status was sampled and the first tab
+        has the focus (its keys work), and, in an app that builds behind, every tab is
+        built; return the status."""
         deadline = time.monotonic() + START_S
         while (app.client is None or app.sampler is None or app.sampler.latest is None
                or app.focused is None or app.tab("jog") not in app.focused.ancestors_with_self
-               or not all(tab.is_mounted for tab in app.tabs.values())):  # the others build
-            # once it is live; a tab attached is not yet mounted, and one mounting may take
-            # the focus from the keys a test presses next
+               or (app.build_behind and not all(tab.is_mounted for tab in app.tabs.values()))):
+            # a tab attached is not yet mounted, and one mounting may take the focus from
+            # the keys a test presses next
             if app.client_problem:
                 pytest.fail(f"the controller did not start: {app.client_problem}")
             if time.monotonic() > deadline:
                 pytest.fail(f"the controller did not start within {START_S:g} s")
             await pilot.pause(0.05)
         return app.client.status()
+
+    @staticmethod
+    async def built(app: ServodeskApp, pilot: Pilot) -> None:
+        """Wait until the tabs chosen so far (by keys, clicks, the app) are built, and the
+        one chosen last is shown with its focus; in an app that builds behind, ``ready``
+        waited for every tab and the keys of a test before it are the operator's."""
+        if app.build_behind:
+            return
+        await pilot._wait_for_screen()  # the keys and clicks sent so far were handled
+        while building := [worker for worker in app.workers
+                           if worker.group == "build" and not worker.is_finished]:
+            with contextlib.suppress(WorkerCancelled):  # the app is closing
+                await app.workers.wait_for_complete(building)
+            await pilot._wait_for_screen()  # the focus the shown tab asked for
+
+    @staticmethod
+    async def show(app: ServodeskApp, pilot: Pilot, name: str) -> None:
+        """Show tab ``name`` (as its F key does) once it is built."""
+        app.action_show_tab(name)
+        await Tui.built(app, pilot)
 
     @staticmethod
     async def until(condition: Callable[[], object], timeout: float = 10.0,

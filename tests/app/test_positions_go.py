@@ -27,10 +27,10 @@ def test_go_asks_first_and_leaves_its_result(tui, data_dir: Path) -> None:
         app = tui.app()
         async with app.run_test(size=SIZE) as pilot:
             start = np.array((await tui.ready(app, pilot)).position)
+            await pilot.press("f9")
             tab = app.query_one(PositionsTab)
             table = app.query_one("#positions-table", DataTable)
             state = app.query_one("#positions-state", LiveText)
-            await pilot.press("f9")
             await tui.until(lambda: tab.visible_now and table.row_count == 2,
                             what="home and park listed")
             app.query_one("#positions-speed Input", Input).value = "1"

@@ -51,7 +51,7 @@ async def watch_parts(app, parts: list[Widget], show) -> list[tuple[bool, ...]]:
 
 def test_the_moves_tab_is_drawn_in_parts_the_first_time_and_whole_after(tui) -> None:
     async def scenario() -> None:
-        app = tui.app()
+        app = tui.app(build_behind=True)  # as the operator's: every tab built once live
         async with app.run_test(size=SIZE) as pilot:
             await tui.ready(app, pilot)
             parts = [app.query_one(s) for s in ("#move-kinds", "#move-forms", "#move-preview",
@@ -81,7 +81,7 @@ def test_every_tab_ends_up_whole(tui) -> None:
     """Every tab opened in turn, each left before its parts could be drawn: every part of
     each is shown when the tab is next opened."""
     async def scenario() -> None:
-        app = tui.app()
+        app = tui.app(build_behind=True)  # as the operator's: every tab built once live
         async with app.run_test(size=SIZE) as pilot:
             await tui.ready(app, pilot)
             tabs = app.query_one(TabbedContent)

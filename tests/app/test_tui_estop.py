@@ -27,7 +27,8 @@ def command_cell(app: ServodeskApp, joint: int) -> str:
 
 def test_estop_from_every_tab_closes_the_valves(tui) -> None:
     async def scenario() -> None:
-        app = tui.app(lockstep=False)  # real time: the joints barely move between E-stops
+        # real time: the joints barely move between E-stops; every tab is opened
+        app = tui.app(lockstep=False, build_behind=True)
         async with app.run_test(size=SIZE) as pilot:
             await tui.ready(app, pilot)
             client = app.client

@@ -48,7 +48,7 @@ def laid_out(widget: Widget) -> Callable[[], bool]:
 def test_opening_every_tab_for_the_first_time_beside_a_burner_keeps_the_heartbeat(tui) -> None:
     async def scenario() -> None:
         with burner():
-            app = tui.app(lockstep=False,
+            app = tui.app(lockstep=False, build_behind=True,  # as the operator's
                           client_options={"heartbeat_timeout_s": HEARTBEAT_TIMEOUT_S})
             async with app.run_test(size=SIZE) as pilot:
                 await tui.ready(app, pilot)

@@ -181,7 +181,7 @@ def test_a_controller_stall_outside_a_move_goes_into_the_log(tui) -> None:
     """The control process stopped for 120 ms (SIGSTOP, then SIGCONT): the Latency tab's
     watch logs the stall from the run's maximum lateness, shown or not."""
     async def scenario() -> None:
-        app = tui.app(lockstep=False)
+        app = tui.app(lockstep=False, build_behind=True)  # the Latency tab built, not shown
         async with app.run_test(size=SIZE) as pilot:
             await tui.ready(app, pilot)
             pid = app.client.pid

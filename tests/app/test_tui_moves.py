@@ -408,7 +408,7 @@ def test_a_field_chosen_while_the_tabs_build_keeps_the_focus(tui, monkeypatch) -
         for name, kind in tui_module.TABS))
 
     async def scenario() -> None:
-        app = tui.app()
+        app = tui.app(build_behind=True)  # the operator's, whose build this holds back
         try:
             async with app.run_test(size=SIZE) as pilot:
                 tui.post_key(app, "f2")

@@ -38,9 +38,10 @@ def test_teach_list_rename_go_to_and_delete(tui, data_dir: Path) -> None:
         tolerance = np.array([j.goal_tolerance for j in app.machine.joints])  # "at": in position
         async with app.run_test(size=SIZE) as pilot:
             start = np.array((await tui.ready(app, pilot)).position)
+            await pilot.press("f2")  # Moves built: its via-point editor is offered what is taught
+            await pilot.press("f9")
             tab = app.query_one(PositionsTab)
             table = app.query_one("#positions-table", DataTable)
-            await pilot.press("f9")
             await tui.until(lambda: tab.visible_now and table.row_count == 2,
                             what="home and park listed")
             assert [str(k.value) for k in table.rows] == ["home", "park"]

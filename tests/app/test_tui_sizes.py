@@ -206,7 +206,7 @@ def test_every_tab_shows_what_it_is_for(tui) -> None:
     a_saved_run(tui.data_dir)
 
     async def scenario() -> None:
-        app = tui.app()
+        app = tui.app(build_behind=True)  # every tab is opened
         async with app.run_test(size=SIZES[-1]) as pilot:
             await tui.ready(app, pilot)
             app.record_event(LogEntry(time.time(), "notice", LONG_EVENT))

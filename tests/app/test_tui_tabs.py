@@ -32,6 +32,7 @@ def test_scope_draws_live_traces_and_answers_its_keys(tui) -> None:
         async with app.run_test(size=SIZE) as pilot:
             await tui.ready(app, pilot)
             tui.post_key(app, "f3")
+            await tui.built(app, pilot)  # the Scope is built when first shown
             scope = app.query_one(ScopeTab)
             await tui.until(lambda: scope.visible_now and len(app.history) > 50,
                             what="samples in the scope")
