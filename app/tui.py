@@ -31,6 +31,7 @@ from app.event_log import LogEntry, entries_of
 from app.history import SAMPLE_HZ, History, Sampler
 from app.messages import ClientFailed, ClientReady, ControllerEvent, RunsChanged
 from app.priority import Priority, raise_priority, raise_priority_under, restore
+from app.screens.live import LiveScreen
 from app.tabs.tab import TabPage
 from app.widgets.dialogs import ConfirmScreen
 from app.widgets.header import FaultBanner, StatusHeader
@@ -254,6 +255,9 @@ class ServodeskApp(App[None]):
         self._estop_reason = ""
 
     # -- layout --------------------------------------------------------------------------------
+
+    def get_default_screen(self) -> LiveScreen:
+        return LiveScreen(id="_default")  # an update draws the rows it changed, not the screen
 
     def compose(self) -> ComposeResult:
         backend = self.backend + (f" {self.port}" if self.port else "")

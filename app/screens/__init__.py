@@ -1,1 +1,2 @@
-"""Full screens pushed over the tabs: the arm's view (``arm``)."""
+"""The app's screens: the tabs' own, drawn by the rows that changed (``live``), and full
+screens pushed over the tabs: the arm's view (``arm``)."""

@@ -20,7 +20,7 @@ from textual.app import ComposeResult
 from textual.containers import Horizontal, VerticalScroll
 
 from app.tabs.tab import TabPage
-from app.widgets.header import MODE_NAMES
+from app.widgets.header import MODE_NAMES, StatusHeader
 from app.widgets.limit_bar import LimitBar
 from app.widgets.live_text import LiveLines, LiveText
 from control.rt.layout import Flag, Status
@@ -32,9 +32,10 @@ GAP = 2  # columns between two of a table's columns
 
 
 class StatusTab(TabPage):
-    """Everything the controller publishes, ten times a second."""
+    """Everything the controller publishes, ten times a second: drawn on the header's tick
+    (no timer of its own), so that the header and the tab change in one screen update, not
+    two (each update draws the screen's containers again, whatever changed)."""
 
-    REFRESH_HZ = 10.0
     TITLE = "Status"
     LATER = ("#status-lower",)
 
@@ -53,6 +54,12 @@ class StatusTab(TabPage):
         # each block as last made, with what it was made from: a joint at rest, the pose
         # and the link counters read the same tick after tick, and are not made again
         self._made: dict[str, tuple[object, Text]] = {}
+        self.watch(self.screen.query_one(StatusHeader), "status", self._header_ticked,
+                   init=False)
+
+    def _header_ticked(self) -> None:
+        if self.visible_now:
+            self.refresh_live()
 
     def refresh_live(self) -> None:
         joints, pose, loop, link = self._blocks

@@ -19,7 +19,9 @@ import numpy as np
 import pytest
 from rich.style import Style
 from rich.text import Text
+from textual._compositor import Compositor
 from textual.app import App, ComposeResult
+from textual.containers import Horizontal, Vertical, VerticalScroll
 from textual.geometry import Region
 from textual.strip import Strip
 from textual.widget import Widget
@@ -28,6 +30,7 @@ import app.tui
 from app.plotting import braille
 from app.plotting.braille import Rows, Trace, render
 from app.plotting.strips import plot_strips
+from app.screens.live import LiveScreen
 from app.tabs.status import StatusTab
 from app.tui import ServodeskApp
 from app.widgets.live_text import LiveLines, LiveText
@@ -75,6 +78,110 @@ async def watch_ticks(app: ServodeskApp, ticks: int) -> float:
         if app.header.status is not last:
             seen, last = seen + 1, app.header.status
     return time.monotonic() - started
+
+
+def count_draws(app: ServodeskApp) -> dict[str, int]:
+    """Count the screen's updates and the lines they draw, of every widget shown."""
+    seen = {"updates": 0, "lines": 0}
+    screen = app.screen
+    update = screen._compositor_refresh
+
+    def counted_update() -> None:
+        seen["updates"] += 1
+        update()
+
+    screen._compositor_refresh = counted_update  # type: ignore[method-assign]
+    for widget in screen.walk_children(with_self=True):
+        render_lines = widget.render_lines
+
+        def counted(crop: Region, render_lines: Callable[[Region], list[Strip]] = render_lines
+                    ) -> list[Strip]:
+            seen["lines"] += crop.height
+            return render_lines(crop)
+
+        widget.render_lines = counted  # type: ignore[method-assign]
+    return seen
+
+
+def test_an_idle_tick_draws_the_rows_it_changed_not_the_screen(tui) -> None:
+    """Idle on Jog a tick changes the header's loop line (its tick count); on Status also
+    a few numbers of the joints and the loop. The screen draws the rows those changes are on,
+    of the widgets they are in, in one update a tick. Textual's own compositor drew every
+    line of every widget whose parent's area met the box around the changes (the screen's
+    48, the tab bar's 44, ...: 111 lines a tick on Jog, 430 on Status), and Status drew the
+    header and the tab in two updates a tick."""
+
+    async def scenario() -> None:
+        app = tui.app(lockstep=False)
+        async with app.run_test(size=(160, 48)) as pilot:
+            await tui.ready(app, pilot)
+            for key, most in (("f1", 20), ("f4", 200)):
+                await pilot.press(key)
+                await watch_ticks(app, 5)  # the tab's first frames drawn
+                seen = count_draws(app)
+                await watch_ticks(app, OBSERVED_TICKS)
+                assert 0 < seen["lines"] <= most * OBSERVED_TICKS, (key, seen)
+                assert seen["updates"] <= OBSERVED_TICKS + 3, (key, seen)
+
+    asyncio.run(scenario())
+
+
+class Nested(App[None]):
+    """Containers in containers, side by side and docked, as the tabs' screen has them."""
+
+    CSS = """
+    #top { height: 3; } #side { dock: right; width: 12; }
+    LiveLines { height: 4; } Horizontal LiveLines { width: 1fr; }
+    """
+
+    def get_default_screen(self) -> LiveScreen:
+        return LiveScreen(id="_default")
+
+    def compose(self) -> ComposeResult:
+        yield LiveLines(id="top")
+        yield LiveLines(id="side")
+        with VerticalScroll():
+            with Vertical():
+                yield LiveLines(id="a")
+                with Horizontal():
+                    yield LiveLines(id="b")
+                    yield LiveLines(id="c")
+            yield LiveLines(id="d")
+
+
+def test_the_changed_rows_compositor_sends_what_textuals_sends() -> None:
+    """For random changes of random lines, the live screen's partial update sends the
+    terminal the very bytes Textual's compositor sends for them (it only draws less)."""
+    rng = np.random.default_rng(7)
+
+    def lines(n: int) -> Text:
+        return Text("\n".join(f"{rng.integers(10**9):>{rng.integers(9, 30)}} row {k}"
+                              for k in range(n)), style=str(rng.choice(["", "bold", "red"])))
+
+    async def scenario() -> None:
+        app = Nested()
+        async with app.run_test(size=(60, 20)) as pilot:
+            widgets = list(app.query(LiveLines))
+            for widget in widgets:
+                widget.show(lines(4))
+            await pilot.pause()
+            screen, compositor = app.screen, app.screen._compositor
+            for _ in range(200):
+                changed = [w for w in widgets if rng.random() < 0.4] or widgets[:1]
+                for widget in changed:
+                    widget.show(lines(4))
+                compositor.update_widgets(set(changed))
+                regions = set(compositor._dirty_regions)
+                live = compositor.render_partial_update()
+                compositor._dirty_regions.update(regions)
+                textual = Compositor.render_partial_update(compositor)
+                assert (live is None) == (textual is None)
+                if live is not None:
+                    assert (live.render_segments(app.console)
+                            == textual.render_segments(app.console)), regions
+                screen._dirty_widgets.clear()
+
+    asyncio.run(scenario())
 
 
 def test_idle_jog_draws_only_what_changed(tui) -> None:
