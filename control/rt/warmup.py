@@ -4,7 +4,8 @@ After the loop sleeps, the same Python code runs cold on a VM: its caches and br
 predictors served other work meanwhile, and a tick right after a 1 ms sleep took about
 1.9x the same tick back to back (``benchmarks/loop.py``, live / tight). The loop spins
 the last ``spin_ns`` before each deadline anyway (``hw.backend.RealClock``); a shadow
-tick run there warms the very code the live tick runs next, on CPU already spent.
+tick run there (the part a tick times, ``Controller.compute``: up to the valves written)
+warms the very code the live tick runs next, on CPU already spent.
 
 The shadow shares no mutable state with the live controller: it is a ``Controller`` of
 the same machine and loop settings on a simulator of its own (lockstep: its time steps
@@ -12,8 +13,9 @@ only when it ticks), with its own control words in a private buffer and its own
 socketpair, whose far end nobody writes to, for a channel. It never touches the live
 backend, shared memory, channel or outbox, so what the live tick reads, decides and
 writes is bit for bit the same with or without it (tests/control/test_warm_up.py).
-A warm-up that would not end ``MARGIN_NS`` before the deadline is skipped, never the
-live tick delayed; one that raises turns the warm-up off for good.
+A warm-up tick not expected to end before the deadline (``Estimate``) is skipped; one
+that overruns its estimate (the machine took the CPU meanwhile) delays the live tick's
+start, counted in ``late``. One that raises turns the warm-up off for good.
 """
 
 from __future__ import annotations
