@@ -8,9 +8,7 @@ law), ``guard`` (E-stop, feedback, limits, the supervisor), record the move,
 the next grid point; it never catches up with a burst of ticks, and it never
 blocks: no file I/O (a run whose client is gone is kept, and handed over to a saver
 after the loop, ``RunSaver``),
-events wait in the ``Outbox``. In the spin before each deadline a shadow controller
-ticks (``WarmUp``, control/rt/warmup.py), so the live tick runs on warm code. Each stage's
-state lives in its component:
+events wait in the ``Outbox``. Each stage's state lives in its component:
 ``EncoderInput``, ``ClientWatch``, ``ModeMachine``, ``Guards``, ``Supervisor``,
 ``LatencyStats``, ``Outbox``.
 """
@@ -18,7 +16,6 @@ state lives in its component:
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 from control.rt import commands as cmd
 from control.rt.channel import CommandChannel
@@ -39,9 +36,6 @@ from control.rt.wire import Wire
 from hw.backend import Backend, StepClock
 from hw.machine import Machine
 from hw.transmission import Transmission
-
-if TYPE_CHECKING:
-    from control.rt.warmup import WarmUp
 
 MS = 1_000_000
 SETTLE_NS = 2_000 * MS  # after motion, a lockstep clock steps this long before pacing (idle)
@@ -101,7 +95,6 @@ class Controller:
         self.tick_count = 0
         self.publisher = Publisher(control_buf, self.layout, self.clock.now_ns())
         self.deadline = 0
-        self.warm_up: WarmUp | None = None  # a shadow ticked before each deadline (warmup.py)
         self.channel = CommandChannel(wire, self.outbox, self.client, n, {
             cmd.Shutdown: self.on_shutdown,
             cmd.Hold: self.on_hold, cmd.EmergencyStop: self.on_estop, cmd.Reset: self.on_reset,
@@ -124,36 +117,22 @@ class Controller:
 
     def run(self) -> None:
         """Run until told to stop or orphaned; the valves are closed on the way out."""
-        self.deadline = self.clock.now_ns() + self.config.period_ns
+        clock, latency = self.clock, self.latency
+        lockstep = clock if isinstance(clock, StepClock) else None
+        self.deadline = clock.now_ns() + self.config.period_ns
         while self.running:
-            self.cycle()
+            if lockstep is not None:
+                lockstep.idle = self.idle(lockstep.now_ns())
+            clock.sleep_until(self.deadline)
+            woke = clock.now_ns()
+            try:
+                self.tick(woke)
+            except Exception as exc:
+                self.fail_safe(exc)
+            self.deadline = latency.next_deadline(self.deadline, clock.now_ns())
         self.zero_valves()
         self.publish()
         self.outbox.flush()
-
-    def cycle(self) -> None:
-        """Wait for the deadline (ticking the shadow, if any, in the spin before it), tick,
-        and set the next deadline."""
-        clock = self.clock
-        if isinstance(clock, StepClock):
-            clock.idle = self.idle(clock.now_ns())
-        if self.warm_up is not None:
-            self.warm_before(self.warm_up)
-        clock.sleep_until(self.deadline)
-        woke = clock.now_ns()
-        try:
-            self.tick(woke)
-        except Exception as exc:
-            self.fail_safe(exc)
-        self.deadline = self.latency.next_deadline(self.deadline, clock.now_ns())
-
-    def warm_before(self, warm_up: WarmUp) -> None:
-        """Tick the shadow in the spin before the deadline; one that failed is dropped."""
-        warm_up.before(self.deadline)
-        if warm_up.error:
-            self.warm_up = None
-            self.outbox.put(Notice(f"warm-up tick off (the live loop is unaffected): "
-                                   f"{warm_up.error}"))
 
     def in_motion(self) -> bool:
         """Something for the next tick to step: a move, an initialise, a position jog
@@ -187,13 +166,6 @@ class Controller:
         self.zero_valves()
 
     def tick(self, woke: int) -> None:
-        self.compute(woke)
-        self.publish()
-        self.outbox.flush()
-        self.tick_count += 1
-
-    def compute(self, woke: int) -> None:
-        """The tick up to the valves written, the part it times (``LatencyStats.computed``)."""
         self.latency.woke(woke - self.deadline)
         self.modes.begin_tick(self.tick_count)
         self.read()
@@ -205,6 +177,9 @@ class Controller:
             self.record(self.clock.now_ns())
         self.write()
         self.latency.computed(self.clock.now_ns() - woke)
+        self.publish()
+        self.outbox.flush()
+        self.tick_count += 1
 
     def read(self) -> None:
         before = self.clock.now_ns()
