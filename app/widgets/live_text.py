@@ -148,8 +148,8 @@ class LiveLines(LiveText):
         strip = self._strips[y]
         if strip is None or strip.cell_length != width:
             line = self._rows[y]
-            strip = (Strip(list(line.render(self.app.console)))
-                     .crop(0, width).adjust_cell_length(width).apply_style(style))
+            strip = (Strip(list(line.render(self.app.console)))  # cut or padded to the width
+                     .adjust_cell_length(width).apply_style(style))
             self._strips[y] = strip
         return strip
 
