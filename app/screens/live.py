@@ -53,10 +53,24 @@ class ChangedRowsCompositor(Compositor):
                 rows.translate((-region.x, -region.y)))
 
 
+def fits_textual() -> bool:
+    """Whether the installed Textual's compositor has the private parts this one builds on
+    (``textual>=0.80`` admits releases that may not): else Textual's own draws, whole."""
+    try:
+        compositor = Compositor()
+    except TypeError:
+        return False
+    return (callable(getattr(Compositor, "_get_renders", None))
+            and callable(getattr(Compositor, "render_partial_update", None))
+            and isinstance(getattr(compositor, "_dirty_regions", None), set)
+            and hasattr(Compositor, "visible_widgets"))
+
+
 class LiveScreen(Screen):
-    """The app's screen of tabs, drawn by ``ChangedRowsCompositor``."""
+    """The app's screen of tabs, drawn by ``ChangedRowsCompositor`` where Textual fits it."""
 
     def __init__(self, name: str | None = None, id: str | None = None,
                  classes: str | None = None) -> None:
         super().__init__(name=name, id=id, classes=classes)
-        self._compositor = ChangedRowsCompositor()
+        if fits_textual():
+            self._compositor = ChangedRowsCompositor()

@@ -30,7 +30,7 @@ import app.tui
 from app.plotting import braille
 from app.plotting.braille import Rows, Trace, render
 from app.plotting.strips import plot_strips
-from app.screens.live import LiveScreen
+from app.screens.live import ChangedRowsCompositor, LiveScreen
 from app.tabs.status import StatusTab
 from app.tui import ServodeskApp
 from app.widgets.live_text import LiveLines, LiveText
@@ -166,6 +166,8 @@ def test_the_changed_rows_compositor_sends_what_textuals_sends() -> None:
                 widget.show(lines(4))
             await pilot.pause()
             screen, compositor = app.screen, app.screen._compositor
+            # a Textual whose compositor the live one does not fit draws with its own
+            assert isinstance(compositor, ChangedRowsCompositor), "Textual changed: see live.py"
             for _ in range(200):
                 changed = [w for w in widgets if rng.random() < 0.4] or widgets[:1]
                 for widget in changed:
