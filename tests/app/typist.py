@@ -164,8 +164,12 @@ class Typist:
 
     @staticmethod
     def probed(field: Field, before: str | None, screen: str) -> bool:
+        """The probe typed into the field: alone (it was empty) or after its value. Not merely
+        a new text ending in it: an empty field's placeholder is live ("here -0.09" became
+        "here -0.10" as the rig settled), and was taken for the probe when no click had
+        reached the field (a failure beside two burners)."""
         text = shown_text(screen, field)
-        return text is not None and text != before and text.endswith(PROBE)
+        return text == PROBE or (before is not None and text == before + PROBE)
 
     def click(self, row: int, column: int) -> None:
         report = f"\x1b[<0;{column + 1};{row + 1}M\x1b[<0;{column + 1};{row + 1}m"
