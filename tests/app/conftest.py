@@ -109,12 +109,6 @@ class Tui:
             await pilot._wait_for_screen()  # the focus the shown tab asked for
 
     @staticmethod
-    async def show(app: ServodeskApp, pilot: Pilot, name: str) -> None:
-        """Show tab ``name`` (as its F key does) once it is built."""
-        app.action_show_tab(name)
-        await Tui.built(app, pilot)
-
-    @staticmethod
     async def until(condition: Callable[[], object], timeout: float = 10.0,
                     what: str | Callable[[], str] = "") -> None:
         """Wait (without Pilot's idle waits) until ``condition()`` is true; ``what`` (or
