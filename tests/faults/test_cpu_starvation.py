@@ -112,7 +112,7 @@ def test_a_starved_machine_counts_its_overruns_and_the_controller_stays_safe(
 
 def test_overrun_holds_under_starvation_keep_the_commanded_target(controller, until,
                                                                    measured) -> None:
-    """Issue 24 item 4: starved (the controller at normal priority, three burners a core),
+    """Issue 24 item 4: starved (the controller at the lowest priority, three burners a core),
     the loop overruns and holds, again and again; each hold is where the arm was commanded
     (the hold target), never where it had got to, so starvation never moves the target (the
     operator's In/Out crept 1309.9 → 1330.2 mm over ten holds). The hold gains are zeroed
@@ -120,6 +120,10 @@ def test_overrun_holds_under_starvation_keep_the_commanded_target(controller, un
     target and inside its 2.5° standstill following error, so a hold taken where the arm is
     would move the target by 50 counts."""
     client: ControlClient = controller(realtime=False, heartbeat_timeout_s=60.0)
+    # at nice 0 beside them a waking loop was served first often enough to keep up (it
+    # never overran in one suite run): at nice 19 the burners take nearly all of every core
+    for thread in os.listdir(f"/proc/{client.pid}/task"):
+        os.setpriority(os.PRIO_PROCESS, int(thread), 19)
     zero = replace(UNIMATE.hold, name="zero", kp=((0.0,),) * 6, ki=(0.0,) * 6,
                    kd=(0.0,) * 6, w=((),) * 6)
     client.set_coefficients("hold", zero, override="test: the arm stays where it is left")
