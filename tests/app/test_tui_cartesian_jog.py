@@ -186,9 +186,11 @@ def test_the_pose_line_warns_near_the_wrist_singularity(tui) -> None:
     asyncio.run(scenario())
 
 
-def hold(tui, app, key: str, seconds: float, gap: float = 0.03) -> asyncio.Task:
-    """Hold ``key`` as a terminal does: the key again every ``gap`` s (its auto-repeat; no
-    key-up ever comes) for ``seconds``, then nothing: the release is the silence."""
+def hold(tui, app, key: str, seconds: float, gap: float = 0.04) -> asyncio.Task:
+    """Hold ``key`` as a terminal does: the key again every ``gap`` s (its auto-repeat, 30-50
+    ms; no key-up ever comes) for ``seconds``, then nothing: the release is the silence. At
+    the slow end of that range: a release is 4 repeats missed, and at 30 ms a 120 ms hiccup
+    of the app's queue, loaded by the suite's other worker, broke the hold (one CI run)."""
     async def repeat() -> None:
         end = time.monotonic() + seconds
         while time.monotonic() < end:

@@ -144,7 +144,9 @@ def test_overrun_holds_under_starvation_keep_the_commanded_target(controller, un
                 away.append(commanded[ROTATE] - status.position[ROTATE])
     measured("overrun_holds", len(targets))
     measured("rotate_from_target_deg", min(away, default=math.nan), "°")
-    assert len(targets) >= 2, "starved, the loop never overran a fifth of a second's ticks"
+    # one hold shows it: a hold where the arm is moves the target 1.5° at the first (b552302);
+    # how many more come in 30 s is the scheduler's (1 to 3 seen, in a suite and alone)
+    assert targets, "starved, the loop never overran a fifth of a second's ticks"
     assert not client.status().estop, client.status().fault
     count = np.array([abs(j.encoder.gradient) for j in UNIMATE.joints])
     for target, off in zip(targets, away, strict=True):
