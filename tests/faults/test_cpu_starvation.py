@@ -120,10 +120,6 @@ def test_overrun_holds_under_starvation_keep_the_commanded_target(controller, un
     target and inside its 2.5° standstill following error, so a hold taken where the arm is
     would move the target by 50 counts."""
     client: ControlClient = controller(realtime=False, heartbeat_timeout_s=60.0)
-    # at nice 0 beside them a waking loop was served first often enough to keep up (it
-    # never overran in one suite run): at nice 19 the burners take nearly all of every core
-    for thread in os.listdir(f"/proc/{client.pid}/task"):
-        os.setpriority(os.PRIO_PROCESS, int(thread), 19)
     zero = replace(UNIMATE.hold, name="zero", kp=((0.0,),) * 6, ki=(0.0,) * 6,
                    kd=(0.0,) * 6, w=((),) * 6)
     client.set_coefficients("hold", zero, override="test: the arm stays where it is left")
@@ -134,6 +130,10 @@ def test_overrun_holds_under_starvation_keep_the_commanded_target(controller, un
     commanded = np.array(client.status().desired)
     client.poll_events()  # a fault from a loaded start is not one of these
     targets, away = [], []
+    # at nice 0 beside them a waking loop was served first often enough to keep up (it
+    # never overran in one suite run): at nice 19 the burners take nearly all of every core
+    for thread in os.listdir(f"/proc/{client.pid}/task"):
+        os.setpriority(os.PRIO_PROCESS, int(thread), 19)
     with burning_every_core(per_core=3):
         deadline = time.monotonic() + 30.0
         while len(targets) < 3 and time.monotonic() < deadline:
