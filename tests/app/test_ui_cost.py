@@ -81,8 +81,9 @@ async def watch_ticks(app: ServodeskApp, ticks: int) -> float:
 
 
 def count_draws(app: ServodeskApp) -> dict[str, int]:
-    """Count the screen's updates and the lines they draw, of every widget shown."""
-    seen = {"updates": 0, "lines": 0}
+    """Count the screen's updates and the lines they draw, of every widget shown, and the
+    lines drawn of containers (widgets with children)."""
+    seen = {"updates": 0, "lines": 0, "container lines": 0}
     screen = app.screen
     update = screen._compositor_refresh
 
@@ -94,9 +95,10 @@ def count_draws(app: ServodeskApp) -> dict[str, int]:
     for widget in screen.walk_children(with_self=True):
         render_lines = widget.render_lines
 
-        def counted(crop: Region, render_lines: Callable[[Region], list[Strip]] = render_lines
-                    ) -> list[Strip]:
+        def counted(crop: Region, render_lines: Callable[[Region], list[Strip]] = render_lines,
+                    container: bool = bool(widget.children)) -> list[Strip]:
             seen["lines"] += crop.height
+            seen["container lines"] += crop.height if container else 0
             return render_lines(crop)
 
         widget.render_lines = counted  # type: ignore[method-assign]
@@ -106,21 +108,24 @@ def count_draws(app: ServodeskApp) -> dict[str, int]:
 def test_an_idle_tick_draws_the_rows_it_changed_not_the_screen(tui) -> None:
     """Idle on Jog a tick changes the header's loop line (its tick count); on Status also
     a few numbers of the joints and the loop. The screen draws the rows those changes are on,
-    of the widgets they are in, in one update a tick. Textual's own compositor drew every
+    of the widgets they are in, in one update a tick, and no container under them (the
+    terminal is sent the widgets' cells in front). Textual's own compositor drew every
     line of every widget whose parent's area met the box around the changes (the screen's
     48, the tab bar's 44, ...: 111 lines a tick on Jog, 430 on Status), and Status drew the
-    header and the tab in two updates a tick."""
+    header and the tab in two updates a tick; the first live screen drew the containers
+    behind (6 lines a tick on Jog, 108 on Status)."""
 
     async def scenario() -> None:
         app = tui.app(lockstep=False)
         async with app.run_test(size=(160, 48)) as pilot:
             await tui.ready(app, pilot)
-            for key, most in (("f1", 20), ("f4", 200)):
+            for key, most in (("f1", 4), ("f4", 30)):
                 await pilot.press(key)
                 await watch_ticks(app, 5)  # the tab's first frames drawn
                 seen = count_draws(app)
                 await watch_ticks(app, OBSERVED_TICKS)
                 assert 0 < seen["lines"] <= most * OBSERVED_TICKS, (key, seen)
+                assert seen["container lines"] == 0, (key, seen)
                 assert seen["updates"] <= OBSERVED_TICKS + 3, (key, seen)
 
     asyncio.run(scenario())
@@ -132,6 +137,7 @@ class Nested(App[None]):
     CSS = """
     #top { height: 3; } #side { dock: right; width: 12; }
     LiveLines { height: 4; } Horizontal LiveLines { width: 1fr; }
+    #boxed { border: round red; padding: 0 1; height: auto; } Horizontal { height: 5; }
     """
 
     def get_default_screen(self) -> LiveScreen:
@@ -141,7 +147,7 @@ class Nested(App[None]):
         yield LiveLines(id="top")
         yield LiveLines(id="side")
         with VerticalScroll():
-            with Vertical():
+            with Vertical(id="boxed"):
                 yield LiveLines(id="a")
                 with Horizontal():
                     yield LiveLines(id="b")
@@ -150,8 +156,9 @@ class Nested(App[None]):
 
 
 def test_the_changed_rows_compositor_sends_what_textuals_sends() -> None:
-    """For random changes of random lines, the live screen's partial update sends the
-    terminal the very bytes Textual's compositor sends for them (it only draws less)."""
+    """For random changes of random lines, and of a container with a border showing around
+    its children, the live screen's partial update sends the terminal the very bytes Textual's
+    compositor sends for them (it only draws less)."""
     rng = np.random.default_rng(7)
 
     def lines(n: int) -> Text:
@@ -168,10 +175,14 @@ def test_the_changed_rows_compositor_sends_what_textuals_sends() -> None:
             screen, compositor = app.screen, app.screen._compositor
             # a Textual whose compositor the live one does not fit draws with its own
             assert isinstance(compositor, ChangedRowsCompositor), "Textual changed: see live.py"
+            boxed = app.query_one("#boxed")
             for _ in range(200):
                 changed = [w for w in widgets if rng.random() < 0.4] or widgets[:1]
                 for widget in changed:
                     widget.show(lines(4))
+                if rng.random() < 0.2:  # its border's rows and columns, under and beside all
+                    boxed.refresh(Region(0, int(rng.integers(0, 6)), 30, 2))
+                    changed.append(boxed)
                 compositor.update_widgets(set(changed))
                 regions = set(compositor._dirty_regions)
                 live = compositor.render_partial_update()
