@@ -5,8 +5,11 @@ Debian's ``cyclictest`` (rt-tests) is installed, runs it at the same period in
 the same window on the other core, then prints both side by side with the
 thesis's Table 2.1 (486-66, RTL 1.0). Beside it, the same ticks in a tight loop
 (``tight_compute``: the controller's ``tick`` on a lockstep simulator, back to back
-on the controller's core): live ÷ tight says what the wake-up costs the work. Prints
-figures; asserts nothing.
+on the controller's core): live ÷ tight says what the wake-up costs the work. The control
+process ticks a shadow, a piece at a time, in the window before each deadline to warm that
+work (the machine file's ``warm_up_pct``, control/rt/warmup.py): the live part runs again
+without it (``SERVODESK_WARM_UP=0``), and both by turns in one real-time child, with the
+warm-up's counters. Prints figures; asserts nothing.
 
     python benchmarks/loop.py --seconds 20
     python benchmarks/loop.py --sample-time-ms 0.5 --spin-us 0   # 2 kHz, no spin
@@ -24,6 +27,7 @@ import os
 import platform
 import re
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -45,6 +49,7 @@ from control.rt.layout import HIST_BIN_NS
 from hw.machine import load_machine
 from hw.transmission import valve_duty
 
+WARM_UP_ENV = "SERVODESK_WARM_UP"  # control/rt/process.py: "0" starts it with no warm-up
 TABLE_2_1 = {"min_us": 11.5, "mean_us": 13.97, "max_us": 54.0, "ticks": 100_290}
 JOG_S = 2.0  # how long commands are timed, cyclictest beside them
 
@@ -61,6 +66,7 @@ class Lateness:
     over_1ms: int
     min_us: float | None = None
     mean_us: float | None = None
+    over_20us: int = 0  # ticks late by 20 µs or more (a window a warm-up piece overran, say)
 
     @classmethod
     def from_histogram(cls, edges_us: np.ndarray, counts: np.ndarray, max_us: float,
@@ -73,7 +79,8 @@ class Lateness:
                                       len(edges_us) - 1)])
 
         over = int(counts[edges_us > 1000].sum())
-        return cls(total, pct(50), pct(99), pct(99.9), max_us, over, min_us, mean_us)
+        return cls(total, pct(50), pct(99), pct(99.9), max_us, over, min_us, mean_us,
+                   int(counts[edges_us > 20].sum()))
 
 
 def cpu_seconds(pid: int) -> float:
@@ -181,6 +188,79 @@ def tight_child(machine_name: str, batches: int, ticks: int) -> tuple[float, flo
         ours.close()
 
 
+def warm_compute(machine: str, spin_us: float, turns: int = 8, ticks: int = 1000) -> dict | None:
+    """``warm_child`` in a child made real-time as the control process is; None when the
+    code measured has no warm-up (an older commit)."""
+    code = (f"import json, sys; sys.path.insert(0, {sys.path[0]!r}); import loop; "
+            f"print(json.dumps(loop.warm_child({machine!r}, {spin_us!r}, {turns}, {ticks})))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         cwd=Path(__file__).parent, check=True).stdout
+    return json.loads(out.splitlines()[-1])
+
+
+def warm_child(machine_name: str, spin_us: float, turns: int, ticks: int) -> dict | None:
+    """The controller on a real-time simulator, paced as the control process paces it
+    (``Controller.cycle``), ``ticks`` ticks without its warm-up (control/rt/warmup.py), then
+    as many with it, by turns: the median of each's means of compute per tick (µs), each's
+    wake-up lateness p99 (µs, the live tick's start after its deadline), and the warm-up's
+    counters over its turns."""
+    import socket
+
+    from control.rt import shm
+    from control.rt.channel import controller_end
+    from control.rt.layout import ControlLayout
+    from control.rt.loop import Controller, LoopConfig
+    from control.rt.realtime import enter_realtime
+    from hw.sim.backend import SimBackend
+    try:
+        from control.rt.warmup import WarmUp
+    except ImportError:
+        return None
+
+    machine = load_machine(machine_name)
+    backend = SimBackend(machine)
+    backend.clock.spin_ns = round(spin_us * 1e3)
+    period = round(machine.sample_time_s * 1e9)
+    ours, theirs = socket.socketpair()
+    layout = ControlLayout(machine.n_joints)
+    segment = shm.create("warm", layout.size)
+    layout.write_header(segment.buf)
+    controller = Controller(machine, backend, controller_end(theirs), segment.buf,
+                            LoopConfig(period_ns=period, heartbeat_timeout_ns=10**15,
+                                       orphan_timeout_ns=10**15))
+    warm_up = WarmUp.beside(controller)
+    try:
+        backend.open()
+        controller.start()
+        enter_realtime()
+        latency = controller.latency
+        means: dict[bool, list[float]] = {False: [], True: []}
+        late: dict[bool, list[int]] = {False: [], True: []}
+        controller.deadline = backend.clock.now_ns() + period
+        for turn in range(2 * turns + 2):
+            on = turn % 2 == 1
+            controller.warm_up = warm_up if on else None
+            compute0 = latency.compute_total_ns
+            for _ in range(ticks):
+                controller.cycle()
+                late[on].append(latency.late_ns)
+            if turn >= 2:  # the first two: a warm-up
+                means[on].append((latency.compute_total_ns - compute0) / ticks / 1e3)
+        return {"off_us": float(np.median(means[False])), "on_us": float(np.median(means[True])),
+                "off_p99_us": float(np.percentile(late[False], 99)) / 1e3,
+                "on_p99_us": float(np.percentile(late[True], 99)) / 1e3,
+                "windows": warm_up.windows, "ran": warm_up.ran, "skipped": warm_up.skipped,
+                "pieces": warm_up.pieces_run, "late": warm_up.late,
+                "late_max_us": warm_up.late_max_ns / 1e3,
+                "error": warm_up.error}
+    finally:
+        controller.warm_up = None
+        warm_up.close()
+        controller.release()
+        shm.release(segment, unlink=True)
+        ours.close()
+
+
 @dataclass(frozen=True)
 class CommandLatency:
     """Milliseconds from the call of ``client.jog_joint`` to its duty, one entry a command:
@@ -252,7 +332,9 @@ def measure(seconds: float = 10.0, machine: str = "unimate2000b", spin_us: float
     (``Lateness`` in µs; servodesk's mean and percentiles cover the window, its min and
     max the whole run, as the histogram keeps them; ``cyclictest`` None when not installed),
     ``whole_run`` (min, mean, max µs and ticks since the controller started), ``tight_us``
-    and ``tight_io_us`` (``tight_compute``'s compute and backend read/write per tick).
+    and ``tight_io_us`` (``tight_compute``'s compute and backend read/write per tick), ``warm``
+    (``warm_child``'s figures; None without a spin, or for code with no warm-up), ``cold``
+    (``measure_live``'s figures without the warm-up, when there is one).
     """
     with tempfile.TemporaryDirectory() as data:
         path = machine_at(machine, sample_time_ms, data)
@@ -261,14 +343,25 @@ def measure(seconds: float = 10.0, machine: str = "unimate2000b", spin_us: float
         os.chdir(data)  # ``python -m`` puts its cwd first: a checkout there would be measured
         try:
             live = measure_live(seconds, path, spin_us, warmup, data)
+            warm = warm_compute(path, spin_us) if spin_us > 0 else None
+            cold = (measure_live(seconds, path, spin_us, warmup, data, warm_up=False)
+                    if warm is not None else None)
         finally:
             os.chdir(home)
-    return {**live, "machine": machine, "tight_us": tight, "tight_io_us": tight_io}
+    return {**live, "machine": machine, "tight_us": tight, "tight_io_us": tight_io,
+            "warm": warm, "cold": cold}
 
 
-def measure_live(seconds: float, machine: str, spin_us: float, warmup: float, data: str) -> dict:
-    """``measure``'s live part: the control subprocess for ``seconds``, cyclictest beside it."""
-    with ControlClient(machine, data_dir=data, spin_us=spin_us) as client:
+def measure_live(seconds: float, machine: str, spin_us: float, warmup: float, data: str,
+                 warm_up: bool = True) -> dict:
+    """``measure``'s live part: the control subprocess for ``seconds``, cyclictest beside it;
+    ``warm_up`` False starts it with ``SERVODESK_WARM_UP=0`` (no shadow ticks)."""
+    os.environ[WARM_UP_ENV] = "report" if warm_up else "0"
+    try:
+        client = ControlClient(machine, data_dir=data, spin_us=spin_us)
+    finally:
+        os.environ.pop(WARM_UP_ENV, None)
+    with client:
         realtime, notice, pid = client.realtime, client.notice, client.pid
         period_us = round(client.dt * 1e6)
         time.sleep(warmup)
@@ -285,6 +378,7 @@ def measure_live(seconds: float, machine: str, spin_us: float, warmup: float, da
         ui = command_latency(client, nice=UI_NICE)
         cyclic_jog_out = (cyclic_jog.communicate(timeout=2 * JOG_S + 30)[0] if cyclic_jog
                           else "")
+        warm_report = stopped_report(client)
     ticks = status1.tick - status0.tick
     counts = after.counts - before.counts
     edges = (np.arange(len(counts)) + 1) * HIST_BIN_NS / 1e3
@@ -311,7 +405,23 @@ def measure_live(seconds: float, machine: str, spin_us: float, warmup: float, da
             / max(after.ticks - before.ticks, 1)),
         "cyclictest": parse_cyclictest(cyclic_out) if cyclic_out else None,
         "whole_run": (after.min_us, after.mean_us, after.max_us, after.ticks),
+        "warm_report": warm_report,
     }
+
+
+def stopped_report(client: ControlClient) -> dict[str, int] | None:
+    """Stop the control process (SIGTERM ends its loop) and read the warm-up counters it
+    wrote to stderr on the way out (``SERVODESK_WARM_UP=report``); None if it wrote none."""
+    os.kill(client.pid, signal.SIGTERM)
+    end = time.monotonic() + 5.0
+    while client.alive and time.monotonic() < end:
+        time.sleep(0.01)
+    found = re.search(r"warm-up: windows (\d+), ran (\d+), pieces (\d+), skipped (\d+), "
+                      r"late (\d+), max (\d+) ns", client.controller_log())
+    if found is None:
+        return None
+    return dict(zip(("windows", "ran", "pieces", "skipped", "late", "late_max_ns"),
+                    map(int, found.groups()), strict=True))
 
 
 def run(seconds: float, machine: str, spin_us: float, warmup: float,
@@ -335,6 +445,36 @@ def run(seconds: float, machine: str, spin_us: float, warmup: float,
           f"{m['tight_io_us']:.1f} µs); live / tight {m['compute_mean_us'] / m['tight_us']:.2f} "
           f"(target <= 1.5), backend {m['io_mean_us'] / m['tight_io_us']:.2f}, controller "
           f"{control_us / (m['tight_us'] - m['tight_io_us']):.2f}")
+    warm = m["warm"]
+    if warm is not None:
+        windows = max(warm["windows"], 1)
+        print(f"  warm-up (shadow pieces in the window before each deadline), by turns in one "
+              f"real-time child: compute {warm['on_us']:.1f} µs with it, {warm['off_us']:.1f} µs "
+              f"without ({warm['on_us'] / warm['off_us'] - 1:+.0%}); wake-up p99 "
+              f"{warm['on_p99_us']:.0f} µs with it, {warm['off_p99_us']:.0f} without; "
+              f"{warm['ran'] / windows:.2f} shadow ticks ({warm['pieces'] / windows:.1f} pieces) "
+              f"a window, {100 * warm['skipped'] / windows:.1f} % of windows "
+              f"skipped (no room), {warm['late']} ended late of {warm['windows']} (at most "
+              f"{warm['late_max_us']:.0f} µs)" + (f"; error: {warm['error']}" if warm["error"]
+                                                  else ""))
+    counted = m["warm_report"]
+    if counted is not None:
+        windows = max(counted["windows"], 1)
+        print(f"  warm-up in this control process: {counted['ran'] / windows:.2f} shadow ticks "
+              f"({counted['pieces'] / windows:.1f} pieces) a window, "
+              f"{100 * counted['skipped'] / windows:.1f} % of windows skipped (no "
+              f"room), {counted['late']} of {counted['windows']} ended late (at most "
+              f"{counted['late_max_ns'] / 1e3:.0f} µs)")
+    cold = m["cold"]
+    if cold is not None:
+        ct = cold["cyclictest"]
+        ratio = f"{cold['servodesk'].p99 / max(ct.p99, 1):.2f}" if ct is not None else "-"
+        print(f"  without the warm-up ({WARM_UP_ENV}=0; the same code, next in this run): "
+              f"compute {cold['compute_mean_us']:.1f} µs, live / tight "
+              f"{cold['compute_mean_us'] / m['tight_us']:.2f}, wake-up p99 "
+              f"{cold['servodesk'].p99:.0f} µs (ratio to cyclictest {ratio}), "
+              f"{cold['servodesk'].over_20us} ticks woke >= 20 µs late, "
+              f"{cold['cpu_pct']:.1f} % of a core, {cold['overruns']} overruns")
     print(f"  CPU use of the control process: {m['cpu_pct']:.1f} % of a core")
     print(f"  overruns: {m['overruns']}")
     print(f"  client.jog -> duty at the backend: median {median:.2f} ms, p99 {p99:.2f} ms, "
@@ -352,14 +492,14 @@ def run(seconds: float, machine: str, spin_us: float, warmup: float,
     print("    cyclictest beside them: " + (f"p99 {jog_ct.p99:.0f} µs, max {jog_ct.max_us:.0f} µs"
                                           if jog_ct is not None else "not installed"))
     ours, ct = m["servodesk"], m["cyclictest"]
-    header = f"  {'':<22}{'p50':>8}{'p99':>8}{'p99.9':>8}{'max':>9}{'>1 ms':>8}"
+    header = f"  {'':<22}{'p50':>8}{'p99':>8}{'p99.9':>8}{'max':>9}{'>1 ms':>8}{'>=20 µs':>9}"
     print("\nwake-up lateness (µs; servodesk in 5 µs bins, upper edges)")
     print(header)
     print(f"  {'servodesk':<22}{ours.p50:>8.0f}{ours.p99:>8.0f}{ours.p999:>8.0f}"
-          f"{ours.max_us:>9.0f}{ours.over_1ms:>8d}")
+          f"{ours.max_us:>9.0f}{ours.over_1ms:>8d}{ours.over_20us:>9d}")
     if ct is not None:
         print(f"  {'cyclictest (C)':<22}{ct.p50:>8.0f}{ct.p99:>8.0f}{ct.p999:>8.0f}"
-              f"{ct.max_us:>9.0f}{ct.over_1ms:>8d}")
+              f"{ct.max_us:>9.0f}{ct.over_1ms:>8d}{ct.over_20us:>9d}")
         print(f"  ratio p99 servodesk/cyclictest: {ours.p99 / max(ct.p99, 1):.2f} "
               f"(target <= 1.5); ticks > 1 ms: {ours.over_1ms} vs {ct.over_1ms}")
     else:

@@ -65,6 +65,9 @@ CARTESIAN_JOG_ACCEL_RANGE = (1.0, 10_000.0)
 GOAL_WINDOW_S = 0.1
 GOAL_TIME_S = (0.5, 600.0)  # at least two windows and the samples the path ends on
 GOAL_TIME_DEFAULT_S = 2.0
+# the last part of each period in which the control process warms its code (a shadow tick,
+# control/rt/warmup.py): past half the period a core would spin more than it rests
+WARM_UP_PCT = (0.0, 50.0)
 STOPPED_SPEED_FRACTION = 0.02  # stopped_speed defaults to 2 % of max_speed
 
 
@@ -239,6 +242,7 @@ class Machine:
     cartesian_jog_accel: tuple[float, float] = CARTESIAN_JOG_ACCEL  # mm/s², deg/s²
     encoder_threshold: float = 0.5
     goal_time_s: float = GOAL_TIME_DEFAULT_S  # after a path's end, to come in position
+    warm_up_pct: float = 0.0  # of the period, before each deadline: a shadow tick's window
 
     @property
     def n_joints(self) -> int:
@@ -482,7 +486,7 @@ class _Reader:
                             "coefficients", "plant", "supervisor"})
         head = self.table(doc, "", "machine")
         self.only(head, "machine", {"name", "title", "sample_time_ms", "home", "park",
-                                    "goal_time"})
+                                    "goal_time", "warm_up_pct"})
         valve = self.table(doc, "", "valve")
         self.only(valve, "valve", {"period_us", "resolution_pct"})
         enc = self.table(doc, "", "encoder")
@@ -532,6 +536,7 @@ class _Reader:
                                               CARTESIAN_JOG_ACCEL_RANGE),
             goal_time_s=self.number(head, "machine", "goal_time", GOAL_TIME_DEFAULT_S,
                                     *GOAL_TIME_S),
+            warm_up_pct=self.number(head, "machine", "warm_up_pct", 0.0, *WARM_UP_PCT),
         )
 
     def joint_vector(self, head: Mapping[str, Any], name: str, joints: tuple[Joint, ...]

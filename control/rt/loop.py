@@ -8,14 +8,19 @@ law), ``guard`` (E-stop, feedback, limits, the supervisor), record the move,
 the next grid point; it never catches up with a burst of ticks, and it never
 blocks: no file I/O (a run whose client is gone is kept, and handed over to a saver
 after the loop, ``RunSaver``),
-events wait in the ``Outbox``. Each stage's state lives in its component:
+events wait in the ``Outbox``. In the last part of each period a shadow controller ticks,
+a piece at a time while the next piece fits before the deadline (``WarmUp``,
+control/rt/warmup.py), so the live tick runs on warm code. Each stage's state lives in its
+component:
 ``EncoderInput``, ``ClientWatch``, ``ModeMachine``, ``Guards``, ``Supervisor``,
 ``LatencyStats``, ``Outbox``.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 from control.rt import commands as cmd
 from control.rt.channel import CommandChannel
@@ -36,6 +41,9 @@ from control.rt.wire import Wire
 from hw.backend import Backend, StepClock
 from hw.machine import Machine
 from hw.transmission import Transmission
+
+if TYPE_CHECKING:
+    from control.rt.warmup import WarmUp
 
 MS = 1_000_000
 SETTLE_NS = 2_000 * MS  # after motion, a lockstep clock steps this long before pacing (idle)
@@ -95,6 +103,11 @@ class Controller:
         self.tick_count = 0
         self.publisher = Publisher(control_buf, self.layout, self.clock.now_ns())
         self.deadline = 0
+        self.warm_up: WarmUp | None = None  # a shadow ticked before each deadline (warmup.py)
+        # the timed part of a tick, stage by stage, each given the tick's wake-up (``compute``);
+        # a shadow runs them one at a time
+        self.stages: tuple[Callable[[int], None], ...] = (
+            self.begin, self.read, self.poll, self.watch, self.control, self.guard, self.finish)
         self.channel = CommandChannel(wire, self.outbox, self.client, n, {
             cmd.Shutdown: self.on_shutdown,
             cmd.Hold: self.on_hold, cmd.EmergencyStop: self.on_estop, cmd.Reset: self.on_reset,
@@ -117,22 +130,36 @@ class Controller:
 
     def run(self) -> None:
         """Run until told to stop or orphaned; the valves are closed on the way out."""
-        clock, latency = self.clock, self.latency
-        lockstep = clock if isinstance(clock, StepClock) else None
-        self.deadline = clock.now_ns() + self.config.period_ns
+        self.deadline = self.clock.now_ns() + self.config.period_ns
         while self.running:
-            if lockstep is not None:
-                lockstep.idle = self.idle(lockstep.now_ns())
-            clock.sleep_until(self.deadline)
-            woke = clock.now_ns()
-            try:
-                self.tick(woke)
-            except Exception as exc:
-                self.fail_safe(exc)
-            self.deadline = latency.next_deadline(self.deadline, clock.now_ns())
+            self.cycle()
         self.zero_valves()
         self.publish()
         self.outbox.flush()
+
+    def cycle(self) -> None:
+        """Wait for the deadline (ticking the shadow, if any, in the window before it), tick,
+        and set the next deadline."""
+        clock = self.clock
+        if isinstance(clock, StepClock):
+            clock.idle = self.idle(clock.now_ns())
+        if self.warm_up is not None:
+            self.warm_before(self.warm_up)
+        clock.sleep_until(self.deadline)
+        woke = clock.now_ns()
+        try:
+            self.tick(woke)
+        except Exception as exc:
+            self.fail_safe(exc)
+        self.deadline = self.latency.next_deadline(self.deadline, clock.now_ns())
+
+    def warm_before(self, warm_up: WarmUp) -> None:
+        """Tick the shadow in the window before the deadline; one that failed is dropped."""
+        warm_up.before(self.deadline)
+        if warm_up.error:
+            self.warm_up = None
+            self.outbox.put(Notice(f"warm-up tick off (the live loop is unaffected): "
+                                   f"{warm_up.error}"))
 
     def in_motion(self) -> bool:
         """Something for the next tick to step: a move, an initialise, a position jog
@@ -166,29 +193,38 @@ class Controller:
         self.zero_valves()
 
     def tick(self, woke: int) -> None:
-        self.latency.woke(woke - self.deadline)
-        self.modes.begin_tick(self.tick_count)
-        self.read()
-        self.poll()
-        self.watch(woke)
-        self.modes.control(self.guards.latched, woke)
-        self.guard(woke)
-        if self.modes.move is not None and self.modes.sample_end:
-            self.record(self.clock.now_ns())
-        self.write()
-        self.latency.computed(self.clock.now_ns() - woke)
+        self.compute(woke)
         self.publish()
         self.outbox.flush()
         self.tick_count += 1
 
-    def read(self) -> None:
+    def compute(self, woke: int) -> None:
+        """The tick up to the valves written, the part it times (``LatencyStats.computed``)."""
+        for stage in self.stages:
+            stage(woke)
+
+    def begin(self, woke: int) -> None:
+        self.latency.woke(woke - self.deadline)
+        self.modes.begin_tick(self.tick_count)
+
+    def control(self, woke: int) -> None:
+        self.modes.control(self.guards.latched, woke)
+
+    def finish(self, woke: int) -> None:
+        """Record the move's sample, write the valves, and time the tick."""
+        if self.modes.move is not None and self.modes.sample_end:
+            self.record(self.clock.now_ns())
+        self.write()
+        self.latency.computed(self.clock.now_ns() - woke)
+
+    def read(self, _woke: int = 0) -> None:
         before = self.clock.now_ns()
         self.encoders.read(self.backend, self.modes.serviced)
         self.latency.io_total_ns += self.clock.now_ns() - before
 
     # -- poll: the client's E-stop word, then its commands (the FIFO analogue) -----
 
-    def poll(self) -> None:
+    def poll(self, _woke: int = 0) -> None:
         if self.client.estop_pressed() and not self.guards.latched:
             self.latch_estop("operator E-stop")
         self.channel.poll()

@@ -23,10 +23,13 @@ from control.rt.events import Crash, Ready
 from control.rt.layout import ControlLayout
 from control.rt.loop import Controller, LoopConfig
 from control.rt.realtime import enter_realtime
+from control.rt.warmup import WarmUp
 from control.rt.wire import Broken, Wire
 from hw.backend import RealClock
 from hw.factory import make_backend
 from hw.machine import load_machine
+
+WARM_UP_ENV = "SERVODESK_WARM_UP"  # "0": no shadow ticks; "report": their counters at exit
 
 
 @dataclass(frozen=True)
@@ -78,6 +81,8 @@ def main(config: ProcessConfig, wire: Wire) -> None:
         if isinstance(backend.clock, RealClock):
             backend.clock.spin_ns = round(config.spin_us * 1e3)
         controller = Controller(machine, backend, wire, segment.buf, loop_config)
+        if os.environ.get(WARM_UP_ENV) != "0":
+            controller.warm_up = WarmUp.beside(controller)
         signal.signal(signal.SIGTERM, lambda *_: setattr(controller, "running", False))
         backend.open()
         try:
@@ -92,6 +97,10 @@ def main(config: ProcessConfig, wire: Wire) -> None:
             with contextlib.suppress(Exception):
                 controller.zero_valves()
             backend.close()
+            if controller.warm_up is not None:
+                if os.environ.get(WARM_UP_ENV) == "report":  # for benchmarks/loop.py
+                    print(controller.warm_up.report(), file=sys.stderr, flush=True)
+                controller.warm_up.close()
     except Exception as exc:
         with contextlib.suppress(Broken):
             wire.send(Crash(f"{type(exc).__name__}: {exc}", traceback.format_exc()))

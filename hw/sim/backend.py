@@ -120,6 +120,11 @@ class SimBackend:
             for i, (frozen, stuck_mask, stuck_value) in self._lies.items():
                 raw[i] = frozen if frozen is not None else (raw[i] & ~stuck_mask) | stuck_value
 
+    def advance(self) -> None:
+        """What ``read`` does first: integrate the plant, and latch the encoders, up to the
+        clock's time (the loop's warm-up steps its shadow's plant as a piece of its own)."""
+        self._advance()
+
     def write(self, duty_pct: Sequence[float]) -> None:
         """Command signed valve duty per joint, percent; clipped to ±100 and quantised.
 
