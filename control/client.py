@@ -89,6 +89,11 @@ __all__ = ["ControlClient", "ControllerError", "Event", "MoveHandle", "MoveResul
 HEARTBEAT_S = 0.05
 KEEP_WAIT_S = 30.0  # close(): how long the runs in hand may take to be saved (600 s: under 5)
 DEATH_S = 0.25
+# the event thread's wait for the channel: an event, or the controller's end of it closing,
+# wakes it at once; the wait only bounds how soon a controller gone without closing it is seen
+# (well inside the 250 ms promised) and how long close() waits for the thread. At 10 ms it
+# woke 100 times a second for nothing, half a percent of a core on every tab
+EVENT_WAIT_S = 0.1
 _MOVES = itertools.count(1)  # a move's segment is named apart (it may outlive its client)
 SPIN_US = 150.0  # spin before each deadline: keeps the core and its caches (benchmarks/loop.py)
 
@@ -422,7 +427,7 @@ class ControlClient:
         wire = self.link.wire
         while not self._closing.is_set():
             try:
-                if wire.poll(0.01):
+                if wire.poll(EVENT_WAIT_S):
                     self._dispatch(Event(wire.recv().record))
             except Unreadable:
                 pass  # a message of a newer servodesk, say: nothing to act on

@@ -10,6 +10,7 @@ import os
 import shlex
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -527,3 +528,30 @@ def test_a_flat_line_in_the_middle_of_its_plot_stays_on_its_row_through_noise() 
         [Trace(x, np.full(2000, 1.5 + noise), style)], (-10.0, 0.0), (1.0, 2.0), 60, 8))
         for noise in (-1e-6, 0.0, 1e-6)}
     assert len(pictures) == 1
+
+
+def thread_wakeups(thread: threading.Thread) -> int:
+    """How many times ``thread`` has gone to sleep and been woken (its voluntary switches)."""
+    status = Path(f"/proc/self/task/{thread.native_id}/status").read_text()
+    return int(next(line.split()[1] for line in status.splitlines()
+                    if line.startswith("voluntary_ctxt_switches")))
+
+
+def test_the_client_event_thread_sleeps_until_an_event_when_idle(tui) -> None:
+    """The client's event thread waits on the channel, woken by an event or the controller's
+    end closing; idle it wakes ten times a second to look for a controller gone without
+    closing it. The old thread woke every 10 ms: a hundred times a second (twice that counted
+    here when it waited for the interpreter's lock), half a percent of a core on every tab."""
+
+    async def scenario() -> None:
+        app = tui.app(lockstep=False)
+        async with app.run_test(size=(160, 48)) as pilot:
+            await tui.ready(app, pilot)
+            events = next(t for t in threading.enumerate() if t.name == "servodesk-events")
+            await watch_ticks(app, 5)
+            before, started = thread_wakeups(events), time.monotonic()
+            await watch_ticks(app, OBSERVED_TICKS)
+            rate = (thread_wakeups(events) - before) / (time.monotonic() - started)
+            assert rate <= 40, f"the event thread woke {rate:.0f} times a second, idle"
+
+    asyncio.run(scenario())

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from control import ControlClient
+from control.client import EVENT_WAIT_S
 from control.motion import moves
 from control.recorder import load_run
 from control.rt import shm
@@ -24,7 +25,7 @@ from control.rt.layout import ESTOP_WORD, MoveLayout
 from control.runs import encode_meta
 
 SAMPLES = 600_000  # 600 s at 1 ms, the longest move
-POLL_S = 0.01  # the monitor thread's wait for an event, each pass (client._watch)
+POLL_S = EVENT_WAIT_S  # the monitor thread's wait for an event, each pass (client._watch)
 LATENCY_S = 0.05
 BLOCKED_S = 0.05  # a pass is wall time: preempted beside a burner on two workers it took
 # 11 ms; saving the run in it took 7-13 s
