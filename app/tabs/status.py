@@ -53,7 +53,7 @@ class StatusTab(TabPage):
                              for name in ("joints", "pose", "loop", "link"))
         # each block as last made, with what it was made from: a joint at rest, the pose
         # and the link counters read the same tick after tick, and are not made again
-        self._made: dict[str, tuple[object, Text]] = {}
+        self._made: dict[str, tuple[object, list[Text]]] = {}
         self.watch(self.screen.query_one(StatusHeader), "status", self._header_ticked,
                    init=False)
 
@@ -69,29 +69,31 @@ class StatusTab(TabPage):
             return
         width = joints.size.width or FULL_WIDTH
         full = width >= FULL_WIDTH
-        joints.show(self._made_from(
+        joints.show_rows(self._made_from(
             "joints", (status.position, status.desired, status.duty, status.valve, status.raw,
                        status.glitches, width),
             lambda: self._joints(status, width) if full else self._joints_narrow(status, width)))
-        pose.show(self._made_from("pose", (status.position, full),
-                                  lambda: self._pose(status, full)))
-        loop.show(self._loop(status))
-        link.show(self._made_from("link", tuple(status.link.items()),
-                                  lambda: self._link(status)))
+        pose.show_rows(self._made_from("pose", (status.position, full),
+                                       lambda: self._pose(status, full)))
+        loop.show_rows(self._loop(status))
+        link.show_rows(self._made_from("link", tuple(status.link.items()),
+                                       lambda: self._link(status)))
 
-    def _made_from(self, block: str, inputs: object, make: Callable[[], Text]) -> Text:
+    def _made_from(self, block: str, inputs: object, make: Callable[[], list[Text]]
+                   ) -> list[Text]:
         """``block`` made by ``make`` from ``inputs``, or as last made if they are the same."""
         made = self._made.get(block)
         if made is not None and made[0] == inputs:
             return made[1]
-        text = make()
-        self._made[block] = (inputs, text)
-        return text
+        rows = make()
+        self._made[block] = (inputs, rows)
+        return rows
 
-    # Each block is text in aligned columns, not a rich Table: a table's layout cost 9 ms a
-    # frame at ten frames a second, most of the idle tab's CPU.
+    # Each block is its lines of text in aligned columns, not a rich Table: a table's layout
+    # cost 9 ms a frame at ten frames a second, most of the idle tab's CPU; nor one Text, which
+    # the widget would split into its lines again each tick.
 
-    def _joints(self, status: Status, width: int = FULL_WIDTH + 60) -> Text:
+    def _joints(self, status: Status, width: int = FULL_WIDTH + 60) -> list[Text]:
         rows: list[list[str | Text]] = [["joint", "position", "desired", "error", "duty %",
                                          "valve %", "raw", "glitches"]]
         for j, joint in enumerate(self.machine.joints):
@@ -104,7 +106,7 @@ class StatusTab(TabPage):
                 Text(str(status.glitches[j]), "yellow" if status.glitches[j] else "dim")])
         return self._with_bars(status, rows, width, edge=" ", least=8)
 
-    def _joints_narrow(self, status: Status, width: int = 80) -> Text:
+    def _joints_narrow(self, status: Status, width: int = 80) -> list[Text]:
         """The joints' table in 80 columns: no raw word or glitches, two decimals."""
         rows: list[list[str | Text]] = [["joint", "position", "desired", "error", "duty %",
                                          "valve %"]]
@@ -117,36 +119,33 @@ class StatusTab(TabPage):
         return self._with_bars(status, rows, width, edge="", least=10)
 
     def _with_bars(self, status: Status, rows: list[list[str | Text]], width: int, edge: str,
-                   least: int) -> Text:
+                   least: int) -> list[Text]:
         """``rows`` (a header, then a row a joint) in columns, each joint's limit bar in what
         the line has left (at least ``least`` columns), under the title "joints"."""
         lines = columns(rows, ("left",) + ("right",) * (len(rows[0]) - 1), edge=edge)
         bar = max(least, width - lines[0].cell_len - len(edge) - GAP)
-        out = Text("joints", "bold")
+        out = [_title("joints")]
         for i, line in enumerate(lines):
-            out.append("\n")
-            out.append_text(line)
-            out.append(" " * GAP)
+            line.append(" " * GAP)
             if i == 0:
-                out.append("limits", "bold")
-                continue
-            j = i - 1
-            joint = self.machine.joints[j]
-            out.append_text(LimitBar(status.position[j], joint.lower, joint.upper,
-                                     status.desired[j]).text(bar))
-        out.no_wrap, out.overflow = True, "crop"
+                line.append("limits", "bold")
+            else:
+                joint = self.machine.joints[i - 1]
+                line.append_text(LimitBar(status.position[i - 1], joint.lower, joint.upper,
+                                          status.desired[i - 1]).text(bar))
+            out.append(line)
         return out
 
-    def _pose(self, status: Status, full: bool = True) -> Text:
+    def _pose(self, status: Status, full: bool = True) -> list[Text]:
         if self.model is None:
-            return Text.assemble(("end effector\n", "bold"),
-                                 ("no kinematic model for this machine", "dim"))
+            return [_title("end effector"),
+                    Text.assemble(("no kinematic model for this machine", "dim"))]
         pose = self.model.pose(np.asarray(status.position))
         title = "end effector (X-Y-Z fixed, eq. 4.04)" if full else "end effector"
         return _block(title, [[name, f"{value:9.2f} {unit}"]
                               for (name, unit), value in zip(POSE_LABELS, pose, strict=True)])
 
-    def _loop(self, status: Status) -> Text:
+    def _loop(self, status: Status) -> list[Text]:
         progress = (f"{status.move_done}/{status.move_total} (move {status.move_id})"
                     if status.move_total else "–")
         flags = ", ".join(f.name.lower().replace("_", " ") for f in Flag
@@ -165,7 +164,7 @@ class StatusTab(TabPage):
             ["fault", status.fault or "–"],
         ])
 
-    def _link(self, status: Status) -> Text:
+    def _link(self, status: Status) -> list[Text]:
         rows: list[list[str | Text]] = []
         for name, value in status.link.items():
             bad = value and name not in ("frames_tx", "frames_rx")
@@ -200,14 +199,14 @@ def columns(rows: list[list[str | Text]], justify: tuple[str, ...], edge: str = 
     return lines
 
 
-def _block(title: str, rows: list[list[str | Text]]) -> Text:
-    """A title over rows of a name and its value, the values right-aligned."""
-    out = Text(title, "bold")
-    for line in columns(rows, ("left", "right"), gap=1):
-        out.append("\n")
-        out.append_text(line)
-    out.no_wrap, out.overflow = True, "crop"
-    return out
+def _block(title: str, rows: list[list[str | Text]]) -> list[Text]:
+    """A title over rows of a name and its value, the values right-aligned: its lines."""
+    return [_title(title), *columns(rows, ("left", "right"), gap=1)]
+
+
+def _title(title: str) -> Text:
+    """A block's title line, bold (a span: a line's own style is not drawn by ``LiveLines``)."""
+    return Text(title, spans=[Span(0, len(title), "bold")])
 
 
 def _pct(duty: float, width: int = 0) -> str:

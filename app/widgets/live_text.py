@@ -90,8 +90,9 @@ def _segments(lines: list[list[Segment]]) -> Segments:
 
 class LiveLines(LiveText):
     """A ``LiveText`` of many lines of which a few change each time (Status' blocks): a
-    ``Text`` shown is compared line by line, and only the lines that changed are drawn again
-    (each one line, cut at the widget's width; other renderables are drawn whole)."""
+    ``Text`` shown (or its lines, ``show_rows``) is compared line by line, and only the lines
+    that changed are drawn again (each one line, cut at the widget's width; other renderables
+    are drawn whole)."""
 
     def __init__(self, renderable: RenderableType = "", *, id: str | None = None,
                  classes: str | None = None) -> None:
@@ -110,7 +111,17 @@ class LiveLines(LiveText):
             super().show(renderable)
             return
         self._renderable = renderable
-        rows = renderable.split("\n", allow_blank=True)
+        self._show_rows(renderable.split("\n", allow_blank=True))
+
+    def show_rows(self, rows: list[Text]) -> None:
+        """Show ``rows``, a ``Text`` a line (each drawn as one line, cut at the width): what a
+        live block makes line by line need not be joined to be split again here."""
+        if rows is self._renderable and self._rows is not None:  # the very rows shown
+            return
+        self._renderable = rows
+        self._show_rows(rows)
+
+    def _show_rows(self, rows: list[Text]) -> None:
         before = self._rows
         self._rows, self._key, self._lines = rows, None, None
         if before is None or len(before) != len(rows):
@@ -126,6 +137,12 @@ class LiveLines(LiveText):
         if changed:
             self.repaints += 1
             self.refresh(*changed)
+
+    @property
+    def text(self) -> str:
+        if self._rows is not None:
+            return "\n".join(row.plain for row in self._rows)
+        return super().text
 
     def on_resize(self) -> None:
         self._strips = [None] * len(self._strips)

@@ -17,6 +17,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+from rich.text import Text
 from textual.errors import NoWidget
 from textual.geometry import Region
 from textual.widget import Widget
@@ -170,11 +171,12 @@ def status_rows_whole(app: ServodeskApp) -> None:
                      move_done=60000, move_total=120000)
     console = app.console
     full = app.query_one("#status-joints").size.width >= FULL_WIDTH  # as the tab chooses
-    for selector, renderable, rows in (
+    for selector, lines, rows in (
             ("#status-pose", tab._pose(status, full), 7),
             ("#status-loop", tab._loop(status), 12),
             ("#status-link", tab._link(status), 1 + len(status.link))):
         widget = app.query_one(selector, LiveText)
+        renderable = Text("\n").join(lines)
         shown, whole = (["".join(s.text for s in line).rstrip()
                          for line in console.render_lines(
                              renderable, console.options.update_width(width), pad=False)]

@@ -270,6 +270,34 @@ def test_a_status_block_that_reads_the_same_is_not_made_again(tui, monkeypatch) 
     asyncio.run(scenario())
 
 
+def test_a_status_block_is_shown_by_its_lines_not_split_each_tick(tui, monkeypatch) -> None:
+    """The Status tab makes each block as its lines and shows them so (``show_rows``): the
+    old tab joined the lines into one Text that the widget split into lines again, for the
+    joints and the loop every tick (a fifth of the tab's own CPU)."""
+    split: list[str] = []
+    show = LiveLines.show
+
+    def counted(self: LiveLines, renderable: object) -> None:
+        if isinstance(renderable, Text) and (self.id or "").startswith("status-"):
+            split.append(self.id or "")
+        show(self, renderable)  # type: ignore[arg-type]
+
+    async def scenario() -> None:
+        app = tui.app(lockstep=False)
+        async with app.run_test(size=(160, 48)) as pilot:
+            await tui.ready(app, pilot)
+            await pilot.press("f4")
+            loop = app.query_one("#status-loop", LiveText)
+            await tui.until(lambda: "controller time" in tui.text(loop), what="the loop block")
+            monkeypatch.setattr(LiveLines, "show", counted)
+            before = tui.text(loop)
+            await watch_ticks(app, OBSERVED_TICKS)
+            assert tui.text(loop) != before  # the sample count moved on
+            assert not split, f"blocks split into lines again: {sorted(set(split))}"
+
+    asyncio.run(scenario())
+
+
 class FirstFrame(ServodeskApp):
     """Notes which tabs are built when the first frame has been drawn."""
 
