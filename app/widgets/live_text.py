@@ -22,6 +22,7 @@ from textual.geometry import Region
 from textual.strip import Strip
 from textual.widget import Widget
 
+from app.widgets.direct_lines import DirectLines
 from app.widgets.limit_bar import LimitBar
 
 BAR_STEPS = 10_000  # a limit bar's marks compared to a ten-thousandth of its range: finer
@@ -88,7 +89,7 @@ def _segments(lines: list[list[Segment]]) -> Segments:
     return Segments(out)
 
 
-class LiveLines(LiveText):
+class LiveLines(LiveText, DirectLines):
     """A ``LiveText`` of many lines of which a few change each time (Status' blocks): a
     ``Text`` shown (or its lines, ``show_rows``) is compared line by line, and only the lines
     that changed are drawn again (each one line, cut at the widget's width; other renderables
@@ -152,6 +153,9 @@ class LiveLines(LiveText):
         super().notify_style_update()
         self._style = None
         self._strips = [None] * len(self._strips)
+
+    def direct(self) -> bool:
+        return self._rows is not None and super().direct()  # a Text's lines: drawn whole
 
     def render_line(self, y: int) -> Strip:
         if self._rows is None:

@@ -10,13 +10,13 @@ from collections.abc import Sequence
 from rich.text import Text
 from textual.geometry import Region, Size
 from textual.strip import Strip
-from textual.widget import Widget
 
 from app.plotting.braille import Rows, Trace
 from app.plotting.strips import Plot, plots_strips
+from app.widgets.direct_lines import DirectLines
 
 
-class ScopePlot(Widget):
+class ScopePlot(DirectLines):
     """Traces over ``x_range`` (s) and ``y_range``; the newest data on the right."""
 
     def __init__(self, *, id: str | None = None, classes: str | None = None) -> None:

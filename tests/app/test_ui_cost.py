@@ -21,6 +21,7 @@ import pytest
 from rich.style import Style
 from rich.text import Text
 from textual._compositor import Compositor
+from textual._styles_cache import StylesCache
 from textual.app import App, ComposeResult
 from textual.containers import Horizontal, Vertical, VerticalScroll
 from textual.geometry import Region
@@ -294,6 +295,42 @@ def test_a_status_block_is_shown_by_its_lines_not_split_each_tick(tui, monkeypat
             await watch_ticks(app, OBSERVED_TICKS)
             assert tui.text(loop) != before  # the sample count moved on
             assert not split, f"blocks split into lines again: {sorted(set(split))}"
+
+    asyncio.run(scenario())
+
+
+def test_live_blocks_and_plots_go_to_the_screen_as_drawn_and_the_same(tui) -> None:
+    """Status' blocks and the Scope's plots have no border, padding or tint: their lines go to
+    the screen as their widgets draw them, not through Textual's styles cache (whose work a
+    call cost more than the lines that changed: the old widgets went through it each tick,
+    three times on Status, seven a frame on the Scope); and those lines are the very lines the
+    styles cache gives of them."""
+    cached: list[Widget] = []
+    render_widget = StylesCache.render_widget
+
+    def counted(self: StylesCache, widget: Widget, crop: Region) -> list[Strip]:
+        cached.append(widget)
+        return render_widget(self, widget, crop)
+
+    async def scenario() -> None:
+        app = tui.app(lockstep=False)
+        async with app.run_test(size=(160, 48)) as pilot:
+            await tui.ready(app, pilot)
+            for key, kind in (("f4", LiveLines), ("f3", ScopePlot)):
+                await pilot.press(key)
+                await watch_ticks(app, 5)
+                widgets = [w for w in app.screen.query(kind) if w.region.area]
+                assert widgets, key
+                with pytest.MonkeyPatch.context() as patch:
+                    patch.setattr(StylesCache, "render_widget", counted)
+                    await watch_ticks(app, OBSERVED_TICKS)
+                drawn = {str(w) for w in cached if w in widgets}
+                assert not drawn, f"{key}: through the styles cache: {sorted(drawn)}"
+                assert all(w.direct() for w in widgets), key
+                for widget in widgets:
+                    whole = Region(0, 0, *widget.size)
+                    assert (widget.render_lines(whole)
+                            == Widget.render_lines(widget, whole)), widget
 
     asyncio.run(scenario())
 
