@@ -141,6 +141,15 @@ def below_min_pwm(joint: Joint, duty: float) -> float | None:
     return least if abs(duty) < least else None
 
 
+def behind_queued_keys(widget: Widget, check: Callable[[], None]) -> Callable[[], None]:
+    """``check`` sent through the app's message queue, behind every key the terminal sent
+    before it. Run by the widget's own timer, a release check went ahead of repeats still
+    waiting in a busy app's queue and took their silence for a release (a held Cartesian
+    jog braked mid-line); behind them, the repeats are heard first, and the check's own
+    lateness shows the stall (``STALL_S``)."""
+    return lambda: widget.app.call_later(check)
+
+
 @dataclass
 class KeyRepeat:
     """Key-up events from auto-repeat: a key is held while it repeats; silence is a release.
@@ -308,8 +317,8 @@ class JogPad(Widget, can_focus=True):
         self._checked = -math.inf  # when the release was last checked
 
     def on_mount(self) -> None:
-        self._release_timer = self.set_interval(RELEASE_CHECK_S, self._check_release,
-                                                pause=True)
+        self._release_timer = self.set_interval(
+            RELEASE_CHECK_S, behind_queued_keys(self, self._check_release), pause=True)
 
     def render(self) -> Text:
         if self.latched:
@@ -477,6 +486,8 @@ class JogPad(Widget, can_focus=True):
     def _check_release(self) -> None:
         """Every RELEASE_CHECK_S while a key is held: stop the joints let go; when the last
         is let go, hold every joint where it stopped (at zero duty a joint would sag)."""
+        if self._checked == -math.inf:  # queued before the pad stopped listening
+            return
         now = time.monotonic()
         late, self._checked = now - self._checked - RELEASE_CHECK_S, now
         if late > STALL_S:  # the UI was not listening: repeats may be waiting behind this

@@ -38,7 +38,13 @@ from textual.widgets import DataTable, Input
 
 from app.desk import Desk
 from app.messages import RunsChanged
-from app.tabs.jog import RELEASE_CHECK_S, STALL_S, TOOL_RELEASE, KeyRepeat
+from app.tabs.jog import (
+    RELEASE_CHECK_S,
+    STALL_S,
+    TOOL_RELEASE,
+    KeyRepeat,
+    behind_queued_keys,
+)
 from app.tabs.program_edit import delete_step, insert_go_to, move_step
 from app.tabs.tab import TabPage
 from app.widgets.dialogs import ConfirmScreen
@@ -172,8 +178,8 @@ class ProgramTab(TabPage):
         table = self.query_one("#program-table", DataTable)
         for key, label in COLUMNS:
             table.add_column(label, key=key)
-        self._release_timer: Timer = self.set_interval(RELEASE_CHECK_S, self._check_release,
-                                                pause=True)
+        self._release_timer: Timer = self.set_interval(
+            RELEASE_CHECK_S, behind_queued_keys(self, self._check_release), pause=True)
         self._watch_timer: Timer = self.set_interval(1.0 / WATCH_HZ, self._watch, pause=True)
         self._problems_text()
         self._find_examples()
@@ -693,6 +699,8 @@ class ProgramTab(TabPage):
 
     def _check_release(self) -> None:
         """Every RELEASE_CHECK_S while the enabling key is held: its release is a feed hold."""
+        if self._release_seen == -math.inf:  # queued before the tab stopped listening
+            return
         now = time.monotonic()
         late, self._release_seen = now - self._release_seen - RELEASE_CHECK_S, now
         if late > STALL_S:  # the UI was not listening: repeats may be waiting behind this

@@ -1,0 +1,65 @@
+"""A held key's repeats waiting in a busy app's queue are no release (app/tabs/jog.py,
+``behind_queued_keys``).
+
+A terminal sends no key-up: a held key is its auto-repeat, and its release is their
+silence. The repeats reach the Jog pad through the app's message queue; the pad's release
+check ran on its own timer. When the app's queue stalled (a slow handler; a loaded machine),
+the check, on time, saw the repeats stop and braked the tool mid-line, though they were
+waiting in the queue: a suite run broke a held Cartesian jog so. The check now waits in the
+same queue, behind them.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+
+import numpy as np
+
+from app.tabs.jog import JogPad
+from control.rt.layout import Mode
+from tests.app.test_tui_cartesian_jog import START
+
+SIZE = (160, 48)
+GAP_S = 0.04  # a terminal's auto-repeat, at the slow end of its 30-50 ms
+STALL_S = 0.4  # the app's queue stands still this long, in the middle of the hold
+KEYS = 25  # a second of repeats: the stall starts after the fifth
+
+
+def test_a_held_key_outlasts_a_stall_of_the_apps_queue(tui) -> None:
+    async def scenario() -> None:
+        app = tui.app(lockstep=False)
+        async with app.run_test(size=SIZE) as pilot:
+            await tui.ready(app, pilot)
+            client = app.client
+            client.go_to(START, speed=1.0)  # away from the wrist singularity
+            await tui.until(lambda: client.status().mode == Mode.HOLD and np.allclose(
+                client.status().desired, START), timeout=30, what="the arm at START")
+            await pilot.press("w", "m", "9")  # world frame, hold-to-move at 100 %
+            pad = app.query_one(JogPad)
+            stops: list[float] = []
+            post = pad.post_message
+
+            def recorded(message) -> bool:
+                if isinstance(message, JogPad.Stopped):
+                    stops.append(time.monotonic())
+                return post(message)
+
+            pad.post_message = recorded
+
+            async def stall() -> None:  # the app's queue waits; every other task runs
+                await asyncio.sleep(STALL_S)
+
+            for k in range(KEYS):  # z up, held
+                tui.post_key(app, "d")
+                if k == 5:
+                    app.call_later(stall)
+                await asyncio.sleep(GAP_S)
+            let_go = time.monotonic()
+            await tui.until(lambda: stops, what="the release, after the last repeat")
+            assert all(t >= let_go for t in stops), (
+                f"released {let_go - stops[0]:.2f} s before the last repeat")
+            jogs = [e.what for e in app.desk.events.entries if e.kind == "jog"]
+            assert len(jogs) <= 1, f"the hold broke in two: {jogs}"
+
+    asyncio.run(scenario())
