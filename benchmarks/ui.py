@@ -42,7 +42,9 @@ Unimate 2000B. Parts:
 ``--tmux [ROOT ...]`` runs only 9, 5 and 10, for each ROOT given (a worktree of an older
 commit: ``git worktree add /tmp/old HASH``) and then this tree, one after the other in one run;
 ``--idle [ROOT ...]`` only 9, for each ROOT and this tree by turns, ``--rounds`` times, and
-prints each tab's median (the process and its main thread, the event loop that draws).
+prints each tab's median (the process and its main thread, the event loop that draws);
+``--start [ROOT ...]`` only 5, one start of each ROOT and of this tree by turns, ``--rounds``
+times (``--burner``: beside a CPU burner), and prints each one's median.
 """
 
 from __future__ import annotations
@@ -585,6 +587,25 @@ def startup(repeats: int, root: Path = ROOT, burn: bool = False, peer: bool = Fa
     return times
 
 
+def start_rounds(roots: list[Path], rounds: int, burn: bool) -> None:
+    """Part 5 by turns: one start of each of ``roots``, ``rounds`` times (the machine's load
+    drifts: by turns, each root sees the same), then each one's median and spread."""
+    seen: dict[Path, list[float]] = {root: [] for root in roots}
+    with tempfile.TemporaryDirectory() as data_dir, burning(burn):
+        for k in range(rounds):
+            for root in roots:
+                app = TmuxApp(root, data_dir, f"s{k}")
+                try:
+                    seen[root].append(app.wait_for(*LIVE))
+                finally:
+                    app.close()
+    print(f"\n5. startup to a live screen, median of {rounds} starts by turns (tmux "
+          f"{SIZE[0]}×{SIZE[1]}, {'beside a CPU burner' if burn else 'no burner'}; {load()})")
+    for root, times in seen.items():
+        print(f"   {root!s:<28}  median {statistics.median(times):.2f} s  min {min(times):.2f}"
+              f"  max {max(times):.2f}  ({' '.join(f'{t:.2f}' for t in times)})")
+
+
 def idle_cpu(root: Path = ROOT) -> dict[str, tuple[float, float]]:
     """The app's CPU, % of one core, idle on each of Jog, Scope (drawing at its rate) and
     Status, in tmux; nothing else pressed: the process's and its main thread's (the event
@@ -745,7 +766,11 @@ def main() -> None:
     parser.add_argument("--idle", nargs="*", type=Path, metavar="ROOT",
                         help="only part 9 (idle CPU on Jog, Scope and Status) for each ROOT "
                         "given and this tree, by turns, --rounds times")
-    parser.add_argument("--rounds", type=int, default=3, help="rounds of --idle (3)")
+    parser.add_argument("--start", nargs="*", type=Path, metavar="ROOT",
+                        help="only part 5 (start to a live screen) for each ROOT given and this "
+                        "tree, by turns, --rounds times")
+    parser.add_argument("--burner", action="store_true", help="--start beside a CPU burner")
+    parser.add_argument("--rounds", type=int, default=3, help="rounds of --idle and --start (3)")
     parser.add_argument("--browser", action="store_true",
                         help="only part 8: servodesk serve's first render in headless Chromium")
     parser.add_argument("--arm", action="store_true",
@@ -757,6 +782,9 @@ def main() -> None:
         return
     if args.idle is not None:
         idle_rounds([*args.idle, ROOT], args.rounds)
+        return
+    if args.start is not None:
+        start_rounds([*args.start, ROOT], args.rounds, args.burner)
         return
     if args.tmux is not None:
         tmux_figures([*args.tmux, ROOT], 5, 10 if args.quick else 40)

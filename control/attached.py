@@ -22,7 +22,7 @@ from multiprocessing.shared_memory import SharedMemory
 from pathlib import Path
 
 from control import rendezvous
-from control.link import ControllerError, Link, NotCommanding, Setting
+from control.link import ANSWER_S, ControllerError, Link, NotCommanding, Setting
 from control.rt import shm
 from control.rt.commands import Command, EmergencyStop
 from control.rt.events import Commander, Refused
@@ -30,7 +30,6 @@ from control.rt.wire import Broken, Message, Wire
 from control.timing import Timing
 from hw.machine import load_machine
 
-ANSWER_S = 2.0  # how long take_command and release_command wait for the service's answer
 CLOSE_WAIT_S = 1.0  # detaching: how long the client's moves may take to end
 TAKE, RELEASE = "take command", "release command"
 

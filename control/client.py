@@ -29,12 +29,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from control.attached import ANSWER_S, ServiceLink
 from control.embedded import EmbeddedLink
-from control.link import OUTGOING, ControllerError, Link, NotCommanding, Setting
-from control.motion import form_plans
+from control.link import ANSWER_S, OUTGOING, ControllerError, Link, NotCommanding, Setting
 from control.motion.acceptance import accept
-from control.motion.cartesian_jog import plan_jog
 from control.motion.plan import MovePlan, Summary, moving_joints, result_records, summaries
 from control.recorder import Run, RunFiles, coefficients_record, default_data_dir
 from control.rt import sealed, shm
@@ -231,6 +228,9 @@ class ControlClient:
         by default the one in the user's runtime directory), with this class's API
         (``control/attached.py``). It observes until ``take_command``; ``close`` detaches and
         leaves the controller running."""
+        # here, not at the top: a client that starts its controller never needs it
+        from control.attached import ServiceLink
+
         client = cls.__new__(cls)
         client._join(ServiceLink.connect(path, name, timeout_s), on_event, [])
         return client
@@ -727,6 +727,8 @@ class ControlClient:
         trajectory at ``speed`` of each joint's max_speed and max_accel (0 < speed ≤ 1); like
         every closed-loop move it is complete only once in position (``wait``).
         ValueError (nothing sent) for a target outside the limits or a bad speed."""
+        from control.motion import form_plans  # its paths and kinematics: not at the start
+
         plan = form_plans.go_to(self.machine, np.array(self.status().position), q, speed,
                                 dt=self.dt)
         return self.run(replace(plan, meta={**plan.meta, **(meta or {})}))
@@ -747,6 +749,8 @@ class ControlClient:
         needs a joint past its limit or comes near a singularity: the reason names which.
         ``stop_short`` instead jogs as far as the line allows and says why in the handle's
         ``meta["stopped"]``. ValueError for bad input or a machine without kinematics."""
+        from control.motion.cartesian_jog import plan_jog  # its kinematics: not at the start
+
         status = self.status() if stop_short else self._after_move()
         here = start = np.array(status.position)
         target = np.array(status.desired)

@@ -26,11 +26,12 @@ from typing import IO
 import control
 from control.link import ControllerError, Link, Setting
 from control.recovery import recover_runs
-from control.rt import process, shm
+from control.rt import shm
 from control.rt.channel import client_end
 from control.rt.commands import Command, Shutdown
 from control.rt.events import ControllerEvent, Crash, Ready
 from control.rt.layout import HEARTBEAT_WORD, ControlLayout
+from control.rt.process_config import ProcessConfig
 from control.rt.wire import Broken, Message, Unreadable, Wire
 from hw.machine import Coefficients
 
@@ -58,7 +59,7 @@ class EmbeddedLink(Link):
         segment = shm.create(f"ctl{next(_SESSIONS)}", layout.size, "the controller's status")
         layout.write_header(segment.buf)
         slots = timing.slots(machine)
-        config = process.ProcessConfig(
+        config = ProcessConfig(
             machine=str(machine.path), backend=setting.backend, port=setting.port, seed=seed,
             lockstep=setting.lockstep, control_segment=segment.name,
             period_s=setting.dt / slots, spin_us=spin_us, realtime=realtime,

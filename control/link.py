@@ -28,6 +28,7 @@ from control.timing import Timing
 from hw.machine import Coefficients, Machine
 
 OUTGOING = 64  # commands waiting for the wire; more means the other end is not reading
+ANSWER_S = 2.0  # how long take_command and release_command wait for the service's answer
 
 
 class ControllerError(RuntimeError):

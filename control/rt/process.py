@@ -8,20 +8,19 @@ socketpair (the command channel, ``control/rt/wire.py`` frames) and the shared m
 from __future__ import annotations
 
 import contextlib
-import json
 import os
 import signal
 import socket
 import subprocess
 import sys
 import traceback
-from dataclasses import asdict, dataclass
 
 from control.rt import shm
 from control.rt.channel import controller_end
 from control.rt.events import Crash, Ready
 from control.rt.layout import ControlLayout
 from control.rt.loop import Controller, LoopConfig
+from control.rt.process_config import ProcessConfig
 from control.rt.realtime import enter_realtime
 from control.rt.warmup import WarmUp
 from control.rt.wire import Broken, Wire
@@ -30,33 +29,6 @@ from hw.factory import make_backend
 from hw.machine import load_machine
 
 WARM_UP_ENV = "SERVODESK_WARM_UP"  # "0": no shadow ticks; "report": their counters at exit
-
-
-@dataclass(frozen=True)
-class ProcessConfig:
-    """Everything the subprocess needs, picklable."""
-
-    machine: str
-    backend: str
-    port: str | None
-    seed: int
-    lockstep: bool
-    control_segment: str
-    period_s: float
-    spin_us: float
-    realtime: bool
-    heartbeat_timeout_s: float
-    orphan_timeout_s: float
-    sim_options: dict
-    slots: int = 1  # ticks per sample (control/timing.py)
-    slips: tuple[str, ...] = ()
-
-    def to_json(self) -> str:
-        return json.dumps(asdict(self))
-
-    @classmethod
-    def from_json(cls, text: str) -> ProcessConfig:
-        return cls(**json.loads(text))
 
 
 def main(config: ProcessConfig, wire: Wire) -> None:

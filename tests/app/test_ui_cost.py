@@ -430,6 +430,46 @@ asyncio.run(main())
     assert not others & set(seen["loaded"]), sorted(others & set(seen["loaded"]))
 
 
+# what a client that starts its own controller never runs: a service's link and its
+# rendezvous, the controller process's own code, the move planners the first tab does not use
+NOT_AT_START = ("control.attached", "control.rendezvous", "control.rt.process",
+                "control.rt.loop", "control.motion.form_plans")
+
+
+def test_an_app_live_on_its_own_controller_has_not_imported_what_it_does_not_run(tui) -> None:
+    """A fresh interpreter (this one has imported everything): the app started on a controller
+    of its own, the modules of ``NOT_AT_START`` loaded once its first frame is drawn and the
+    controller is up. The old control.client imported them all before it could start the
+    controller, and the screen after it (``tui`` is taken for its data directory)."""
+    script = f"""
+import asyncio, json, sys
+from pathlib import Path
+import app.tui
+from app.tui import ServodeskApp
+
+class Live(ServodeskApp):
+    CSS_PATH = [str(Path(app.tui.__file__).parent / path) for path in ServodeskApp.CSS_PATH]
+    drawn = False
+
+    def on_mount(self):
+        self.call_after_refresh(setattr, self, "drawn", True)
+
+async def main():
+    app = Live("unimate2000b", "sim", None, {str(tui.data_dir)!r},
+               client_options={{"heartbeat_timeout_s": 2.0}})
+    async with app.run_test(size=(160, 48)) as pilot:
+        while not (app.drawn and app.client is not None):
+            await asyncio.sleep(0.01)
+        print(json.dumps(sorted(set({NOT_AT_START!r}) & set(sys.modules))))
+
+asyncio.run(main())
+"""
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=120, cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO)})
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout.strip().splitlines()[-1]) == []
+
+
 @pytest.mark.skipif(TMUX is None, reason="tmux is not installed (apt-get install tmux)")
 def test_servodesk_starts_its_controller_before_it_imports_the_screen(tmp_path: Path) -> None:
     """``servodesk`` in a real terminal: when the controller's process is started, Textual is
