@@ -361,6 +361,7 @@ def test_tabs_not_shown_are_not_built_before_the_first_frame(tui) -> None:
             tui.post_key(app, "f3")
             scope = app.tab("scope")
             await tui.until(lambda: scope.visible_now, what="the Scope tab shown")
+            await tui.no_tab_half_built(app)
 
     asyncio.run(scenario())
 
@@ -387,6 +388,7 @@ def test_a_tab_chosen_while_it_is_being_built_shows_whole(tui) -> None:
                             and all(p.styles.visibility == "visible" for p in parts),
                             what=lambda: f"Moves' parts: {[p.styles.visibility for p in parts]}")
             await pilot.pause()
+            await tui.no_tab_half_built(app)
 
     asyncio.run(scenario())
 
