@@ -12,7 +12,7 @@ there, to keep CI short.
 Cost: a test that starts a process (the control subprocess through
 ``ControlClient``, the emulator, a CLI, tmux) or the TUI, or that takes seconds
 without one (a file at its size bound, a deep fuzz), is marked ``slow`` here,
-centrally (``pytest_collection_modifyitems``), so that ``pytest -m "not slow"``
+centrally (``pytest_collection_modifyitems``), so that ``pytest -m "not slow" -n 2``
 is the inner loop. Every other test is watched: one that starts a process
 anyway fails at teardown, naming what it started and where to mark it.
 """
@@ -134,6 +134,11 @@ SLOW_TESTS = (
     "tests/hw/sim/test_plant.py::test_full_duty_speed_is_what_the_plant_reaches",
     "tests/control/motion/test_acceptance.py::"
     "test_a_move_longer_than_the_move_limit_is_refused_approach_and_all",
+    # every module's classes parsed for the names the docs cite (the first doc pays: 0.8 s)
+    "tests/test_docs.py::test_every_name_a_doc_cites_exists",
+    "tests/test_docs.py::test_the_check_finds_what_is_not_there",
+    # 4,500 lockstep ticks with and without the warm-up, 0.8 s
+    "tests/control/test_warm_up.py::test_the_live_loop_is_bit_for_bit_the_same_with_the_warm_up",
     # 10,000 machine files changed and run on a controller, about a minute
     "tests/hw/test_machine_fuzz.py::"
     "test_ten_thousand_changed_machine_files_load_and_run_or_name_their_key",

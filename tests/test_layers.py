@@ -14,12 +14,12 @@ from __future__ import annotations
 
 import ast
 from collections.abc import Iterator
+from functools import cache
 from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-PROJECT = ("app", "control", "hw", "kinematics")
 # What pure numpy kinematics may import: numpy and the stdlib's plain computation, nothing
 # that reads a file or finds a package (tomllib, pathlib, importlib, io, os…).
 KINEMATICS_MAY_IMPORT = ("__future__", "collections", "dataclasses", "functools", "itertools",
@@ -60,14 +60,12 @@ def under(module: str, *packages: str) -> bool:
     return any(module == p or module.startswith(f"{p}.") for p in packages)
 
 
+@cache  # read when a test asks, not at collection (0.6 s: every xdist worker collects)
 def arrows(package: str) -> list[tuple[str, int, str]]:
     """``(module, line, imported)`` for every import of every module of ``package``."""
     return [(module_name(path), line, imported)
             for path in sorted((ROOT / package).rglob("*.py"))
             for line, imported in imports_of(path)]
-
-
-ARROWS = {package: arrows(package) for package in PROJECT}
 
 
 def shown(found: list[tuple[str, int, str]]) -> str:
@@ -87,34 +85,34 @@ def test_the_import_reader_sees_late_relative_and_from_imports() -> None:
 
 
 def test_kinematics_is_pure_numpy_and_imports_nothing_of_the_project() -> None:
-    found = [a for a in ARROWS["kinematics"] if not under(a[2], *KINEMATICS_MAY_IMPORT)]
+    found = [a for a in arrows("kinematics") if not under(a[2], *KINEMATICS_MAY_IMPORT)]
     assert found == [], (f"{shown(found)}: kinematics takes its numbers from the caller "
                          "(control.motion.robot_model builds models from machine files)")
 
 
 def test_hw_imports_neither_control_nor_app_nor_kinematics() -> None:
-    found = [a for a in ARROWS["hw"] if under(a[2], "control", "app", "kinematics")]
+    found = [a for a in arrows("hw") if under(a[2], "control", "app", "kinematics")]
     assert found == [], f"{shown(found)}: hw is the core the others stand on"
 
 
 def test_the_machine_description_knows_no_backend() -> None:
     """Only the factory builds a backend; the machine description, transmission and the
     Backend interface know neither the simulator nor the I/O board."""
-    found = [a for a in ARROWS["hw"]
+    found = [a for a in arrows("hw")
              if under(a[2], *BACKENDS) and not under(a[0], *BACKENDS, *BUILDS_BACKENDS)]
     assert found == [], (f"{shown(found)}: a backend checks what it needs of a machine as it "
                          "is built (hw.sim.check_plant)")
 
 
 def test_control_imports_nothing_of_the_app() -> None:
-    found = [a for a in ARROWS["control"] if under(a[2], "app")]
+    found = [a for a in arrows("control") if under(a[2], "app")]
     assert found == [], shown(found)
 
 
 def test_the_1_khz_code_imports_nothing_of_control_outside_it() -> None:
     """``control/rt/`` is what runs at 1 kHz and in the control process: the client, planning,
     identification and run files stand on it, never the other way round."""
-    found = [a for a in ARROWS["control"]
+    found = [a for a in arrows("control")
              if under(a[0], "control.rt") and under(a[2], "control")
              and not under(a[2], "control.rt")]
     assert found == [], shown(found)
@@ -124,5 +122,5 @@ def test_the_1_khz_code_imports_nothing_of_control_outside_it() -> None:
 def test_plotting_imports_nothing_of_the_ui(ui: str) -> None:
     """Plots are drawn as strips and exported without a screen (``servodesk runs export``);
     the widgets show them, never the other way round."""
-    found = [a for a in ARROWS["app"] if under(a[0], "app.plotting") and under(a[2], ui)]
+    found = [a for a in arrows("app") if under(a[0], "app.plotting") and under(a[2], ui)]
     assert found == [], shown(found)
