@@ -22,6 +22,7 @@ add /tmp/old <rev>``, then ``PYTHONPATH=/tmp/old``), else this file's repository
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import platform
@@ -33,8 +34,10 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -48,6 +51,11 @@ from control.client import SPIN_US
 from control.rt.layout import HIST_BIN_NS
 from hw.machine import load_machine
 from hw.transmission import valve_duty
+
+if TYPE_CHECKING:
+    from control.rt.loop import Controller
+    from hw.backend import Backend
+    from hw.machine import Machine
 
 WARM_UP_ENV = "SERVODESK_WARM_UP"  # control/rt/process.py: "0" starts it with no warm-up
 TABLE_2_1 = {"min_us": 11.5, "mean_us": 13.97, "max_us": 54.0, "ticks": 100_290}
@@ -144,14 +152,36 @@ def tight_compute(machine: str, batches: int = 7, ticks: int = 1000) -> tuple[fl
     return compute, io
 
 
-def tight_child(machine_name: str, batches: int, ticks: int) -> tuple[float, float]:
-    """``tight_compute``'s child: a batch to warm up, the batches, their median means (µs)."""
+@contextlib.contextmanager
+def bare_controller(machine: Machine, backend: Backend, name: str) -> Iterator[Controller]:
+    """A controller of ``machine`` on ``backend`` with a status segment of its own and no
+    client (nothing ever missed), released on the way out: the children's tight and warm
+    loops."""
     import socket
 
     from control.rt import shm
     from control.rt.channel import controller_end
     from control.rt.layout import ControlLayout
     from control.rt.loop import Controller, LoopConfig
+
+    period = round(machine.sample_time_s * 1e9)
+    ours, theirs = socket.socketpair()
+    layout = ControlLayout(machine.n_joints)
+    segment = shm.create(name, layout.size)
+    layout.write_header(segment.buf)
+    controller = Controller(machine, backend, controller_end(theirs), segment.buf,
+                            LoopConfig(period_ns=period, heartbeat_timeout_ns=10**15,
+                                       orphan_timeout_ns=10**15))
+    try:
+        yield controller
+    finally:
+        controller.release()
+        shm.release(segment, unlink=True)
+        ours.close()
+
+
+def tight_child(machine_name: str, batches: int, ticks: int) -> tuple[float, float]:
+    """``tight_compute``'s child: a batch to warm up, the batches, their median means (µs)."""
     from control.rt.realtime import enter_realtime
     from hw.backend import RealClock
     from hw.sim.backend import SimBackend
@@ -159,14 +189,7 @@ def tight_child(machine_name: str, batches: int, ticks: int) -> tuple[float, flo
     machine = load_machine(machine_name)
     backend = SimBackend(machine, lockstep=True)
     period = round(machine.sample_time_s * 1e9)
-    ours, theirs = socket.socketpair()
-    layout = ControlLayout(machine.n_joints)
-    segment = shm.create("tight", layout.size)
-    layout.write_header(segment.buf)
-    controller = Controller(machine, backend, controller_end(theirs), segment.buf,
-                            LoopConfig(period_ns=period, heartbeat_timeout_ns=10**15,
-                                       orphan_timeout_ns=10**15))
-    try:
+    with bare_controller(machine, backend, "tight") as controller:
         backend.open()
         controller.start()
         controller.clock = RealClock()  # the controller times itself; the plant steps lockstep
@@ -182,10 +205,6 @@ def tight_child(machine_name: str, batches: int, ticks: int) -> tuple[float, flo
             means.append(((latency.compute_total_ns - compute0) / ticks / 1e3,
                           (latency.io_total_ns - io0) / ticks / 1e3))
         return sorted(means[1:])[batches // 2]
-    finally:
-        controller.release()
-        shm.release(segment, unlink=True)
-        ours.close()
 
 
 def warm_compute(machine: str, spin_us: float, turns: int = 8, ticks: int = 1000) -> dict | None:
@@ -204,12 +223,6 @@ def warm_child(machine_name: str, spin_us: float, turns: int, ticks: int) -> dic
     as many with it, by turns: the median of each's means of compute per tick (µs), each's
     wake-up lateness p99 (µs, the live tick's start after its deadline), and the warm-up's
     counters over its turns."""
-    import socket
-
-    from control.rt import shm
-    from control.rt.channel import controller_end
-    from control.rt.layout import ControlLayout
-    from control.rt.loop import Controller, LoopConfig
     from control.rt.realtime import enter_realtime
     from hw.sim.backend import SimBackend
     try:
@@ -221,44 +234,36 @@ def warm_child(machine_name: str, spin_us: float, turns: int, ticks: int) -> dic
     backend = SimBackend(machine)
     backend.clock.spin_ns = round(spin_us * 1e3)
     period = round(machine.sample_time_s * 1e9)
-    ours, theirs = socket.socketpair()
-    layout = ControlLayout(machine.n_joints)
-    segment = shm.create("warm", layout.size)
-    layout.write_header(segment.buf)
-    controller = Controller(machine, backend, controller_end(theirs), segment.buf,
-                            LoopConfig(period_ns=period, heartbeat_timeout_ns=10**15,
-                                       orphan_timeout_ns=10**15))
-    warm_up = WarmUp.beside(controller)
-    try:
-        backend.open()
-        controller.start()
-        enter_realtime()
-        latency = controller.latency
-        means: dict[bool, list[float]] = {False: [], True: []}
-        late: dict[bool, list[int]] = {False: [], True: []}
-        controller.deadline = backend.clock.now_ns() + period
-        for turn in range(2 * turns + 2):
-            on = turn % 2 == 1
-            controller.warm_up = warm_up if on else None
-            compute0 = latency.compute_total_ns
-            for _ in range(ticks):
-                controller.cycle()
-                late[on].append(latency.late_ns)
-            if turn >= 2:  # the first two: a warm-up
-                means[on].append((latency.compute_total_ns - compute0) / ticks / 1e3)
-        return {"off_us": float(np.median(means[False])), "on_us": float(np.median(means[True])),
-                "off_p99_us": float(np.percentile(late[False], 99)) / 1e3,
-                "on_p99_us": float(np.percentile(late[True], 99)) / 1e3,
-                "windows": warm_up.windows, "ran": warm_up.ran, "skipped": warm_up.skipped,
-                "pieces": warm_up.pieces_run, "late": warm_up.late,
-                "late_max_us": warm_up.late_max_ns / 1e3,
-                "error": warm_up.error}
-    finally:
-        controller.warm_up = None
-        warm_up.close()
-        controller.release()
-        shm.release(segment, unlink=True)
-        ours.close()
+    with bare_controller(machine, backend, "warm") as controller:
+        warm_up = WarmUp.beside(controller)
+        try:
+            backend.open()
+            controller.start()
+            enter_realtime()
+            latency = controller.latency
+            means: dict[bool, list[float]] = {False: [], True: []}
+            late: dict[bool, list[int]] = {False: [], True: []}
+            controller.deadline = backend.clock.now_ns() + period
+            for turn in range(2 * turns + 2):
+                on = turn % 2 == 1
+                controller.warm_up = warm_up if on else None
+                compute0 = latency.compute_total_ns
+                for _ in range(ticks):
+                    controller.cycle()
+                    late[on].append(latency.late_ns)
+                if turn >= 2:  # the first two: a warm-up
+                    means[on].append((latency.compute_total_ns - compute0) / ticks / 1e3)
+            return {"off_us": float(np.median(means[False])),
+                    "on_us": float(np.median(means[True])),
+                    "off_p99_us": float(np.percentile(late[False], 99)) / 1e3,
+                    "on_p99_us": float(np.percentile(late[True], 99)) / 1e3,
+                    "windows": warm_up.windows, "ran": warm_up.ran, "skipped": warm_up.skipped,
+                    "pieces": warm_up.pieces_run, "late": warm_up.late,
+                    "late_max_us": warm_up.late_max_ns / 1e3,
+                    "error": warm_up.error}
+        finally:
+            controller.warm_up = None
+            warm_up.close()
 
 
 @dataclass(frozen=True)

@@ -14,11 +14,8 @@ from __future__ import annotations
 import asyncio
 import time
 
-import numpy as np
-
 from app.tabs.jog import JogPad
-from control.rt.layout import Mode
-from tests.app.test_tui_cartesian_jog import START
+from tests.app.test_tui_cartesian_jog import held_in_world_at_start
 
 SIZE = (160, 48)
 GAP_S = 0.04  # a terminal's auto-repeat, at the slow end of its 30-50 ms
@@ -30,12 +27,7 @@ def test_a_held_key_outlasts_a_stall_of_the_apps_queue(tui) -> None:
     async def scenario() -> None:
         app = tui.app(lockstep=False)
         async with app.run_test(size=SIZE) as pilot:
-            await tui.ready(app, pilot)
-            client = app.client
-            client.go_to(START, speed=1.0)  # away from the wrist singularity
-            await tui.until(lambda: client.status().mode == Mode.HOLD and np.allclose(
-                client.status().desired, START), timeout=30, what="the arm at START")
-            await pilot.press("w", "m", "9")  # world frame, hold-to-move at 100 %
+            await held_in_world_at_start(tui, app, pilot)
             pad = app.query_one(JogPad)
             stops: list[float] = []
             post = pad.post_message

@@ -200,6 +200,16 @@ def hold(tui, app, key: str, seconds: float, gap: float = 0.04) -> asyncio.Task:
     return asyncio.ensure_future(repeat())
 
 
+async def held_in_world_at_start(tui, app, pilot) -> None:
+    """The app live, the arm at START, the Jog pad in the world frame, hold-to-move at 100 %."""
+    await tui.ready(app, pilot)
+    client = app.client
+    client.go_to(START, speed=1.0)  # away from the wrist singularity
+    await tui.until(lambda: client.status().mode == Mode.HOLD and np.allclose(
+        client.status().desired, START), timeout=30, what="the arm at START")
+    await pilot.press("w", "m", "9")
+
+
 def test_holding_a_key_moves_the_tool_along_its_axis_in_one_continuous_motion(tui) -> None:
     """Issue 25 item 3: held 5 s at 25 mm/s the tool goes 125 mm ± 10 % up z with under 1 mm
     sideways (the commanded tool), stops on release within its braking distance, and leaves
@@ -207,13 +217,9 @@ def test_holding_a_key_moves_the_tool_along_its_axis_in_one_continuous_motion(tu
     async def scenario() -> None:
         app = tui.app(lockstep=False)
         async with app.run_test(size=SIZE) as pilot:
-            await tui.ready(app, pilot)
+            await held_in_world_at_start(tui, app, pilot)
             client = app.client
-            client.go_to(START, speed=1.0)  # away from the wrist singularity
-            await tui.until(lambda: client.status().mode == Mode.HOLD and np.allclose(
-                client.status().desired, START), timeout=30, what="the arm at START")
             start = MODEL.pose(START)
-            await pilot.press("w", "m", "9")  # world frame, hold-to-move at 100 %
             assert app.query_one(JogPad).mode == "hold-to-move"
             drift = [0.0]
 
