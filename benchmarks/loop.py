@@ -152,6 +152,15 @@ def tight_compute(machine: str, batches: int = 7, ticks: int = 1000) -> tuple[fl
     return compute, io
 
 
+def windows_text(counters: dict, late_max_us: float) -> str:
+    """The warm-up's counters (``WarmUp.report``'s) as a line's end."""
+    windows = max(counters["windows"], 1)
+    return (f"{counters['ran'] / windows:.2f} shadow ticks ({counters['pieces'] / windows:.1f} "
+            f"pieces) a window, {100 * counters['skipped'] / windows:.1f} % of windows skipped "
+            f"(no room), {counters['late']} ended late of {counters['windows']} (at most "
+            f"{late_max_us:.0f} µs)")
+
+
 @contextlib.contextmanager
 def bare_controller(machine: Machine, backend: Backend, name: str) -> Iterator[Controller]:
     """A controller of ``machine`` on ``backend`` with a status segment of its own and no
@@ -452,24 +461,16 @@ def run(seconds: float, machine: str, spin_us: float, warmup: float,
           f"{control_us / (m['tight_us'] - m['tight_io_us']):.2f}")
     warm = m["warm"]
     if warm is not None:
-        windows = max(warm["windows"], 1)
         print(f"  warm-up (shadow pieces in the window before each deadline), by turns in one "
               f"real-time child: compute {warm['on_us']:.1f} µs with it, {warm['off_us']:.1f} µs "
               f"without ({warm['on_us'] / warm['off_us'] - 1:+.0%}); wake-up p99 "
               f"{warm['on_p99_us']:.0f} µs with it, {warm['off_p99_us']:.0f} without; "
-              f"{warm['ran'] / windows:.2f} shadow ticks ({warm['pieces'] / windows:.1f} pieces) "
-              f"a window, {100 * warm['skipped'] / windows:.1f} % of windows "
-              f"skipped (no room), {warm['late']} ended late of {warm['windows']} (at most "
-              f"{warm['late_max_us']:.0f} µs)" + (f"; error: {warm['error']}" if warm["error"]
-                                                  else ""))
+              f"{windows_text(warm, warm['late_max_us'])}"
+              + (f"; error: {warm['error']}" if warm["error"] else ""))
     counted = m["warm_report"]
     if counted is not None:
-        windows = max(counted["windows"], 1)
-        print(f"  warm-up in this control process: {counted['ran'] / windows:.2f} shadow ticks "
-              f"({counted['pieces'] / windows:.1f} pieces) a window, "
-              f"{100 * counted['skipped'] / windows:.1f} % of windows skipped (no "
-              f"room), {counted['late']} of {counted['windows']} ended late (at most "
-              f"{counted['late_max_ns'] / 1e3:.0f} µs)")
+        print(f"  warm-up in this control process: "
+              f"{windows_text(counted, counted['late_max_ns'] / 1e3)}")
     cold = m["cold"]
     if cold is not None:
         ct = cold["cyclictest"]
