@@ -208,6 +208,12 @@ async def held_in_world_at_start(tui, app, pilot) -> None:
     await tui.until(lambda: client.status().mode == Mode.HOLD and np.allclose(
         client.status().desired, START), timeout=30, what="the arm at START")
     await pilot.press("w", "m", "9")
+    pad = app.query_one(JogPad)
+    # each of these keys stops the pad (a Stopped): handled before the test goes on, so that
+    # none is taken for the end of its hold (Pilot's idle wait can return first on a loaded
+    # machine)
+    await tui.until(lambda: (pad.frame, pad.mode, pad.increment) == ("world", "hold-to-move", 9),
+                    what="the pad in the world frame, hold-to-move at 100 %")
 
 
 def test_holding_a_key_moves_the_tool_along_its_axis_in_one_continuous_motion(tui) -> None:
