@@ -245,6 +245,15 @@ def test_status_is_drawn_at_most_ten_times_a_second_and_only_what_changed(tui) -
     asyncio.run(scenario())
 
 
+async def status_block_shown(tui, app, pilot, name: str, shows: str) -> LiveText:
+    """The app live on its Status tab (F4), its block ``name`` showing ``shows``."""
+    await tui.ready(app, pilot)
+    await pilot.press("f4")
+    block = app.query_one(f"#status-{name}", LiveText)
+    await tui.until(lambda: shows in tui.text(block), what=f"the {name} block")
+    return block
+
+
 def test_a_status_block_that_reads_the_same_is_not_made_again(tui, monkeypatch) -> None:
     """The Status tab makes a block again only when what it is made of changed: the link's
     counters stay at zero on the simulator, so its block is made once, not ten times a
@@ -252,17 +261,14 @@ def test_a_status_block_that_reads_the_same_is_not_made_again(tui, monkeypatch) 
     made: list[int] = []
     link = StatusTab._link
 
-    def counted(self: StatusTab, status: object) -> Text:
+    def counted(self: StatusTab, status: object) -> list[Text]:
         made.append(1)
         return link(self, status)  # type: ignore[arg-type]
 
     async def scenario() -> None:
         app = tui.app(lockstep=False)
         async with app.run_test(size=(160, 48)) as pilot:
-            await tui.ready(app, pilot)
-            await pilot.press("f4")
-            block = app.query_one("#status-link", LiveText)
-            await tui.until(lambda: "crc errors" in tui.text(block), what="the link block")
+            block = await status_block_shown(tui, app, pilot, "link", "crc errors")
             monkeypatch.setattr(StatusTab, "_link", counted)
             await watch_ticks(app, OBSERVED_TICKS)
             assert len(made) <= 1, f"the link block made {len(made)} times unchanged"
@@ -286,10 +292,7 @@ def test_a_status_block_is_shown_by_its_lines_not_split_each_tick(tui, monkeypat
     async def scenario() -> None:
         app = tui.app(lockstep=False)
         async with app.run_test(size=(160, 48)) as pilot:
-            await tui.ready(app, pilot)
-            await pilot.press("f4")
-            loop = app.query_one("#status-loop", LiveText)
-            await tui.until(lambda: "controller time" in tui.text(loop), what="the loop block")
+            loop = await status_block_shown(tui, app, pilot, "loop", "controller time")
             monkeypatch.setattr(LiveLines, "show", counted)
             before = tui.text(loop)
             await watch_ticks(app, OBSERVED_TICKS)
