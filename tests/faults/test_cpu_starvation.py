@@ -120,14 +120,19 @@ def test_overrun_holds_under_starvation_keep_the_commanded_target(controller, un
     target and inside its 2.5° standstill following error, so a hold taken where the arm is
     would move the target by 50 counts."""
     client: ControlClient = controller(realtime=False, heartbeat_timeout_s=60.0)
+    # every term zero, the velocity feed-forward too: a jog's target moving at its speed
+    # opened Rotate's valve by kv, and a loaded loop's jog kept it open for longer (one
+    # suite run: the arm ended 6.85° past its target before the starvation began)
     zero = replace(UNIMATE.hold, name="zero", kp=((0.0,),) * 6, ki=(0.0,) * 6,
-                   kd=(0.0,) * 6, w=((),) * 6)
+                   kd=(0.0,) * 6, w=((),) * 6, kv=(0.0,) * 6)
     client.set_coefficients("hold", zero, override="test: the arm stays where it is left")
     start = np.array(client.status().position)
     client.jog_position("rotate", 1.5)
     until(lambda: abs(client.status().desired[ROTATE] - start[ROTATE] - 1.5) < 1e-9, 10.0,
           "Rotate's target jogged on")
     commanded = np.array(client.status().desired)
+    left = client.status().position[ROTATE]
+    assert abs(left - start[ROTATE]) < 0.1, f"Rotate moved {left - start[ROTATE]:.2f}° on the jog"
     client.poll_events()  # a fault from a loaded start is not one of these
     targets, away = [], []
     # at nice 0 beside them a waking loop was served first often enough to keep up (it
