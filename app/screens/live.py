@@ -17,6 +17,7 @@ from textual._compositor import ChopsUpdate, Compositor
 from textual.geometry import Region
 from textual.screen import Screen
 from textual.strip import Strip
+from textual.widget import Widget
 
 NOTHING = Strip([])  # a piece of a line not sent
 
@@ -28,6 +29,10 @@ class ChangedRowsCompositor(Compositor):
     def __init__(self) -> None:
         super().__init__()
         self._changed: list[Region] | None = None  # while a partial update is drawn
+        # the widgets shown, front to back, and on each row: for the widgets shown in _rows_for
+        self._rows_for: object = None
+        self._front_to_back: list[tuple[Widget, Region, Region]] = []
+        self._rows: list[list[tuple[int, int, int]]] = []
 
     def render_partial_update(self) -> ChopsUpdate | None:
         self._changed = list(self._dirty_regions)
@@ -54,37 +59,47 @@ class ChangedRowsCompositor(Compositor):
         if not changed or crop is None:  # a full update: every widget, whole
             yield from super()._get_renders(crop)
             return
-        # the changed cells no widget drawn so far covers: widgets come front to back, and
-        # the front one's cells are sent, so a container under its children is drawn only
-        # where a change shows it (its padding, a border), most ticks not at all
-        uncovered = changed
-        for widget, (region, clip) in self.visible_widgets.items():
-            if not uncovered:
-                return
+        # for each row of changed cells, the widgets on that row front to back: the front one's
+        # cells are sent, so a container under its children is drawn only where a change shows
+        # it (its padding, a border), most ticks not at all
+        rows_of = self._rows_of_widgets()
+        reached: dict[int, list[int]] = {}  # a widget's place in front: its first, last row
+        for y, x1, x2 in self._regions_to_spans(changed):
+            uncovered = [(x1, x2)]
+            for place, left, right in rows_of[y] if 0 <= y < len(rows_of) else ():
+                if not any(left < end and start < right for start, end in uncovered):
+                    continue
+                rows = reached.setdefault(place, [y, y])
+                rows[1] = y
+                uncovered = [piece for start, end in uncovered
+                             for piece in ((start, min(end, left)), (max(start, right), end))
+                             if piece[0] < piece[1]]
+                if not uncovered:
+                    break
+        widgets = self._front_to_back
+        for place in sorted(reached):
+            widget, region, clip = widgets[place]
+            top, bottom = reached[place]
             shown = region.intersection(clip)
-            if not crop.overlaps(shown):  # most widgets: away from every change
-                continue
-            reached = [shown.intersection(c) for c in uncovered if shown.overlaps(c)]
-            if not reached:  # nothing of it is sent: its cells are not in any change
-                continue
-            uncovered = [piece for c in uncovered for piece in without(c, shown)]
-            top = min(r.y for r in reached)
-            rows = Region(shown.x, top, shown.width, max(r.bottom for r in reached) - top)
+            rows = Region(shown.x, top, shown.width, bottom + 1 - top)
             # the rows as the widget's own clip: the compositor places them where they are
             yield region, clip.intersection(rows), widget.render_lines(
                 rows.translate((-region.x, -region.y)))
 
-
-def without(region: Region, cut: Region) -> list[Region]:
-    """What of ``region`` is outside ``cut``: up to four regions (above, below, left, right)."""
-    if not region.overlaps(cut):
-        return [region]
-    x, y, width, height = region
-    top, bottom = max(y, cut.y), min(y + height, cut.bottom)
-    pieces = [Region(x, y, width, top - y), Region(x, bottom, width, y + height - bottom),
-              Region(x, top, cut.x - x, bottom - top),
-              Region(cut.right, top, x + width - cut.right, bottom - top)]
-    return [piece for piece in pieces if piece.width > 0 and piece.height > 0]
+    def _rows_of_widgets(self) -> list[list[tuple[int, int, int]]]:
+        """Each row of the screen's widgets front to back, as (place, first column, end): made
+        again only when the widgets shown or where they are changed."""
+        visible = self.visible_widgets
+        if self._rows_for is not visible:
+            self._rows_for = visible
+            self._front_to_back = [(w, region, clip) for w, (region, clip) in visible.items()]
+            rows: list[list[tuple[int, int, int]]] = [[] for _ in range(self.size.height)]
+            for place, (_, region, clip) in enumerate(self._front_to_back):
+                x, y, width, height = region.intersection(clip)
+                for row in rows[max(0, y):max(0, y + height)]:
+                    row.append((place, x, x + width))
+            self._rows = rows
+        return self._rows
 
 
 def fits_textual() -> bool:

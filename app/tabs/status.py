@@ -10,16 +10,17 @@ whole; the tab scrolls when the screen is short."""
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 
 import numpy as np
-from rich.cells import cell_len
 from rich.text import Span, Text
 from textual.app import ComposeResult
 from textual.containers import Horizontal, VerticalScroll
 
 from app.tabs.tab import TabPage
+from app.widgets.aligned_rows import GAP, AlignedRows, Cell
 from app.widgets.header import MODE_NAMES, StatusHeader
 from app.widgets.limit_bar import LimitBar
 from app.widgets.live_text import LiveLines, LiveText
@@ -28,7 +29,6 @@ from hw.machine import Machine
 
 POSE_LABELS = (("x", "mm"), ("y", "mm"), ("z", "mm"), ("γ", "°"), ("β", "°"), ("α", "°"))
 FULL_WIDTH = 100  # columns the joints' table needs for every column
-GAP = 2  # columns between two of a table's columns
 
 
 class StatusTab(TabPage):
@@ -54,16 +54,26 @@ class StatusTab(TabPage):
         # each block as last made, with what it was made from: a joint at rest, the pose
         # and the link counters read the same tick after tick, and are not made again
         self._made: dict[str, tuple[object, list[Text]]] = {}
-        self.watch(self.screen.query_one(StatusHeader), "status", self._header_ticked,
-                   init=False)
+        # each table's rows as laid out: a tick lays out again only the cells that changed
+        self._tables = {
+            "joints": AlignedRows(("left",) + ("right",) * 7, edge=" ", header=True),
+            "joints narrow": AlignedRows(("left",) + ("right",) * 5),
+            "pose": AlignedRows(("left", "right"), gap=1),
+            "loop": AlignedRows(("left", "right"), gap=1),
+            "link": AlignedRows(("left", "right"), gap=1)}
+        self._bars: dict[int, tuple[tuple[int, int, int, str], Text]] = {}  # each joint's
+        self._header = self.screen.query_one(StatusHeader)
+        self.watch(self._header, "status", self._header_ticked, init=False)
 
     def _header_ticked(self) -> None:
-        if self.visible_now:
-            self.refresh_live()
+        if self.visible_now:  # the status the header shows: not read and decoded again
+            self._show(self._header.status if self.client is not None else None)
 
     def refresh_live(self) -> None:
+        self._show(self.status())
+
+    def _show(self, status: Status | None) -> None:
         joints, pose, loop, link = self._blocks
-        status = self.status()
         if status is None:
             joints.show(Text("waiting for the controller…", "yellow"))
             return
@@ -91,11 +101,12 @@ class StatusTab(TabPage):
 
     # Each block is its lines of text in aligned columns, not a rich Table: a table's layout
     # cost 9 ms a frame at ten frames a second, most of the idle tab's CPU; nor one Text, which
-    # the widget would split into its lines again each tick.
+    # the widget would split into its lines again each tick. Its rows are laid out again only
+    # where they changed (``AlignedRows``): idle, every joint's glitch count changes a tick.
 
     def _joints(self, status: Status, width: int = FULL_WIDTH + 60) -> list[Text]:
-        rows: list[list[str | Text]] = [["joint", "position", "desired", "error", "duty %",
-                                         "valve %", "raw", "glitches"]]
+        rows: list[list[Cell]] = [["joint", "position", "desired", "error", "duty %",
+                                   "valve %", "raw", "glitches"]]
         for j, joint in enumerate(self.machine.joints):
             q, d = status.position[j], status.desired[j]
             e = d - q if math.isfinite(d) else math.nan
@@ -104,37 +115,40 @@ class StatusTab(TabPage):
                 _num(e, joint.symbol), _pct(status.duty[j], 7), _pct(status.valve[j], 7),
                 f"{status.raw[j]:#06x}",
                 Text(str(status.glitches[j]), "yellow" if status.glitches[j] else "dim")])
-        return self._with_bars(status, rows, width, edge=" ", least=8)
+        return self._with_bars(self._tables["joints"], status, rows, width, least=8)
 
     def _joints_narrow(self, status: Status, width: int = 80) -> list[Text]:
         """The joints' table in 80 columns: no raw word or glitches, two decimals."""
-        rows: list[list[str | Text]] = [["joint", "position", "desired", "error", "duty %",
-                                         "valve %"]]
+        rows: list[list[Cell]] = [["joint", "position", "desired", "error", "duty %",
+                                   "valve %"]]
         for j, joint in enumerate(self.machine.joints):
             q, d = status.position[j], status.desired[j]
             e = d - q if math.isfinite(d) else math.nan
             rows.append([
                 joint.name, f"{q:.2f} {joint.symbol}", _num(d, joint.symbol, ".2f"),
                 _num(e, "", "+.3f"), _pct(status.duty[j]), _pct(status.valve[j])])
-        return self._with_bars(status, rows, width, edge="", least=10)
+        return self._with_bars(self._tables["joints narrow"], status, rows, width, least=10)
 
-    def _with_bars(self, status: Status, rows: list[list[str | Text]], width: int, edge: str,
-                   least: int) -> list[Text]:
+    def _with_bars(self, table: AlignedRows, status: Status, rows: list[list[Cell]],
+                   width: int, least: int) -> list[Text]:
         """``rows`` (a header, then a row a joint) in columns, each joint's limit bar in what
         the line has left (at least ``least`` columns), under the title "joints"."""
-        lines = columns(rows, ("left",) + ("right",) * (len(rows[0]) - 1), edge=edge)
-        bar = max(least, width - lines[0].cell_len - len(edge) - GAP)
-        out = [_title("joints")]
-        for i, line in enumerate(lines):
-            line.append(" " * GAP)
-            if i == 0:
-                line.append("limits", "bold")
-            else:
-                joint = self.machine.joints[i - 1]
-                line.append_text(LimitBar(status.position[i - 1], joint.lower, joint.upper,
-                                          status.desired[i - 1]).text(bar))
-            out.append(line)
-        return out
+        def bars(used: int) -> list[Cell]:
+            bar = max(least, width - used - len(table.edge) - GAP)
+            return [Text("limits", "bold"), *(self._bar(j, status, bar)
+                                              for j in range(self.machine.n_joints))]
+
+        return [_title("joints"), *table.lines(rows, after=bars)]
+
+    def _bar(self, j: int, status: Status, width: int) -> Text:
+        """Joint ``j``'s limit bar ``width`` wide: as last drawn while its marks stay."""
+        joint = self.machine.joints[j]
+        marks = LimitBar(status.position[j], joint.lower, joint.upper,
+                         status.desired[j]).marks(width)
+        drawn = self._bars.get(j)
+        if drawn is None or drawn[0] != marks:
+            drawn = self._bars[j] = (marks, LimitBar.drawn(marks))
+        return drawn[1]
 
     def _pose(self, status: Status, full: bool = True) -> list[Text]:
         if self.model is None:
@@ -142,15 +156,16 @@ class StatusTab(TabPage):
                     Text.assemble(("no kinematic model for this machine", "dim"))]
         pose = self.model.pose(np.asarray(status.position))
         title = "end effector (X-Y-Z fixed, eq. 4.04)" if full else "end effector"
-        return _block(title, [[name, f"{value:9.2f} {unit}"]
-                              for (name, unit), value in zip(POSE_LABELS, pose, strict=True)])
+        return _block(title, self._tables["pose"],
+                      [[name, f"{value:9.2f} {unit}"]
+                       for (name, unit), value in zip(POSE_LABELS, pose, strict=True)])
 
     def _loop(self, status: Status) -> list[Text]:
         progress = (f"{status.move_done}/{status.move_total} (move {status.move_id})"
                     if status.move_total else "–")
         flags = ", ".join(f.name.lower().replace("_", " ") for f in Flag
                           if f in status.flags and f.name) or "–"
-        return _block("loop", [
+        return _block("loop", self._tables["loop"], [
             ["sample", f"{status.tick}"],
             ["controller time", f"{status.time_s:.3f} s"],
             ["mode", MODE_NAMES.get(status.mode, str(status.mode))],
@@ -165,47 +180,22 @@ class StatusTab(TabPage):
         ])
 
     def _link(self, status: Status) -> list[Text]:
-        rows: list[list[str | Text]] = []
+        rows: list[list[Cell]] = []
         for name, value in status.link.items():
             bad = value and name not in ("frames_tx", "frames_rx")
             rows.append([name.replace("_", " "), Text(str(value), "bold yellow" if bad else "")])
-        return _block(f"link ({self.desk.backend})", rows)
+        return _block(f"link ({self.desk.backend})", self._tables["link"], rows)
 
 
-def columns(rows: list[list[str | Text]], justify: tuple[str, ...], edge: str = "",
-            gap: int = GAP) -> list[Text]:
-    """``rows`` as lines of aligned columns, ``gap`` apart, each line begun with ``edge``;
-    the first row bold when it is a header (``edge`` given)."""
-    plain = [[c.plain if isinstance(c, Text) else c for c in row] for row in rows]
-    widths = [max(cell_len(row[k]) for row in plain) for k in range(len(justify))]
-    lines = []
-    for row, texts in zip(rows, plain, strict=True):
-        parts, spans, at = [edge], [], len(edge)
-        for k, (cell, text) in enumerate(zip(row, texts, strict=True)):
-            if k:
-                parts.append(" " * gap)
-                at += gap
-            pad = " " * (widths[k] - cell_len(text))
-            start = at if justify[k] == "left" else at + len(pad)
-            parts += [text, pad] if justify[k] == "left" else [pad, text]
-            at += len(pad) + len(text)
-            if isinstance(cell, Text):  # its styles, moved to where it now stands
-                if cell.style:
-                    spans.append(Span(start, start + len(text), cell.style))
-                spans += [span.move(start) for span in cell.spans]
-        lines.append(Text("".join(parts), spans=spans))
-    if edge:
-        lines[0].stylize("bold")
-    return lines
-
-
-def _block(title: str, rows: list[list[str | Text]]) -> list[Text]:
+def _block(title: str, table: AlignedRows, rows: list[list[Cell]]) -> list[Text]:
     """A title over rows of a name and its value, the values right-aligned: its lines."""
-    return [_title(title), *columns(rows, ("left", "right"), gap=1)]
+    return [_title(title), *table.lines(rows)]
 
 
+@functools.lru_cache(maxsize=16)
 def _title(title: str) -> Text:
-    """A block's title line, bold (a span: a line's own style is not drawn by ``LiveLines``)."""
+    """A block's title line, bold (a span: a line's own style is not drawn by ``LiveLines``);
+    the very line each time, as it reads the same."""
     return Text(title, spans=[Span(0, len(title), "bold")])
 
 

@@ -10,6 +10,7 @@ more than drawing the lines that changed, and the Scope's seven a frame as much.
 
 from __future__ import annotations
 
+from textual.color import Color
 from textual.geometry import Region, Spacing
 from textual.strip import Strip
 from textual.widget import Widget
@@ -22,11 +23,15 @@ class DirectLines(Widget):
     ``render_line``'s, filtered by the app's line filters: its ``render_line`` must give a line
     of exactly its width."""
 
-    _boxless: bool | None = None  # found once, until a stylesheet change reaches the widget
+    # found once, until a stylesheet change reaches the widget: whether it is boxless, and the
+    # background the line filters are given (found by walking every ancestor)
+    _boxless: bool | None = None
+    _background: Color | None = None
 
     def notify_style_update(self) -> None:
         super().notify_style_update()
         self._boxless = None
+        self._background = None
 
     def direct(self) -> bool:
         """Whether the lines are drawn directly now (a subclass may say not, then and there)."""
@@ -41,7 +46,9 @@ class DirectLines(Widget):
         strips = [self.render_line(y) for y in crop.line_range]
         filters = self.app.get_line_filters()
         if filters:
-            background = self.background_colors[1]
+            background = self._background
+            if background is None:
+                background = self._background = self.background_colors[1]
             for line_filter in filters:
                 strips = [strip.apply_filter(line_filter, background) for strip in strips]
         x1, x2 = crop.column_span

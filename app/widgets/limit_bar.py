@@ -42,15 +42,28 @@ class LimitBar:
         return (value - self.lower) / (self.upper - self.lower)
 
     def text(self, width: int) -> Text:
+        return self.drawn(self.marks(width))
+
+    def marks(self, width: int) -> tuple[int, int, int, str]:
+        """What the bar draws at ``width``: its inner cells, the cells of ``○`` and ``●`` (-1
+        for none) and its style; two bars of the same marks draw the same text."""
         inner = max(2, width - 2)
-        cells = ["─"] * inner
-        if math.isfinite(self.desired):
-            cells[self._cell(self.desired, inner)] = "○"
-        if math.isfinite(self.position):
-            cells[self._cell(self.position, inner)] = "●"
+        desired = self._cell(self.desired, inner) if math.isfinite(self.desired) else -1
+        position = self._cell(self.position, inner) if math.isfinite(self.position) else -1
         f = self.fraction(self.position) if math.isfinite(self.position) else 0.5
         style = ("bold red" if f <= 0 or f >= 1 else
                  "yellow" if f < WARN_FRACTION or f > 1 - WARN_FRACTION else "green")
+        return inner, desired, position, style
+
+    @staticmethod
+    def drawn(marks: tuple[int, int, int, str]) -> Text:
+        """The bar of ``marks`` (``marks``)."""
+        inner, desired, position, style = marks
+        cells = ["─"] * inner
+        if desired >= 0:
+            cells[desired] = "○"
+        if position >= 0:
+            cells[position] = "●"
         return Text.assemble(("├", "dim"), ("".join(cells), style), ("┤", "dim"))
 
     def _cell(self, value: float, inner: int) -> int:

@@ -133,8 +133,13 @@ class LiveLines(LiveText, DirectLines):
         width = self.size.width
         changed = [Region(x, y, w, 1) for y, (old, new) in enumerate(zip(before, rows, strict=True))
                    if not _same(old, new) for x, w in [changed_cells(old, new, width)]]
-        for region in changed:
-            self._strips[region.y] = None
+        strips = self._strips
+        for x, y, w, _ in changed:
+            strip = strips[y]
+            # a few characters changed, in the styles they had: those written into the line
+            # drawn, not the whole line drawn again (a joint's glitch count, every tick)
+            strips[y] = (None if strip is None or w >= width or strip.cell_length != width
+                         else with_characters(strip, rows[y].plain, x, x + w))
         if changed:
             self.repaints += 1
             self.refresh(*changed)
@@ -175,6 +180,24 @@ class LiveLines(LiveText, DirectLines):
         return strip
 
 
+def with_characters(strip: Strip, plain: str, start: int, end: int) -> Strip:
+    """``strip`` with its cells from ``start`` to ``end`` (cut at its length) the characters of
+    ``plain`` there, each in the style its cell had: the line ``plain`` draws, when it differs
+    from the one ``strip`` drew only there and every character of both is one cell wide."""
+    end = min(end, strip.cell_length)
+    segments, at = [], 0
+    for segment in strip:
+        text = segment.text
+        after = at + len(text)
+        if after > start and at < end:
+            left, right = max(start, at), min(end, after)
+            text = text[:left - at] + plain[left:right].ljust(right - left) + text[right - at:]
+            segment = Segment(text, segment.style, segment.control)
+        segments.append(segment)
+        at = after
+    return Strip(segments, strip.cell_length)
+
+
 def _same(a: Text, b: Text) -> bool:
     """``fingerprint(a) == fingerprint(b)`` for two texts, the words compared first (most
     lines of a live block read as before) and no tuple made of either."""
@@ -191,9 +214,17 @@ def changed_cells(old: Text, new: Text, width: int) -> tuple[int, int]:
     if (a == b or old.spans != new.spans or old.style != new.style or len(a) != len(b)
             or cell_len(a) != len(a) or cell_len(b) != len(b)):
         return 0, width
-    first = next((i for i, (p, q) in enumerate(zip(a, b, strict=True)) if p != q), len(a))
-    last = next((i for i in range(len(a) - 1, first - 1, -1) if a[i] != b[i]), first)
-    return first, last - first + 1
+    # the first and the last character that differ, found by halving (slices compare in C)
+    lo, hi = 0, len(a)  # a[:lo] == b[:lo], a[:hi] != b[:hi]
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        lo, hi = (mid, hi) if a[:mid] == b[:mid] else (lo, mid)
+    first = lo
+    lo, hi = first, len(a)  # a[hi:] == b[hi:], a[lo:] != b[lo:]
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        lo, hi = (lo, mid) if a[mid:] == b[mid:] else (mid, hi)
+    return first, lo - first + 1
 
 
 def fingerprint(renderable: RenderableType) -> Hashable | None:

@@ -5,6 +5,7 @@ before the first frame. (Its CPU and times are figures: ``benchmarks/ui.py --tmu
 from __future__ import annotations
 
 import asyncio
+import itertools
 import json
 import os
 import shlex
@@ -277,6 +278,73 @@ def test_a_status_block_that_reads_the_same_is_not_made_again(tui, monkeypatch) 
     asyncio.run(scenario())
 
 
+def test_an_idle_status_tick_makes_again_only_the_lines_and_cells_that_changed(
+        tui, monkeypatch) -> None:
+    """Idle, every joint's glitch count climbs each tick, so the joints' block changes ten
+    times a second; a line of it that reads as before is the very line shown before (its
+    title, the columns' heads, a joint at rest), and a joint's row whose count changed within
+    its width has the new digits written into its line: no row is laid out again whole but
+    when a count gains a digit. The old tab laid out the whole table again every tick."""
+    shown: list[list[Text]] = []
+    show_rows = LiveLines.show_rows
+
+    async def scenario() -> None:
+        app = tui.app(lockstep=False)
+        async with app.run_test(size=(160, 48)) as pilot:
+            joints = await status_block_shown(tui, app, pilot, "joints", "Swivel")
+
+            def recorded(self: LiveLines, rows: list[Text]) -> None:
+                if self is joints:
+                    shown.append(list(rows))
+                show_rows(self, rows)
+
+            monkeypatch.setattr(LiveLines, "show_rows", recorded)
+            table = app.tab("status")._tables["joints"]
+            laid_out = table.laid_out
+            await watch_ticks(app, OBSERVED_TICKS)
+            changed, made_again = 0, []
+            for before, after in itertools.pairwise(shown):
+                for old, new in zip(before, after, strict=True):
+                    if old.plain != new.plain or old.spans != new.spans:
+                        changed += 1
+                    elif old is not new:
+                        made_again.append(old.plain.split()[0])
+            assert len(shown) >= OBSERVED_TICKS - 2, len(shown)
+            assert changed >= OBSERVED_TICKS - 2, "the glitch counts did not climb"
+            assert not made_again, f"lines reading as before made again: {made_again[:8]}"
+            assert table.laid_out - laid_out <= app.machine.n_joints, (
+                f"{table.laid_out - laid_out} rows laid out again in {OBSERVED_TICKS} ticks")
+
+    asyncio.run(scenario())
+
+
+def test_status_shows_the_status_the_header_shows_not_one_read_again(tui) -> None:
+    """On the header's tick the Status tab shows the status the header was given (the
+    sampler's newest), in the same screen update; the old tab read and decoded a status of its
+    own from shared memory each tick."""
+
+    async def scenario() -> None:
+        app = tui.app(lockstep=False)
+        async with app.run_test(size=(160, 48)) as pilot:
+            loop = await status_block_shown(tui, app, pilot, "loop", "controller time")
+            client = app.client
+            read: list[int] = []
+            status = client.status
+
+            def counted() -> object:
+                read.append(1)
+                return status()
+
+            client.status = counted  # the sampler's thread reads through its own reference
+            await watch_ticks(app, OBSERVED_TICKS)
+            assert not read, f"the tab read the status {len(read)} times itself"
+            await watch_ticks(app, 1)
+            sample = next(line for line in tui.text(loop).splitlines() if "sample" in line)
+            assert int(sample.split()[-1]) == app.header.status.tick
+
+    asyncio.run(scenario())
+
+
 def test_a_status_block_is_shown_by_its_lines_not_split_each_tick(tui, monkeypatch) -> None:
     """The Status tab makes each block as its lines and shows them so (``show_rows``): the
     old tab joined the lines into one Text that the widget split into lines again, for the
@@ -543,6 +611,53 @@ def test_a_line_that_changed_repaints_only_its_changed_cells() -> None:
             asked.clear()
             lines.show(Text.assemble("tick 107  t 1.07 s\n", ("mode HOLD", "bold")))
             assert asked == [Region(0, 1, 80, 1)]  # a style changed: the whole line
+
+    asyncio.run(scenario())
+
+
+def test_a_line_whose_few_characters_changed_is_written_into_its_drawn_line() -> None:
+    """A LiveLines line that changed only in a few characters, in the same styles, is drawn by
+    writing them into the line as last drawn, not by drawing the whole line again (a joint's
+    glitch count on Status, the header's sample number); the line drawn is, cell for cell,
+    the one a whole drawing gives. The old LiveLines drew every changed line whole."""
+
+    class One(App[None]):
+        def compose(self) -> ComposeResult:
+            yield LiveLines(id="lines")
+
+    def line(tick: int, glitches: int) -> Text:
+        return Text.assemble("tick ", (f"{tick}", "bold"), "  glitches ",
+                             (f"{glitches:3d}", "yellow"), ("  ├──●──┤", "green"))
+
+    def cells(strip: Strip) -> list[tuple[str, Style | None]]:
+        return [(c, segment.style) for segment in strip for c in segment.text]
+
+    async def scenario() -> None:
+        app = One()
+        async with app.run_test(size=(60, 3)) as pilot:
+            lines = app.query_one(LiveLines)
+            lines.show_rows([line(100, 7), Text("mode HOLD")])
+            await pilot.pause()
+            drawn: list[Text] = []
+            render = Text.render
+
+            def counted(self: Text, *args: object, **kwargs: object) -> object:
+                drawn.append(self)
+                return render(self, *args, **kwargs)
+
+            with pytest.MonkeyPatch.context() as patch:
+                patch.setattr(Text, "render", counted)
+                for tick in range(101, 140):
+                    lines.show_rows([line(tick, tick % 50), Text("mode HOLD")])
+                    await pilot.pause()
+            assert not [t.plain for t in drawn], "lines drawn again whole"
+            whole = (Strip(list(line(139, 39).render(app.console)))
+                     .adjust_cell_length(lines.size.width).apply_style(lines.rich_style))
+            assert cells(lines.render_line(0)) == cells(whole)
+            lines.show_rows([line(1000, 39), Text("mode HOLD")])  # longer: drawn whole again
+            assert cells(lines.render_line(0)) == cells(
+                Strip(list(line(1000, 39).render(app.console)))
+                .adjust_cell_length(lines.size.width).apply_style(lines.rich_style))
 
     asyncio.run(scenario())
 
