@@ -292,7 +292,11 @@ class ServodeskApp(App[None]):
             self._dispatch_client_message(message)
 
     def _held_back(self, message: ClientReady | ClientFailed | ControllerEvent) -> bool:
-        """Keep a message of the client that came before the screen was mounted."""
+        """Keep a message of the client that came before the screen was mounted; drop one
+        that comes once the app is closing (its screen's widgets are gone, and unmounting
+        closes the client). A controller ready as the operator quit crashed the exit."""
+        if not self.is_running:
+            return True
         if self._early is None:
             return False
         self._early.append(message)
@@ -482,9 +486,7 @@ class ServodeskApp(App[None]):
     # -- events from the controller ------------------------------------------------------------
 
     def on_controller_event(self, message: ControllerEvent) -> None:
-        if not self.is_running:  # the events of closing the client arrive after the screen
-            return
-        if self._held_back(message):
+        if self._held_back(message):  # also the events of closing the client, after the screen
             return
         event = message.event
         if (isinstance(event.record, EStop) and event.record.latched and self._estop_banner
