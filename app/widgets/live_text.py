@@ -132,7 +132,8 @@ class LiveLines(LiveText, DirectLines):
             return
         width = self.size.width
         changed = [Region(x, y, w, 1) for y, (old, new) in enumerate(zip(before, rows, strict=True))
-                   if not _same(old, new) for x, w in [changed_cells(old, new, width)]]
+                   if old is not new and not _same(old, new)  # most lines: the very line kept
+                   for x, w in [changed_cells(old, new, width)]]
         strips = self._strips
         for x, y, w, _ in changed:
             strip = strips[y]
