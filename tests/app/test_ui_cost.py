@@ -310,7 +310,7 @@ def test_an_idle_status_tick_makes_again_only_the_lines_and_cells_that_changed(
                     elif old is not new:
                         made_again.append(old.plain.split()[0])
             assert len(shown) >= OBSERVED_TICKS - 2, len(shown)
-            assert changed >= OBSERVED_TICKS - 2, "the glitch counts did not climb"
+            assert changed >= OBSERVED_TICKS // 2, "the glitch counts did not climb"
             assert not made_again, f"lines reading as before made again: {made_again[:8]}"
             assert table.laid_out - laid_out <= app.machine.n_joints, (
                 f"{table.laid_out - laid_out} rows laid out again in {OBSERVED_TICKS} ticks")
