@@ -248,20 +248,21 @@ TIMED = (
     "tests/faults/test_controller_freeze.py",
     "tests/app/test_tui_log.py",
 )
+SLEPT = {"SERVODESK_SPIN": "0", "SERVODESK_WARM_UP": "0"}
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _controllers_sleep_to_their_deadlines(request: pytest.FixtureRequest) -> Iterator[None]:
-    """Every controller a module's tests start (their own, a service's, a CLI's; a module's
-    shared one too: this is set up before it) sleeps to each deadline, without spin or
-    warm-up, unless the module is in ``TIMED``."""
-    if request.path.relative_to(ROOT).as_posix() in TIMED:
-        yield
-        return
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setenv("SERVODESK_SPIN", "0")
-        patch.setenv("SERVODESK_WARM_UP", "0")
-        yield
+@pytest.hookimpl(tryfirst=True)
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    """Every controller a test starts (its own, a service's, a CLI's; its module's shared
+    one, set up after this) sleeps to each deadline, without spin or warm-up, unless its
+    module is in ``TIMED``. A hook, not a fixture: a module-scoped one would put every
+    module in an xdist group of its own (``_shares_a_module_fixture``)."""
+    timed = item.path.relative_to(ROOT).as_posix() in TIMED
+    for name, value in SLEPT.items():
+        if timed:
+            os.environ.pop(name, None)
+        else:
+            os.environ[name] = value
 
 
 # -- the I/O board emulator -------------------------------------------------------------------
