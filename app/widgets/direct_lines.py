@@ -11,6 +11,7 @@ more than drawing the lines that changed, and the Scope's seven a frame as much.
 from __future__ import annotations
 
 from textual.color import Color
+from textual.filter import LineFilter
 from textual.geometry import Region, Spacing
 from textual.strip import Strip
 from textual.widget import Widget
@@ -43,18 +44,24 @@ class DirectLines(Widget):
     def render_lines(self, crop: Region) -> list[Strip]:
         if not self.direct():
             return super().render_lines(crop)
-        strips = [self.render_line(y) for y in crop.line_range]
-        filters = self.app.get_line_filters()
-        if filters:
-            background = self._background
-            if background is None:
-                background = self._background = self.background_colors[1]
-            for line_filter in filters:
-                strips = [strip.apply_filter(line_filter, background) for strip in strips]
+        width = self.size.width
+        filters = tuple(self.app.get_line_filters())
+        background = self._background
+        if filters and background is None:
+            background = self._background = self.background_colors[1]
+        strips = [self.filtered_line(y, width, filters, background) for y in crop.line_range]
         x1, x2 = crop.column_span
-        if (x1, x2) != (0, self.size.width):
+        if (x1, x2) != (0, width):
             strips = [strip.crop(x1, x2) for strip in strips]
         return strips
+
+    def filtered_line(self, y: int, width: int, filters: tuple[LineFilter, ...],
+                      background: Color | None) -> Strip:
+        """Line ``y`` as ``render_line`` draws it (``width`` wide), through ``filters``."""
+        strip = self.render_line(y)
+        for line_filter in filters:
+            strip = strip.apply_filter(line_filter, background)  # type: ignore[arg-type]
+        return strip
 
 
 def boxless_widget(widget: Widget) -> bool:

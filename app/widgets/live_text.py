@@ -18,6 +18,8 @@ from rich.segment import Segment, Segments
 from rich.style import Style
 from rich.table import Table
 from rich.text import Text
+from textual.color import Color
+from textual.filter import LineFilter
 from textual.geometry import Region
 from textual.strip import Strip
 from textual.widget import Widget
@@ -100,6 +102,11 @@ class LiveLines(LiveText, DirectLines):
         super().__init__(renderable, id=id, classes=classes)
         self._rows: list[Text] | None = None  # the Text shown, line by line
         self._strips: list[Strip | None] = []  # each line drawn, None until it is again
+        # each line drawn through the app's line filters (for _filtered_by: the filters and
+        # the background): filters change colours, never characters, so a line whose few
+        # characters changed has them written into its filtered line as into its line
+        self._filtered: list[Strip | None] = []
+        self._filtered_by: tuple[object, ...] = ()
         # the style its lines are drawn in: found once, not per line (it walks every ancestor,
         # two thirds of a line's cost), until a stylesheet change reaches the widget
         self._style: Style | None = None
@@ -126,7 +133,7 @@ class LiveLines(LiveText, DirectLines):
         before = self._rows
         self._rows, self._key, self._lines = rows, None, None
         if before is None or len(before) != len(rows):
-            self._strips = [None] * len(rows)
+            self._forget_strips(len(rows))
             self.repaints += 1
             self.refresh()
             return
@@ -134,13 +141,13 @@ class LiveLines(LiveText, DirectLines):
         changed = [Region(x, y, w, 1) for y, (old, new) in enumerate(zip(before, rows, strict=True))
                    if old is not new and not _same(old, new)  # most lines: the very line kept
                    for x, w in [changed_cells(old, new, width)]]
-        strips = self._strips
         for x, y, w, _ in changed:
-            strip = strips[y]
             # a few characters changed, in the styles they had: those written into the line
             # drawn, not the whole line drawn again (a joint's glitch count, every tick)
-            strips[y] = (None if strip is None or w >= width or strip.cell_length != width
-                         else with_characters(strip, rows[y].plain, x, x + w))
+            for strips in (self._strips, self._filtered):
+                strip = strips[y]
+                strips[y] = (None if strip is None or w >= width or strip.cell_length != width
+                             else with_characters(strip, rows[y].plain, x, x + w))
         if changed:
             self.repaints += 1
             self.refresh(*changed)
@@ -151,22 +158,44 @@ class LiveLines(LiveText, DirectLines):
             return "\n".join(row.plain for row in self._rows)
         return super().text
 
+    def _forget_strips(self, lines: int) -> None:
+        self._strips = [None] * lines
+        self._filtered = [None] * lines
+
     def on_resize(self) -> None:
-        self._strips = [None] * len(self._strips)
+        self._forget_strips(len(self._strips))
         super().on_resize()
 
     def notify_style_update(self) -> None:
         super().notify_style_update()
         self._style = None
-        self._strips = [None] * len(self._strips)
+        self._forget_strips(len(self._strips))
 
     def direct(self) -> bool:
         return self._rows is not None and super().direct()  # a Text's lines: drawn whole
 
+    def filtered_line(self, y: int, width: int, filters: tuple[LineFilter, ...],
+                      background: Color | None) -> Strip:
+        if self._rows is None or y >= len(self._filtered):
+            return super().filtered_line(y, width, filters, background)
+        if (filters, background) != self._filtered_by:
+            self._filtered_by = (filters, background)
+            self._filtered = [None] * len(self._filtered)
+        strip = self._filtered[y]
+        if strip is None or strip.cell_length != width:
+            strip = self._line(y, width)
+            for line_filter in filters:
+                strip = strip.apply_filter(line_filter, background)  # type: ignore[arg-type]
+            self._filtered[y] = strip
+        return strip
+
     def render_line(self, y: int) -> Strip:
         if self._rows is None:
             return super().render_line(y)
-        width = self.size.width
+        return self._line(y, self.size.width)
+
+    def _line(self, y: int, width: int) -> Strip:
+        """Line ``y`` of the rows shown, drawn ``width`` wide (kept until it changes)."""
         style = self._style
         if style is None:
             style = self._style = self.rich_style

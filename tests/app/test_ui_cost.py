@@ -36,6 +36,7 @@ from app.plotting.strips import plot_strips
 from app.screens.live import ChangedRowsCompositor, LiveScreen
 from app.tabs.status import StatusTab
 from app.tui import ServodeskApp
+from app.widgets.direct_lines import DirectLines
 from app.widgets.live_text import LiveLines, LiveText
 from app.widgets.scope import ScopePlot
 from tests.app.conftest import Tui
@@ -58,8 +59,19 @@ OBSERVED_TICKS = 20  # header refreshes watched: two seconds at 10 Hz
 
 def count_renders(widget: Widget) -> list[int]:
     """Count the lines Textual draws of ``widget`` (it asks for a line only when the widget,
-    or that line of it, was refreshed: its other lines come from its cache)."""
+    or that line of it, was refreshed: its other lines come from its cache); of a widget that
+    hands the screen its lines itself (``DirectLines``: the live screen asks it only for the
+    rows that changed), the lines it hands over."""
     drawn = [0]
+    if isinstance(widget, DirectLines):
+        render_lines: Callable[[Region], list[Strip]] = widget.render_lines
+
+        def handed(crop: Region) -> list[Strip]:
+            drawn[0] += crop.height
+            return render_lines(crop)
+
+        widget.render_lines = handed  # type: ignore[method-assign]
+        return drawn
     render_line: Callable[[int], Strip] = widget.render_line
 
     def counted(y: int) -> Strip:
@@ -654,6 +666,10 @@ def test_a_line_whose_few_characters_changed_is_written_into_its_drawn_line() ->
             whole = (Strip(list(line(139, 39).render(app.console)))
                      .adjust_cell_length(lines.size.width).apply_style(lines.rich_style))
             assert cells(lines.render_line(0)) == cells(whole)
+            # and through the app's line filters, as Textual's styles cache gives it
+            region = Region(0, 0, lines.size.width, 1)
+            assert cells(lines.render_lines(region)[0]) == cells(
+                Widget.render_lines(lines, region)[0])
             lines.show_rows([line(1000, 39), Text("mode HOLD")])  # longer: drawn whole again
             assert cells(lines.render_line(0)) == cells(
                 Strip(list(line(1000, 39).render(app.console)))
