@@ -27,6 +27,7 @@ it stopped. A servo leaves no run: the Jog tab logs each press-and-hold.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import threading
 import time
@@ -143,7 +144,12 @@ class CartesianServo:
         if self._after is not None:
             self._after.done.wait(AFTER_S)
         began = self._renewed = time.monotonic()
-        status = self.client.status()
+        try:
+            status = self.client.status()
+        except Exception as exc:  # the client closed as it began (the app quitting)
+            self.report = ServoReport(0.0, 0.0, 0.0, 0.0, f"stopped: {exc}")
+            self.done.set()
+            return
         q = np.array(status.desired)
         line = line_of(self.model.forward(q), self.velocity, self.frame == "tool")
         twist = np.concatenate([line.d, np.degrees(line.r0 @ line.omega if line.tool
@@ -181,7 +187,8 @@ class CartesianServo:
         except Exception as exc:  # the controller died or refused: the deadman brakes it
             self._stopped = self._stopped or f"stopped: {exc}"
         finally:
-            q = np.array(self.client.status().desired) if self.client.alive else q
+            with contextlib.suppress(Exception):  # closed meanwhile: the last reading stands
+                q = np.array(self.client.status().desired)
             distance = self._along(line, q)
             braked = distance - released if released is not None else 0.0
             self.report = ServoReport(distance, drift, braked, time.monotonic() - began,

@@ -166,3 +166,15 @@ def test_a_velocity_faster_than_the_cartesian_jog_speed_is_refused(
         CartesianServo(controller, [30.0, 0, 0, 0, 0, 0])
     with pytest.raises(ValueError, match=r"6 finite numbers, not all 0"):
         CartesianServo(controller, [0.0] * 6)
+
+
+def test_a_servo_begun_as_its_client_closes_ends_with_a_report(tmp_path: Path) -> None:
+    """A held jog whose servo begins after its client has closed (the app quitting as a key
+    was pressed): the servo ends at once with a report that says so. It raised in its
+    thread (the status of released shared memory), and ``wait`` never returned."""
+    client = ControlClient("unimate2000b", lockstep=True, data_dir=tmp_path / "runs")
+    servo = CartesianServo(client, [25.0, 0, 0, 0, 0, 0], "world", keepalive_s=KEEPALIVE_S)
+    client.close()
+    servo.start()
+    report = servo.wait(10.0)
+    assert report.stopped.startswith("stopped: ") and report.distance == 0.0, report
