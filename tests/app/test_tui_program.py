@@ -201,8 +201,8 @@ def test_a_program_is_taught_saved_opened_stepped_and_run(tui, data_dir: Path) -
             assert "2 problem(s)" in problems, problems
             assert "line 5, step 1: no taught position 'nowhere'" in problems, problems
             assert "line 10, step 2:" in problems and "-27…30" in problems, problems
-            await pilot.press("r")
-            assert "problem(s)" in said(tui, tab)
+            await pilot.press("r")  # on a loaded machine Pilot's idle wait may come first
+            await tui.until(lambda: "problem(s)" in said(tui, tab), what="r refused")
             assert tab.runner is None and not app.client.status().moving
 
 
@@ -290,7 +290,8 @@ def test_hold_resume_stop_start_from_a_step_t1s_enabling_key_and_the_refusals(
             await open_path(tui, tab, pilot, folder / "t1.toml")
             await checked(tui, tab)
             await pilot.press("r")  # refused: T1 runs on the enabling key
-            assert "hold space" in said(tui, tab) and tab.runner is None
+            await tui.until(lambda: "hold space" in said(tui, tab), what="r refused in T1")
+            assert tab.runner is None
 
             async def hold_space(until, what: str) -> None:
                 """Space repeating every REPEAT_S until ``until()``."""
@@ -367,7 +368,9 @@ def test_the_rig_example_runs_from_the_tab_and_an_unzeroed_rig_is_refused(tui) -
             await open_path(tui, tab, pilot, unzeroed)
             await checked(tui, tab)
             await pilot.press("r")
-            assert "the encoders are not zeroed" in said(tui, tab) and tab.runner is None
+            await tui.until(lambda: "the encoders are not zeroed" in said(tui, tab),
+                            what="r refused, not zeroed")
+            assert tab.runner is None
             # the example begins with Initialise: it runs
             await open_path(tui, tab, pilot, example)
             await checked(tui, tab)
