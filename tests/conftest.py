@@ -104,6 +104,8 @@ SLOW_TESTS = (
     "tests/control/rt/test_seqlock.py::test_reader_never_sees_a_torn_record",  # spawned writer
     "tests/control/rt/test_realtime.py::test_a_claim_ends_with_its_process",  # a claim's holder
     "tests/control/rt/test_realtime.py::test_two_controllers_run_on_two_cores",
+    "tests/control/rt/test_realtime.py::test_a_controller_on_a_shared_core_runs_no_warm_up_"
+    "and_says_so",
     "tests/control/rt/test_shm.py::test_orphan_of_a_killed_process_is_cleaned_up",
     "tests/control/test_recorder.py::test_a_read_only_directory_raises_and_leaves_nothing",
     "tests/app/test_priority.py::"

@@ -56,13 +56,13 @@ def main(config: ProcessConfig, wire: Wire) -> None:
         if isinstance(backend.clock, RealClock) and os.environ.get(SPIN_ENV) != "0":
             backend.clock.spin_ns = round(config.spin_us * 1e3)
         controller = Controller(machine, backend, wire, segment.buf, loop_config)
-        if os.environ.get(WARM_UP_ENV) != "0":
-            controller.warm_up = WarmUp.beside(controller)
         signal.signal(signal.SIGTERM, lambda *_: setattr(controller, "running", False))
         backend.open()
         try:
             report = enter_realtime() if config.realtime and not config.lockstep else None
             controller.realtime = bool(report and report.fifo)
+            if os.environ.get(WARM_UP_ENV) != "0" and not (report and report.shared):
+                controller.warm_up = WarmUp.beside(controller)
             controller.start()
             notice = report.notice if report else "real-time scheduling off (lockstep or asked)"
             controller.outbox.put(Ready(controller.realtime, notice))

@@ -9,7 +9,9 @@ The core is the highest-numbered one no other servodesk controller on this host 
 claimed (a lock file per core, held for the process's life): two controllers (a rig
 and a robot, or a service beside a TUI's own) at the same priority on one core wait
 for each other's ticks, which late wake-ups and overruns show, while another core
-serves neither. When every core is claimed, the last is shared, as before.
+serves neither. When every core is claimed, the last is shared, and the report says so
+(``shared``): the control process then runs no warm-up (``control/rt/warmup.py``), whose
+window before its own deadline would hold the other controller's ticks.
 """
 
 from __future__ import annotations
@@ -31,13 +33,20 @@ class RealtimeReport:
     cpu: int | None
     priority: int
     notice: str
+    shared: bool = False  # every core was claimed: this one runs beside another controller
 
 
 def enter_realtime(cpu: int | None = None, priority: int = 80, fifo: bool = True) -> RealtimeReport:
     """Pin, raise priority, freeze gc; never raises for lack of privilege."""
     notices = []
     pinned = None
-    target = claim_cpu(sorted(os.sched_getaffinity(0))) if cpu is None else cpu
+    cpus = sorted(os.sched_getaffinity(0))
+    claimed = claim_cpu(cpus) if cpu is None else cpu
+    shared = claimed is None
+    target = cpus[-1] if claimed is None else claimed
+    if shared:
+        notices.append(f"CPU {target} shared with another servodesk controller (every core is "
+                       "claimed): no warm-up, expect later wake-ups")
     try:
         os.sched_setaffinity(0, {target})
         pinned = target
@@ -56,13 +65,13 @@ def enter_realtime(cpu: int | None = None, priority: int = 80, fifo: bool = True
     gc.freeze()
     gc.disable()
     return RealtimeReport(fifo=got_fifo, cpu=pinned, priority=priority if got_fifo else 0,
-                          notice="; ".join(notices))
+                          notice="; ".join(notices), shared=shared)
 
 
-def claim_cpu(cpus: list[int], where: Path = CLAIMS) -> int:
+def claim_cpu(cpus: list[int], where: Path = CLAIMS) -> int | None:
     """The highest-numbered of ``cpus`` no other process holds the claim of, claimed for
-    this process's life (the lock goes with it, however it ends); the last when every one
-    is held or none can be claimed. A claim file is opened read-only and never read: one
+    this process's life (the lock goes with it, however it ends); None when every one is
+    held or none can be claimed. A claim file is opened read-only and never read: one
     another user made is as good a lock as ours, and a symbolic link is refused."""
     for cpu in reversed(cpus):
         try:
@@ -76,4 +85,4 @@ def claim_cpu(cpus: list[int], where: Path = CLAIMS) -> int:
             os.close(fd)
             continue
         return cpu  # the descriptor stays open (and the lock held) until the process ends
-    return cpus[-1]
+    return None

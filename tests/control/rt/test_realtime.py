@@ -4,6 +4,7 @@ no other has claimed, the last is shared when all are, and a claim ends with its
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -15,9 +16,9 @@ from control.rt.realtime import claim_cpu
 from tests.control.waiting import wait_until
 
 
-def test_each_claim_takes_the_highest_free_core_and_the_last_is_shared(tmp_path: Path) -> None:
+def test_each_claim_takes_the_highest_free_core_and_then_none_is_free(tmp_path: Path) -> None:
     """Within one process each open is its own claim, as another process's would be."""
-    assert [claim_cpu([0, 1, 2], tmp_path) for _ in range(4)] == [2, 1, 0, 2]
+    assert [claim_cpu([0, 1, 2], tmp_path) for _ in range(4)] == [2, 1, 0, None]
 
 
 def test_a_symbolic_link_or_a_file_we_cannot_open_is_no_claim_of_ours(tmp_path: Path) -> None:
@@ -56,3 +57,28 @@ def test_two_controllers_run_on_two_cores(tmp_path: Path, monkeypatch: pytest.Mo
         wait_until(lambda: len(os.sched_getaffinity(one.pid)) == 1
                    and len(os.sched_getaffinity(two.pid)) == 1, 10, "both pinned")
         assert os.sched_getaffinity(one.pid) != os.sched_getaffinity(two.pid)
+
+
+def test_a_controller_on_a_shared_core_runs_no_warm_up_and_says_so(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every core claimed (three controllers on two cores, say): the one that shares the last
+    runs no warm-up, whose window before its own deadline would hold the other's ticks, and
+    its notice says why. With a core of its own it runs one (its counters at exit)."""
+    monkeypatch.setenv("SERVODESK_CPU_CLAIMS", str(tmp_path))
+    monkeypatch.setenv("SERVODESK_WARM_UP", "report")
+
+    def warm_up_of(client: ControlClient) -> bool:
+        os.kill(client.pid, signal.SIGTERM)  # its loop ends and the counters are written
+        wait_until(lambda: not client.alive, 10, "the controller's end")
+        return "warm-up: windows" in client.controller_log()
+
+    with ControlClient("unimate2000b", data_dir=tmp_path / "a") as alone:
+        if not alone.realtime:
+            pytest.skip("no SCHED_FIFO here (root or CAP_SYS_NICE): controllers are not pinned")
+        assert "shared" not in alone.notice and warm_up_of(alone), alone.controller_log()
+    cpus = sorted(os.sched_getaffinity(0))
+    for _ in cpus:  # this process holds every core from now on
+        claim_cpu(cpus, tmp_path)
+    with ControlClient("unimate2000b", data_dir=tmp_path / "b") as beside:
+        assert f"CPU {cpus[-1]} shared" in beside.notice, beside.notice
+        assert not warm_up_of(beside), beside.controller_log()
