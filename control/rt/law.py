@@ -136,13 +136,18 @@ class DifferenceLaw:
         return self._coefficients
 
     def set_coefficients(self, c: Coefficients) -> None:
-        """Swap the gains; histories grow to the new tap lengths, integrators are kept."""
+        """Swap the gains; histories grow to the new tap lengths, integrators are kept
+        (bumpless) inside the new set's limit, but not by a set with no integral action
+        (``ki`` 0): nothing would ever unwind it, a frozen offset that minimum PWM opens the
+        valve on (a zeroed hold crept Rotate 13° in a suite run)."""
         _check_shape(c, self.machine)
         gains = tuple(_prepare(joint, c, j, self.dt, self.slips)
                       for j, joint in enumerate(self.machine.joints))
         for state, g in zip(self._states, gains, strict=True):
             _grow(state.e, max(len(g.b), len(c.filter)))
             _grow(state.u, max(len(g.w), 1))
+            limit = g.integral_limit if g.ki_dt else 0.0
+            state.integral = max(-limit, min(limit, state.integral))
         self._gains = gains
         self._coefficients = c
 

@@ -130,6 +130,27 @@ def test_set_coefficients_mid_sequence_keeps_the_integrator() -> None:
     assert law.update(0, 1.0) == pytest.approx(2.5)  # I = 2 + 50·1·0.01; a reset would give 0.5
 
 
+def test_a_set_with_no_integral_action_drops_the_integral_and_a_kept_one_fits_its_limit() -> None:
+    """An integral kept by a set with ki 0 would never unwind: a frozen offset that minimum PWM
+    turns into the valve's starting duty, so a zeroed hold crept Rotate on (a suite run: 13°
+    in 30 s). A set with integral action keeps it, clamped at its own limit."""
+    rotate = UNIMATE.joint_index("rotate")
+    law = DifferenceLaw(UNIMATE, UNIMATE.hold, 0.01)
+    law.update(rotate, 0.1)  # a sample off its target: a little integral, as a loaded start leaves
+    assert law.state(rotate).integral != 0.0
+    zero = replace(UNIMATE.hold, kp=((0.0,),) * 6, ki=(0.0,) * 6, kd=(0.0,) * 6, w=((),) * 6,
+                   kv=(0.0,) * 6)
+    law.set_coefficients(zero)
+    assert law.state(rotate).integral == 0.0
+    assert law.update(rotate, 1.5) == 0.0  # outside the deadband, the valve stays shut
+
+    small = DifferenceLaw(plain_machine(), one_joint(ki=100.0), 0.01)
+    run(small, [1.0] * 5)  # I = 5
+    small.set_coefficients(one_joint(ki=100.0, integral_limit=3.0))
+    assert small.state(0).integral == 3.0
+    assert small.update(0, 0.0) == pytest.approx(3.0)
+
+
 def test_set_coefficients_keeps_the_error_history_for_the_derivative() -> None:
     law = DifferenceLaw(plain_machine(), one_joint(kp=(1.0,)), 0.001)
     run(law, [1.0, 2.0, 3.0])
