@@ -141,7 +141,7 @@ def test_overrun_holds_under_starvation_keep_the_commanded_target(controller, un
         os.setpriority(os.PRIO_PROCESS, int(thread), 19)
     with burning_every_core(per_core=3):
         deadline = time.monotonic() + 30.0
-        while len(targets) < 3 and time.monotonic() < deadline:
+        while len(targets) < 2 and time.monotonic() < deadline:
             with contextlib.suppress(TimeoutError):
                 client.wait_event("fault", 1.0, lambda e: e.payload["kind"] == "overrun")
                 status = client.status()
@@ -150,7 +150,8 @@ def test_overrun_holds_under_starvation_keep_the_commanded_target(controller, un
     measured("overrun_holds", len(targets))
     measured("rotate_from_target_deg", min(away, default=math.nan), "°")
     # one hold shows it: a hold where the arm is moves the target 1.5° at the first (b552302);
-    # how many more come in 30 s is the scheduler's (1 to 3 seen, in a suite and alone)
+    # a second shows a hold is no one-off; whether it comes in 30 s is the scheduler's (1 to 3
+    # came in 30 s, in a suite and alone)
     assert targets, "starved, the loop never overran a fifth of a second's ticks"
     assert not client.status().estop, client.status().fault
     count = np.array([abs(j.encoder.gradient) for j in UNIMATE.joints])
