@@ -85,6 +85,7 @@ __all__ = ["ControlClient", "ControllerError", "Event", "MoveHandle", "MoveResul
 
 HEARTBEAT_S = 0.05
 KEEP_WAIT_S = 30.0  # close(): how long the runs in hand may take to be saved (600 s: under 5)
+CLOSED = "this client is closed: start a new ControlClient to read or command the controller"
 DEATH_S = 0.25
 # the event thread's wait for the channel: an event, or the controller's end of it closing,
 # wakes it at once; the wait only bounds how soon a controller gone without closing it is seen
@@ -860,12 +861,17 @@ class ControlClient:
     # -- observation -----------------------------------------------------------------------
 
     def status(self) -> Status:
-        """The controller's newest status snapshot (consistent: read under the seqlock)."""
+        """The controller's newest status snapshot (consistent: read under the seqlock);
+        ControllerError once the client is closed (its shared memory is let go)."""
         try:
             return self.layout.status.decode(self._status.read())
         except TimeoutError:  # the writer died mid-record: the last status is torn
             if self.dead or not self.alive:
                 raise ControllerError(self.dead or "the control process has exited") from None
+            raise
+        except ValueError:  # a released segment: closed, maybe by another thread meanwhile
+            if self._closing.is_set():
+                raise ControllerError(CLOSED) from None
             raise
 
     @property
@@ -880,6 +886,8 @@ class ControlClient:
 
     def histogram(self) -> LatencyHistogram:
         """The loop's wake-up lateness histogram in 5 µs bins, as Table 2.1."""
+        if self._closing.is_set():  # its shared memory is let go, as ``status`` says
+            raise ControllerError(CLOSED)
         return LatencyHistogram.from_counters(
             self.layout.histogram(self.link.segment.buf).copy(), self.status().overruns)
 

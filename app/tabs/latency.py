@@ -33,6 +33,7 @@ from textual.widgets import Button, Static
 
 from app.desk import Desk
 from app.tabs.tab import TabPage
+from control.link import ControllerError
 from control.rt.layout import HIST_BIN_NS, HIST_BINS, LatencyHistogram
 
 TEST_S = 10.0
@@ -192,7 +193,7 @@ class LatencyTab(TabPage):
             return
         try:
             histogram, status = client.histogram(), client.status()
-        except (ValueError, TimeoutError):  # closed while we asked
+        except (ControllerError, ValueError, TimeoutError):  # closed or died while we asked
             return
         what = self.stalls.sample(histogram, status.compute_max_us)
         if what:

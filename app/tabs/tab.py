@@ -55,7 +55,7 @@ class TabPage(Staged, Container):
             return None
         try:
             return client.status()
-        except (ValueError, TimeoutError):  # closed while we asked
+        except (ControllerError, ValueError, TimeoutError):  # closed or died while we asked
             return None
 
     def command(self, what: str, call: Callable[[ControlClient], object]) -> bool:

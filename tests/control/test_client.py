@@ -296,6 +296,17 @@ def test_two_clients_in_one_process_have_their_own_segments(tmp_path: Path, new_
     assert new_segments() == []
 
 
+def test_a_closed_client_says_so_when_read(tmp_path: Path) -> None:
+    """Its status and histogram after close: a clear ControllerError, not the released
+    memory's ValueError (a servo thread begun as its client closed died of it, c7d6da4)."""
+    client = ControlClient("rig", lockstep=True, data_dir=tmp_path)
+    client.status()
+    client.close()
+    for read in (client.status, client.histogram):
+        with pytest.raises(ControllerError, match="this client is closed"):
+            read()
+
+
 def test_bad_paths_are_refused_before_anything_starts(lockstep: ControlClient,
                                                       new_segments) -> None:
     start = np.array(lockstep.status().position)
