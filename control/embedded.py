@@ -25,6 +25,7 @@ from typing import IO
 
 import control
 from control.link import ControllerError, Link, Setting
+from control.off_core import come_back, controller_core, keep_off
 from control.recovery import recover_runs
 from control.rt import shm
 from control.rt.channel import client_end
@@ -90,6 +91,9 @@ class EmbeddedLink(Link):
             link.close()
             link.release()
             raise
+        core = controller_core(proc.pid) if link.setting.realtime else None
+        if core is not None and keep_off(core):  # control/off_core.py: why
+            link.kept_off = core
         return link, notices
 
     def __init__(self, wire: Wire, segment: SharedMemory, setting: Setting,
@@ -97,6 +101,7 @@ class EmbeddedLink(Link):
         super().__init__(wire, segment, setting)
         self.process = proc
         self._stderr = stderr
+        self.kept_off: int | None = None  # the controller's core, this process's threads off it
 
     def _await_ready(self, timeout_s: float, early: Callable[[ControllerEvent], None]
                      ) -> Setting:
@@ -173,6 +178,9 @@ class EmbeddedLink(Link):
         super().release()
         shm.release(self.segment, unlink=True)
         self._stderr.close()
+        if self.kept_off is not None:
+            come_back(self.kept_off)
+            self.kept_off = None
 
     def log(self) -> str:
         with contextlib.suppress(OSError, ValueError):

@@ -106,6 +106,8 @@ SLOW_TESTS = (
     "tests/control/rt/test_realtime.py::test_two_controllers_run_on_two_cores",
     "tests/control/rt/test_realtime.py::test_a_controller_on_a_shared_core_runs_no_warm_up_"
     "and_says_so",
+    "tests/control/rt/test_realtime.py::test_a_clients_threads_keep_off_its_real_time_"
+    "controllers_core",
     "tests/control/rt/test_shm.py::test_orphan_of_a_killed_process_is_cleaned_up",
     "tests/control/test_recorder.py::test_a_read_only_directory_raises_and_leaves_nothing",
     "tests/app/test_priority.py::"

@@ -82,3 +82,22 @@ def test_a_controller_on_a_shared_core_runs_no_warm_up_and_says_so(
     with ControlClient("unimate2000b", data_dir=tmp_path / "b") as beside:
         assert f"CPU {cpus[-1]} shared" in beside.notice, beside.notice
         assert not warm_up_of(beside), beside.controller_log()
+
+
+def test_a_clients_threads_keep_off_its_real_time_controllers_core(tmp_path: Path,
+                                                                    monkeypatch: pytest.MonkeyPatch
+                                                                    ) -> None:
+    """A client thread on the controller's core waited out its spin and tick, and its command
+    went out just after a tick, a whole period before the next (control/off_core.py): while
+    the controller runs, no thread of the client's process is on its core; after, they may be."""
+    monkeypatch.setenv("SERVODESK_CPU_CLAIMS", str(tmp_path))
+    before = os.sched_getaffinity(0)
+    if len(before) < 2:
+        pytest.skip("one core: there is no other to keep to")
+    with ControlClient("rig", data_dir=tmp_path / "runs") as client:
+        if not client.realtime:
+            pytest.skip("no SCHED_FIFO here (root or CAP_SYS_NICE): controllers are not pinned")
+        (core,) = os.sched_getaffinity(client.pid)
+        for task in os.listdir("/proc/self/task"):  # the client's own threads among them
+            assert core not in os.sched_getaffinity(int(task)), task
+    assert os.sched_getaffinity(0) == before
