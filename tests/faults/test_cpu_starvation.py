@@ -32,13 +32,16 @@ UNIMATE = load_machine("unimate2000b")
 ROTATE, BEND = UNIMATE.joint_index("rotate"), UNIMATE.joint_index("bend")
 INOUT = UNIMATE.joint_index("inout")
 BURN = "import os, sys\nos.sched_setaffinity(0, {int(sys.argv[1])})\nwhile True:\n    pass\n"
+# read before any controller runs: a client's threads keep off its controller's core meanwhile
+# (control/off_core.py), and every core is to burn, the controller's too
+CORES = sorted(os.sched_getaffinity(0))
 
 
 @contextmanager
 def burning_every_core(per_core: int = 1) -> Iterator[int]:
     """``per_core`` busy loops pinned to each core; killed on the way out."""
     burners = [subprocess.Popen([sys.executable, "-c", BURN, str(cpu)])
-               for cpu in sorted(os.sched_getaffinity(0)) for _ in range(per_core)]
+               for cpu in CORES for _ in range(per_core)]
     try:
         yield len(burners)
     finally:
