@@ -176,7 +176,7 @@ def test_a_segment_another_start_recovers_is_waited_for_then_left_to_it(left, tm
     fd = os.open(shm.SHM_DIR / segment.name, os.O_RDONLY)
     try:
         fcntl.flock(fd, fcntl.LOCK_EX)  # as a second client starting at the same time holds it
-        (notice,) = recover_runs(tmp_path / "fallback", wait_s=0.1)
+        (notice,) = recover_runs(tmp_path / "fallback", wait_s=0.02)
         assert "to the process recovering it" in notice
         assert not segment.gone() and list_runs(tmp_path / "runs") == []
     finally:

@@ -84,6 +84,7 @@ def test_a_frame_over_the_limit_is_refused_before_it_is_read(pair) -> None:
 
 def test_a_frame_cut_short_breaks_the_stream_in_time(pair) -> None:
     sender, receiver = pair
+    receiver.frame_s = 0.02  # the pair's 0.2 s was waited out idle
     sender.sock.sendall(HEADER.pack(100) + b'{"type"')
     started = time.monotonic()
     with pytest.raises(Broken, match="cut short"):

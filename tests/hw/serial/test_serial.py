@@ -362,10 +362,10 @@ def test_no_board_on_the_port_is_a_clear_error() -> None:
     master, slave = os.openpty()
     try:
         path = os.ttyname(slave)
-        backend = SerialBackend(UNIMATE, path, open_timeout_s=0.3)
+        backend = SerialBackend(UNIMATE, path, open_timeout_s=0.05)
         with pytest.raises(BoardError) as info:
             backend.open()
-        assert str(info.value) == (f"no I/O board answered on {path} within 0.3 s: "
+        assert str(info.value) == (f"no I/O board answered on {path} within 0.05 s: "
                                    "check the port and that the board is powered")
     finally:
         os.close(master)
