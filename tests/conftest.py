@@ -20,6 +20,7 @@ anyway fails at teardown, naming what it started and where to mark it.
 from __future__ import annotations
 
 import contextlib
+import gc
 import json
 import os
 import select
@@ -195,6 +196,13 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
             item.add_marker(pytest.mark.xdist_group("one_at_a_time"))
         elif _shares_a_module_fixture(item):
             item.add_marker(pytest.mark.xdist_group(item.path.relative_to(ROOT).as_posix()))
+
+
+def pytest_collection_finish(session: pytest.Session) -> None:
+    """Move what collection built (every module imported, every item) to the collector's
+    permanent generation: it lives to the end, and each full collection during the run
+    scanned all of it again."""
+    gc.freeze()
 
 
 def _shares_a_module_fixture(item: pytest.Item) -> bool:
