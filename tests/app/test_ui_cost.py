@@ -661,7 +661,7 @@ def test_a_line_whose_few_characters_changed_is_written_into_its_drawn_line() ->
                 patch.setattr(Text, "render", counted)
                 for tick in range(101, 140):
                     lines.show_rows([line(tick, tick % 50), Text("mode HOLD")])
-                    await pilot.pause()
+                    await pilot.pause(0)  # its messages handled and the screen drawn, unslept
             assert not [t.plain for t in drawn], "lines drawn again whole"
             whole = (Strip(list(line(139, 39).render(app.console)))
                      .adjust_cell_length(lines.size.width).apply_style(lines.rich_style))
