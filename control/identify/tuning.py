@@ -240,15 +240,16 @@ def design_pi(model: DeadbandModel, joint: Joint, dt: float, ms: float = DEFAULT
         raise ValueError(f"the peak sensitivity bound must exceed 1, got {ms:g}")
     plant = loop_plant(model, joint, dt)
     w, response = _plant_response(plant, dt)
+    z = np.exp(1j * w * dt)  # once, not at each of the search's 6,000 steps
     gain = max(slopes(model, joint)) / joint.gain_unit
     best: tuple[float, float] | None = None
     for kp in np.geomspace(0.5, 0.25 * math.pi / dt, KP_GRID) / gain:
-        if not _admissible(plant, response, w, dt, kp, 0.0, ms):
+        if not _admissible(plant, response, z, dt, kp, 0.0, ms):
             continue
         lo, hi = 0.0, 1e3 * kp / dt
         for _ in range(BISECTIONS):
             mid = 0.5 * (lo + hi)
-            lo, hi = (mid, hi) if _admissible(plant, response, w, dt, kp, mid, ms) else (lo, mid)
+            lo, hi = (mid, hi) if _admissible(plant, response, z, dt, kp, mid, ms) else (lo, mid)
         if best is None or lo > best[1]:
             best = (float(kp), lo)
     if best is None:
@@ -470,13 +471,14 @@ def _loop_response(plant: tuple[np.ndarray, np.ndarray], ctrl: tuple[np.ndarray,
     return w, p * np.polyval(ctrl[0], z) / np.polyval(ctrl[1], z)
 
 
-def _admissible(plant: tuple[np.ndarray, np.ndarray], response: np.ndarray, w: np.ndarray,
+def _admissible(plant: tuple[np.ndarray, np.ndarray], response: np.ndarray, z: np.ndarray,
                 dt: float, kp: float, ki: float, ms: float) -> bool:
-    """Whether P.I. (kp, ki) gives a stable loop with peak sensitivity ≤ ms."""
+    """Whether P.I. (kp, ki) gives a stable loop with peak sensitivity ≤ ms (``response`` the
+    plant's at the points ``z`` of the unit circle)."""
     cn, cd = _pi(kp, ki, dt)
-    char = np.polyadd(np.polymul(cd, plant[1]), np.polymul(cn, plant[0]))
+    # np.polymul's own product, without its 50 µs of argument handling (a tenth of the step)
+    char = np.polyadd(np.convolve(cd, plant[1]), np.convolve(cn, plant[0]))
     if np.any(np.abs(np.roots(char)) >= 1.0):
         return False
-    z = np.exp(1j * w * dt)
     loop = response * np.polyval(cn, z) / np.polyval(cd, z)
     return bool(np.max(np.abs(1.0 / (1.0 + loop))) <= ms)
