@@ -47,8 +47,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import scipy  # its signal and optimize load on first use: 1.2 s no importer need pay
 from numpy.typing import ArrayLike
-from scipy import optimize, signal
 
 from control.recorder import Run
 from hw.machine import Joint, Machine
@@ -121,7 +121,7 @@ class DeadbandModel:
         if lag:
             w = np.concatenate([np.zeros(lag), w[:-lag]])
         num, den = _second_order(self.wn, self.zeta, dt)
-        return signal.lfilter(num, den, w)
+        return scipy.signal.lfilter(num, den, w)
 
     def position(self, duty: ArrayLike, dt: float, start: float) -> np.ndarray:
         """Simulated position ``(N,)`` (units) from ``start``, the velocity integrated."""
@@ -154,7 +154,7 @@ class ArxModel:
         rest the run starts from, entry t the block ending at t·period_s."""
         x = self._input(np.asarray(duty, dtype=float), dt)
         num = np.concatenate([np.zeros(self.nk), self.b])
-        return signal.lfilter(num, np.concatenate([[1.0], self.a]), np.append(x, 0.0))
+        return scipy.signal.lfilter(num, np.concatenate([[1.0], self.a]), np.append(x, 0.0))
 
     def position(self, duty: ArrayLike, dt: float, start: float) -> np.ndarray:
         """Simulated position at the block boundaries ``(K + 1,)`` from ``start``."""
@@ -254,7 +254,7 @@ def fit_deadband(data: JointSeries, *, initial: DeadbandModel | None = None,
     x0 = np.clip(x0, lower, [1e9, 98.0, 1e9, 98.0, 0.8 * nyquist, 4.0])
     best: tuple[float, DeadbandModel] | None = None
     for lag in range(round(max_delay_s / data.dt) + 1):
-        result = optimize.least_squares(_residual, x0, bounds=(lower, upper), x_scale="jac",
+        result = scipy.optimize.least_squares(_residual, x0, bounds=(lower, upper), x_scale="jac",
                                         args=(data, lag, cutoff_hz, measured))
         if best is not None and result.cost >= best[0]:
             break  # the cost grows with the dead time from here on
@@ -394,7 +394,8 @@ def _line_guess(data: JointSeries, cutoff_hz: float | None) -> DeadbandModel:
 
 def _second_order(wn: float, zeta: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
     """ZOH discretisation of ωn² / (s² + 2ζωn·s + ωn²) at ``dt``: (num, den) in z⁻¹."""
-    num, den, _ = signal.cont2discrete(([wn * wn], [1.0, 2.0 * zeta * wn, wn * wn]), dt, "zoh")
+    num, den, _ = scipy.signal.cont2discrete(([wn * wn], [1.0, 2.0 * zeta * wn, wn * wn]), dt,
+                                             "zoh")
     return np.ravel(num), np.ravel(den)
 
 
@@ -411,7 +412,7 @@ def _smooth(x: np.ndarray, cutoff_hz: float | None, dt: float) -> np.ndarray:
     if not 0.0 < cutoff_hz < 0.5 / dt:
         raise ValueError(f"cutoff {cutoff_hz:g} Hz must be between 0 and the Nyquist "
                          f"frequency {0.5 / dt:g} Hz")
-    return signal.sosfiltfilt(signal.butter(2, cutoff_hz, fs=1.0 / dt, output="sos"), x)
+    return scipy.signal.sosfiltfilt(scipy.signal.butter(2, cutoff_hz, fs=1.0 / dt, output="sos"), x)
 
 
 def _block(period_s: float, dt: float) -> int:

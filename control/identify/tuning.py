@@ -63,8 +63,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
+import scipy  # its signal loads on first use: 0.7 s no importer need pay
 from numpy.typing import ArrayLike
-from scipy import signal
 
 from control.identify.sysid import DeadbandModel
 from control.rt.law import DifferenceLaw
@@ -185,7 +185,7 @@ def loop_plant(model: DeadbandModel, joint: Joint, dt: float) -> tuple[np.ndarra
     ``(num, den)`` polynomials in z (highest power first)."""
     gain = max(slopes(model, joint)) / joint.gain_unit  # the law sees error / gain_unit
     wn, zeta = model.wn, model.zeta
-    num, den, _ = signal.cont2discrete(
+    num, den, _ = scipy.signal.cont2discrete(
         ([gain * wn * wn], [1.0, 2.0 * zeta * wn, wn * wn, 0.0]), dt, "zoh")
     num = np.trim_zeros(np.ravel(num), "f")
     lag = round(model.delay_s / dt) + LOOP_DELAY_SAMPLES
@@ -444,7 +444,8 @@ class _Plant:
 
 def _second_order(model: DeadbandModel, dt: float) -> tuple[np.ndarray, np.ndarray]:
     wn, zeta = model.wn, model.zeta
-    num, den, _ = signal.cont2discrete(([wn * wn], [1.0, 2.0 * zeta * wn, wn * wn]), dt, "zoh")
+    num, den, _ = scipy.signal.cont2discrete(([wn * wn], [1.0, 2.0 * zeta * wn, wn * wn]), dt,
+                                             "zoh")
     return np.ravel(num), np.ravel(den)
 
 

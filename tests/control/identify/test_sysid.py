@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from scipy import signal
+import scipy  # scipy.signal on first use: collecting this module need not load it
 
 from control import ControlClient
 from control.identify import excitation, sysid
@@ -69,7 +69,7 @@ def test_arx_recovers_a_linear_system_exactly() -> None:
     rng = np.random.default_rng(0)
     period = 0.01
     x = np.repeat(rng.uniform(-50, 50, 40), 10)
-    v = signal.lfilter([0.0, *b], [1.0, *a], x)  # v(t) is the block ending at t
+    v = scipy.signal.lfilter([0.0, *b], [1.0, *a], x)  # v(t) is the block ending at t
     position = np.concatenate([[0.0], np.cumsum(v[1:]) * period])
     data = sysid.series(x, position, period)
     model = sysid.fit_arx(data, 2, 3, 1, period_s=period, cutoff_hz=None)

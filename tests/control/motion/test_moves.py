@@ -6,7 +6,6 @@ import math
 
 import numpy as np
 import pytest
-from scipy.optimize import brentq
 
 from control.motion import moves
 from control.motion.moves import SETTLE_TAIL_S, StepSummary, summary
@@ -189,6 +188,8 @@ def stepped(zeta: float, wn: float, initial: float, size: float,
 
 
 def test_second_order_step_matches_the_analytic_figures() -> None:
+    from scipy.optimize import brentq  # here: collecting the module need not load scipy.optimize
+
     zeta, wn, size, tol = 0.3, 10.0, 400.0, 8.0  # rig: 200 → 600 mm, 2 % band
     t, desired, actual = stepped(zeta, wn, 200.0, size)
     (s,) = summary(t, desired, actual, RIG.joints, tolerance=tol)
