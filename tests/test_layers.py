@@ -13,7 +13,7 @@ test_process.py's.
 from __future__ import annotations
 
 import ast
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from functools import cache
 from pathlib import Path
 
@@ -39,7 +39,7 @@ def imports_in(source: str, package: str) -> Iterator[tuple[int, str]]:
     imported from a module as ``module.name``, so ``from hw import sim`` is ``hw.sim``;
     relative ones resolved."""
     parts = package.split(".")
-    for node in ast.walk(ast.parse(source)):
+    for node in statements(ast.parse(source).body):
         if isinstance(node, ast.Import):
             for alias in node.names:
                 yield node.lineno, alias.name
@@ -48,6 +48,18 @@ def imports_in(source: str, package: str) -> Iterator[tuple[int, str]]:
             module = ".".join([*base, *filter(None, [node.module])])
             for alias in node.names:
                 yield node.lineno, f"{module}.{alias.name}"
+
+
+def statements(body: Sequence[ast.AST]) -> Iterator[ast.AST]:
+    """Every statement in ``body`` and in the bodies nested in it (of functions, classes,
+    ifs, trys, their handlers, match cases): an import is a statement, and no expression
+    holds one, so the expressions (most of a module) are not walked (ast.walk: 0.18 s)."""
+    for node in body:
+        yield node
+        for field in ("body", "orelse", "finalbody", "handlers", "cases"):
+            nested = getattr(node, field, None)
+            if isinstance(nested, list):
+                yield from statements(nested)
 
 
 def imports_of(path: Path) -> Iterator[tuple[int, str]]:
