@@ -21,7 +21,6 @@ from control.motion.positions import PositionBook, positions_file, save_position
 from control.motion.robot_model import builtin_unimate
 from control.rt.layout import Flag, Mode, Status
 from hw.machine import load_machine
-from tests.app.browser import Served, browser, wait_until
 from tests.app.conftest import Tui
 
 MACHINE = load_machine("unimate2000b")
@@ -199,6 +198,8 @@ def test_the_rig_view_shows_the_ram_its_limits_and_the_supply(tui) -> None:
 def test_the_full_view_works_in_the_browser(tmp_path: Path) -> None:
     """``servodesk serve`` in headless Chromium: ^A shows the arm (braille received), q goes
     back to the tabs."""
+    from tests.app.browser import Served, browser, wait_until  # selenium, aiohttp: 0.13 s
+
     serve = Served(tmp_path / "serve.log", "--data-dir", str(tmp_path / "runs"))
     try:
         with browser() as page:
