@@ -58,10 +58,14 @@ class DirectLines(Widget):
     def filtered_line(self, y: int, width: int, filters: tuple[LineFilter, ...],
                       background: Color | None) -> Strip:
         """Line ``y`` as ``render_line`` draws it (``width`` wide), through ``filters``."""
-        strip = self.render_line(y)
-        for line_filter in filters:
-            strip = strip.apply_filter(line_filter, background)  # type: ignore[arg-type]
-        return strip
+        return through(self.render_line(y), filters, background)
+
+
+def through(strip: Strip, filters: tuple[LineFilter, ...], background: Color | None) -> Strip:
+    """``strip`` through the app's line ``filters`` in turn, on ``background``."""
+    for line_filter in filters:
+        strip = strip.apply_filter(line_filter, background)  # type: ignore[arg-type]
+    return strip
 
 
 def boxless_widget(widget: Widget) -> bool:

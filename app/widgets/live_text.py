@@ -24,7 +24,7 @@ from textual.geometry import Region
 from textual.strip import Strip
 from textual.widget import Widget
 
-from app.widgets.direct_lines import DirectLines
+from app.widgets.direct_lines import DirectLines, through
 from app.widgets.limit_bar import LimitBar
 
 BAR_STEPS = 10_000  # a limit bar's marks compared to a ten-thousandth of its range: finer
@@ -183,10 +183,7 @@ class LiveLines(LiveText, DirectLines):
             self._filtered = [None] * len(self._filtered)
         strip = self._filtered[y]
         if strip is None or strip.cell_length != width:
-            strip = self._line(y, width)
-            for line_filter in filters:
-                strip = strip.apply_filter(line_filter, background)  # type: ignore[arg-type]
-            self._filtered[y] = strip
+            strip = self._filtered[y] = through(self._line(y, width), filters, background)
         return strip
 
     def render_line(self, y: int) -> Strip:
