@@ -36,7 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from control.client import ControlClient
+from control.client import ControlClient, ControllerError
 from control.motion.cartesian_jog import FRAMES, Line, line_of
 from control.motion.robot_model import unimate_model
 from control.rt.jog import rest_range
@@ -146,7 +146,7 @@ class CartesianServo:
         began = self._renewed = time.monotonic()
         try:
             status = self.client.status()
-        except Exception as exc:  # the client closed as it began (the app quitting)
+        except (ControllerError, TimeoutError) as exc:  # closed as it began (the app quitting)
             self.report = ServoReport(0.0, 0.0, 0.0, 0.0, f"stopped: {exc}")
             self.done.set()
             return
