@@ -329,8 +329,9 @@ def test_hold_resume_stop_start_from_a_step_t1s_enabling_key_and_the_refusals(
             assert [r.visit.step.number for r in outcome.results] == [1, 2]
             assert client.speed_mode == "reduced"
             # n in T1: nothing moves until space is held, and then one step only
-            await pilot.press("n")
-            assert "hold space to run one step" in said(tui, tab)
+            await pilot.press("n")  # waited for: Pilot's idle wait returns early under load
+            await tui.until(lambda: "hold space to run one step" in said(tui, tab),
+                            what=lambda: f"n in T1 waiting for space; it says {said(tui, tab)!r}")
             assert tab.runner is not None and tab.runner.state.over
             assert not client.status().moving
             await hold_space(lambda: tab.runner.state is RunnerState.HELD, "one step")
@@ -343,11 +344,15 @@ def test_hold_resume_stop_start_from_a_step_t1s_enabling_key_and_the_refusals(
             await tui.until(lambda: client.status().moving, what="a move of the test's")
             runner = tab.runner
             await pilot.press("n")  # refused at once, before any enabling key
-            assert "a move is running" in said(tui, tab) and tab.runner is runner
+            await tui.until(lambda: "a move is running" in said(tui, tab),
+                            what=lambda: f"n refused; it says {said(tui, tab)!r}")
+            assert tab.runner is runner
             await pilot.press("ctrl+e")
             await tui.until(lambda: client.status().estop, what="the E-stop")
             await pilot.press("n")
-            assert "the E-stop is latched" in said(tui, tab) and tab.runner is runner
+            await tui.until(lambda: "the E-stop is latched" in said(tui, tab),
+                            what=lambda: f"n refused; it says {said(tui, tab)!r}")
+            assert tab.runner is runner
 
     asyncio.run(scenario())
 
