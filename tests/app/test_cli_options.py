@@ -3,6 +3,8 @@ before or after its name, with the same default and help; parsed in-process, not
 
 from __future__ import annotations
 
+import argparse
+
 import pytest
 
 from app import cli
@@ -74,3 +76,38 @@ def test_each_help_shows_the_global_options_it_takes_with_their_help(
     for name in names:
         option = GLOBAL_OPTIONS[name]
         assert option.flags[0] in shown and " ".join(option.help.split()) in shown, name
+
+
+@pytest.mark.parametrize(("command", "name"), CASES)
+def test_a_command_line_reads_the_same_with_its_commands_parser_alone(command: str,
+                                                                      name: str) -> None:
+    """``parse_for_command`` (the named command's module alone, for a quicker start) reads
+    every line the whole parser reads, the same, global options before or after the command."""
+    argv, _ = COMMANDS[command]
+    typed, _ = GIVEN[name]
+    for line in (argv, [*typed, *argv], [*argv, *typed]):
+        alone = cli.parse_for_command(line)
+        assert alone is not None, line
+        assert vars(alone) == vars(cli.build_parser().parse_args(line)), line
+
+
+@pytest.mark.parametrize("line", [
+    [], ["--machine", "rig"],  # no command: the TUI's
+    ["--help", "move"], ["-h", "runs", "list"],  # help asked before the command: the whole one's
+    ["move", "step"],  # a usage error (--target is required): the whole parser says so
+    ["fk", *COMMANDS["fk"][0][1:], "--backend", "serial"],
+])
+def test_a_line_the_commands_parser_cannot_read_is_left_to_the_whole_one(
+        line: list[str]) -> None:
+    assert cli.parse_for_command(line) is None
+
+
+def test_a_commands_parser_alone_has_its_modules_commands_only() -> None:
+    """What ``parse_for_command`` builds for ``runs`` adds cli_runs' commands and no other
+    module's (whose imports, cli_move's planners or cli_emulate's serial port, it spares)."""
+    [commands] = [action for action in cli.build_parser("runs")._actions
+                  if isinstance(action, argparse._SubParsersAction)]
+    assert set(commands.choices) == {"runs"}
+    [kinematics] = [action for action in cli.build_parser("ik")._actions
+                    if isinstance(action, argparse._SubParsersAction)]
+    assert set(kinematics.choices) == {"fk", "ik"}
