@@ -106,28 +106,35 @@ def test_steps_pressed_while_a_step_runs_are_added_and_run_after_it(tui) -> None
 
 
 def test_steps_pressed_while_a_step_runs_are_queued_as_far_as_they_fit(tui) -> None:
-    """Issue 25 item 4: about 144 mm from In/Out's limit along x, ten presses of 20 mm: the first
+    """Issue 25 item 4: about 38 mm from In/Out's limit along x, ten presses of 5 mm: the first
     runs, the six that fit after it run, the last three are refused with the reason once (the
-    whole nine were refused before, in a message that doubled its prefix)."""
+    whole nine were refused before, in a message that doubled its prefix). The arm starts
+    there (the simulator's initial position), and the presses come as a terminal sends them,
+    none waiting for the app: all ten arrive while the first step is sent and runs, however
+    loaded the machine (5 mm steps: 2 s of motion, where 20 mm ones took 6)."""
+    near_limit = [2003.0, 0.0, 1.5, 0.0, 30.0, 0.0]
+
     async def scenario() -> None:
-        app = tui.app(lockstep=False)
+        app = tui.app(lockstep=False, sim_options={"initial": near_limit})
         async with app.run_test(size=SIZE) as pilot:
-            await tui.ready(app, pilot)
+            before = await tui.ready(app, pilot)
             client = app.client
             seen = tui.notifications(app)
-            near_limit = [1897.0, 0.0, 1.5, 0.0, 30.0, 0.0]
-            client.go_to(near_limit, speed=1.0)
-            await tui.until(lambda: client.status().mode == Mode.HOLD and np.allclose(
-                client.status().desired, near_limit), timeout=30, what="the arm near the limit")
-            start = MODEL.pose(np.array(client.status().desired))
-            await pilot.press("w", "9", *["a"] * 10)  # world frame, x +20 mm a press
+            assert np.allclose(before.desired, near_limit, atol=0.5), before.desired
+            start = MODEL.pose(np.array(before.desired))
+            await pilot.press("w", "7")  # world frame, 5 mm a press
+            pad = app.query_one(JogPad)
+            await tui.until(lambda: (pad.frame, pad.increment) == ("world", 7),
+                            what="the pad in the world frame, 5 mm steps")
+            for _ in range(10):
+                tui.post_key(app, "a")  # x +5 mm a press
 
             def moved() -> float:
                 return float(MODEL.pose(np.array(client.status().desired))[0] - start[0])
 
-            await tui.until(lambda: abs(moved() - 140.0) < 1e-6
+            await tui.until(lambda: abs(moved() - 35.0) < 1e-6
                             and client.status().mode == Mode.HOLD, timeout=60,
-                            what=lambda: f"the tool 140 mm along x, moved {moved():.2f} mm")
+                            what=lambda: f"the tool 35 mm along x, moved {moved():.2f} mm")
             refusals = [m for m in seen if "In/Out would be" in m]
             assert len(refusals) == 1, seen
             assert not any("Cartesian jog: Cartesian jog" in m for m in seen), seen
@@ -281,23 +288,27 @@ def test_the_rig_has_no_cartesian_mode_and_says_so(tui) -> None:
 
 
 def test_a_step_pressed_while_another_move_runs_waits_and_the_keys_still_work(tui) -> None:
-    """A Cartesian step waits for a move in progress (here the API's slow go_to) to end and
-    settle, then runs from where it ended; meanwhile the keys work: F3 shows the Scope while
-    the go_to still runs. The step waited in the UI's thread before: F3 came only after."""
+    """A Cartesian step waits for a move in progress (here the API's go_to) to end and settle,
+    then runs from where it ended; meanwhile the keys work: F3 shows the Scope while the
+    go_to still runs. The step waited in the UI's thread before: F3 came only after. The
+    go_to runs at 5 % feed override until the Scope is shown, however long that takes on a
+    loaded machine, and at full feed after (it was a 0.1 speed go_to of 6 s before)."""
     async def scenario() -> None:
         app = tui.app(lockstep=False)
         async with app.run_test(size=SIZE) as pilot:
             before = await tui.ready(app, pilot)
             client = app.client
             target = list(before.desired)
-            target[1] += 20.0  # Rotate, slowly: seconds
-            going = client.go_to(target, speed=0.1)
+            target[1] += 20.0  # Rotate: 0.6 s at full feed, 12.5 s at 5 %
+            client.feed_override(0.05)
+            going = client.go_to(target, speed=1.0)
             await tui.until(lambda: client.status().moving, timeout=10, what="the go_to")
             await pilot.press("w", "9", "s")  # world frame, y +20 mm: waits for the go_to
             await pilot.press("f3")
             scope = app.tab("scope")
             await tui.until(lambda: scope.visible_now, timeout=30, what="the Scope shown")
             assert not going.done.is_set(), "F3 was taken only once the go_to had ended"
+            client.feed_override(1.0)
             assert client.wait(going, timeout=60).complete
             jog = app.tab("jog")
             await tui.until(lambda: jog._jog is not None and jog._jog.done.is_set(),
