@@ -40,6 +40,16 @@ def velocity(v: float) -> list[float]:
     return command
 
 
+def at_27(client: ControlClient) -> None:
+    """Up/Down to 27°, 3° below its upper limit, by a full-speed go_to: the jogs under test
+    start there (a position jog there at jog speed took 4 s of the test's 6)."""
+    here = client.status().position
+    goal = [27.0 if j == UPDOWN else q for j, q in enumerate(here)]
+    assert client.wait(client.go_to(goal, speed=1.0), timeout=60).complete
+    wait_until(lambda: abs(client.status().position[UPDOWN] - 27.0) < JOINT.tolerance,
+               "Up/Down at 27°")
+
+
 def faults(client: ControlClient) -> list[str]:
     return [e.message for e in client.poll_events() if e.kind in ("fault", "estop")]
 
@@ -89,9 +99,7 @@ def _moving(client: ControlClient) -> bool:
 def test_a_velocity_jog_held_toward_a_limit_rests_inside_it_with_no_fault(
         realtime: ControlClient) -> None:
     high = rest_range(JOINT)[1]
-    realtime.jog_position(UPDOWN, 27.0 - realtime.status().desired[UPDOWN])
-    wait_until(lambda: abs(realtime.status().position[UPDOWN] - 27.0) < JOINT.tolerance,
-               "Up/Down at 27°")
+    at_27(realtime)
     began = time.monotonic()
     while time.monotonic() - began < 2.5:  # 3° at 6.25°/s: at the limit after half a second
         realtime.jog_velocity(velocity(100.0))
@@ -112,9 +120,7 @@ def test_position_jogs_in_one_degree_steps_up_to_the_limit_trip_nothing(
     the arm on its stop at 29.99° and the E-stop latched with "feedback fault … frozen
     encoder". Now the target stops a goal tolerance inside the limit, the arm rests there,
     and a second's hold later nothing has tripped."""
-    lockstep.jog_position(UPDOWN, 27.0 - lockstep.status().desired[UPDOWN])
-    wait_until(lambda: abs(lockstep.status().position[UPDOWN] - 27.0) < JOINT.tolerance,
-               "Up/Down at 27°")
+    at_27(lockstep)
     for _ in range(4):  # the last one asks for 31°
         lockstep.jog_position(UPDOWN, 1.0)
         ticks_pass(lockstep, 1_500)
