@@ -18,7 +18,7 @@ import time
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, ClassVar, cast
+from typing import TYPE_CHECKING, ClassVar, Self, cast
 
 from textual.app import App, ComposeResult
 from textual.binding import Binding
@@ -253,6 +253,22 @@ class ServodeskApp(App[None]):
         self.estop_latched = False  # an E-stop sent or reported, until the controller releases it
         self._estop_banner = ""  # the latched E-stop's banner, which nothing lesser replaces
         self._estop_reason = ""
+
+    @classmethod
+    def attached(cls, socket: str | Path | None = None, *, observe_only: bool = False,
+                 take_command: bool = False, build_behind: bool = True) -> Self:
+        """This app on a client attached to ``servodesk controller`` at ``socket``
+        (``attached_app``); a subclass's (the tests') app, or one that builds its tabs only
+        when first shown (``build_behind`` as ``__init__``'s), attaches the same way."""
+        client = ControlClient.attach(socket or None, name="servodesk TUI")
+        try:
+            return cls(client.machine, client.backend, client.port, client.data_dir,
+                       client_options={"timing": client.timing}, client=client,
+                       observe_only=observe_only, take_command=take_command,
+                       build_behind=build_behind)
+        except BaseException:
+            client.close()
+            raise
 
     # -- layout --------------------------------------------------------------------------------
 
@@ -932,11 +948,4 @@ def attached_app(socket: str | Path | None = None, *, observe_only: bool = False
     """The TUI on the controller ``servodesk controller`` runs at ``socket`` (default: the
     user's); it observes until the operator takes command (^K), or always
     (``observe_only``), or takes it at once (``take_command``)."""
-    client = ControlClient.attach(socket or None, name="servodesk TUI")
-    try:
-        return ServodeskApp(client.machine, client.backend, client.port, client.data_dir,
-                            client_options={"timing": client.timing}, client=client,
-                            observe_only=observe_only, take_command=take_command)
-    except BaseException:
-        client.close()
-        raise
+    return ServodeskApp.attached(socket, observe_only=observe_only, take_command=take_command)
