@@ -17,16 +17,19 @@ from app.coefficient_files import save_coefficients
 from app.tabs.log import LogTab
 from app.tabs.positions import PositionsTab
 from app.tabs.tuning import TuningTab
-from app.tui import ServodeskApp, attached_app
+from app.tui import ServodeskApp
 from app.widgets.dialogs import ConfirmScreen, EditValueScreen
 from control.motion.positions import load_positions, positions_file
+from tests.app.conftest import PilotedApp
 
 SIZE = (160, 48)
 
 
 def pairs(socket: Path) -> tuple[ServodeskApp, ServodeskApp]:
-    """A TUI that takes command at start, and one that only observes."""
-    return attached_app(socket, take_command=True), attached_app(socket, observe_only=True)
+    """A TUI that takes command at start, and one that only observes; each builds a tab when
+    it is first shown (the few these tests use, not all eleven)."""
+    return (PilotedApp.attached(socket, take_command=True, build_behind=False),
+            PilotedApp.attached(socket, observe_only=True, build_behind=False))
 
 
 async def start(tui, commander: ServodeskApp, one, observer: ServodeskApp, two) -> str:
@@ -69,7 +72,10 @@ def test_an_observer_cannot_teach_rename_or_delete_and_the_commander_can(
             refusal = f"observing: command is held by {holder}; take it first"
             seen = tui.notifications(observer)
 
-            # the commander teaches "fixture"
+            # the observer lists the positions; the commander teaches "fixture"
+            await show(tui, observer, "f9", "positions")
+            table = observer.query_one("#positions-table", DataTable)
+            await tui.until(lambda: table.row_count == 2, what="the observer listing home, park")
             await show(tui, commander, "f9", "positions")
             tui.post_key(commander, "t")
             await name_it(tui, commander, "fixture")
@@ -78,10 +84,7 @@ def test_an_observer_cannot_teach_rename_or_delete_and_the_commander_can(
             before = path.read_bytes()
 
             # the observer sees it, and can change none of it
-            await show(tui, observer, "f9", "positions")
-            tab = observer.tab("positions")
-            assert isinstance(tab, PositionsTab)
-            table = observer.query_one("#positions-table", DataTable)
+            assert isinstance(observer.tab("positions"), PositionsTab)
             tui.post_key(observer, "l")  # read again: taught since the observer last read
             await tui.until(lambda: table.row_count == 3, what="the observer listing fixture")
             table.move_cursor(row=2)
