@@ -10,9 +10,9 @@ import asyncio
 from pathlib import Path
 
 from app.tabs.jog import JogPad
-from app.tui import ServodeskApp, attached_app
 from app.widgets.dialogs import ConfirmScreen
 from app.widgets.live_text import LiveText
+from tests.app.conftest import PilotedApp
 
 SIZE = (160, 48)
 T1, AUTO = "T1 250 mm/s", "AUTO"
@@ -20,9 +20,10 @@ T1, AUTO = "T1 250 mm/s", "AUTO"
 
 def test_the_tui_starts_in_reduced_speed_and_asks_before_automatic(tui, data_dir: Path) -> None:
     async def scenario() -> None:
-        # as an operator starts it: no speed mode given (the tests' Tui.app sets automatic)
-        app = ServodeskApp("unimate2000b", "sim", None, data_dir, lockstep=True,
-                           client_options={"heartbeat_timeout_s": 2.0})
+        # as an operator starts it: no speed mode given (the tests' Tui.app sets automatic);
+        # the Jog tab alone is built, as in Tui.app's apps
+        app = PilotedApp("unimate2000b", "sim", None, data_dir, lockstep=True,
+                         client_options={"heartbeat_timeout_s": 2.0}, build_behind=False)
         async with app.run_test(size=SIZE) as pilot:
             status = await tui.ready(app, pilot)
             assert status.speed_mode == "reduced"
@@ -67,8 +68,9 @@ def test_the_tui_starts_in_reduced_speed_and_asks_before_automatic(tui, data_dir
 def test_a_commanding_tui_sets_reduced_speed_and_an_observer_cannot_switch(
         controller_service, tui) -> None:
     async def scenario() -> None:
-        commander = attached_app(controller_service.socket, take_command=True)
-        observer = attached_app(controller_service.socket)
+        commander = PilotedApp.attached(controller_service.socket, take_command=True,
+                                        build_behind=False)  # the Jog tab alone is built
+        observer = PilotedApp.attached(controller_service.socket, build_behind=False)
         async with commander.run_test(size=SIZE) as one, observer.run_test(size=SIZE) as two:
             await tui.ready(commander, one)
             await tui.ready(observer, two)
