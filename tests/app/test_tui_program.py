@@ -20,12 +20,12 @@ from textual.widgets import DataTable, Input
 from app.run_groups import grouped, program_cell
 from app.tabs.program import ProgramTab
 from app.tabs.program_edit import delete_step, insert_go_to, move_step
-from app.tui import attached_app
 from app.widgets.dialogs import ConfirmScreen, EditValueScreen
 from control.motion import form_plans
 from control.program import RunnerState, parse_program, read_program
 from control.program.model import GoTo
 from control.recorder import RunFiles, RunInfo
+from tests.app.conftest import PilotedApp
 
 SIZE = (120, 36)
 RUN_S = 60.0  # a program of a few go-tos on a loaded two-core machine
@@ -394,7 +394,8 @@ def test_the_rig_example_runs_from_the_tab_and_an_unzeroed_rig_is_refused(tui) -
 def test_an_observer_opens_only_the_data_directorys_programs_and_cannot_run_or_save(
         controller_service, tui) -> None:
     async def scenario() -> None:
-        app = attached_app(controller_service.socket)  # observes: nobody took command
+        # observes: nobody took command; builds the tabs it shows alone, as tui.app's do
+        app = PilotedApp.attached(controller_service.socket, build_behind=False)
         async with app.run_test(size=SIZE) as pilot:
             await tui.ready(app, pilot)
             tab = await program_tab(tui, app, pilot)
