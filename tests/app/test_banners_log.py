@@ -18,7 +18,6 @@ from app.event_log import EventLog, LogEntry
 from app.messages import ControllerEvent
 from app.tabs.log import LogTable
 from app.tabs.tuning import TuningTab
-from app.tui import attached_app
 from app.widgets.dialogs import ConfirmScreen, EditValueScreen
 from app.widgets.header import FaultBanner
 from app.widgets.limit_bar import LimitWatch
@@ -26,6 +25,7 @@ from app.widgets.live_text import LiveText
 from control.client import Event
 from control.rt.events import Fault, MoveDone
 from hw.machine import load_machine
+from tests.app.conftest import PilotedApp
 
 SIZE = (120, 36)
 CLOCK = re.compile(r"\d\d:\d\d:\d\d")
@@ -67,7 +67,9 @@ def logged(app, kind: str, text: str = "") -> list[LogEntry]:
 
 def test_banners_and_the_log_tell_the_story_of_a_session(controller_service, tui) -> None:
     async def scenario() -> None:
-        app = attached_app(controller_service.socket, take_command=True)
+        # it builds the tabs it shows alone (Jog, Tuning, Log, Positions), as tui.app's do
+        app = PilotedApp.attached(controller_service.socket, take_command=True,
+                                  build_behind=False)
         async with app.run_test(size=SIZE) as pilot:
             await tui.ready(app, pilot)
             client, name = app.client, app.client.name
@@ -120,6 +122,7 @@ def test_banners_and_the_log_tell_the_story_of_a_session(controller_service, tui
             await pilot.press("enter")
             await tui.until(lambda: logged(app, "position", "taught p1: In/Out"),
                             what="the taught position logged")
+            await pilot.press("f5")
             tuning = app.query_one(TuningTab)
             unstable = replace(app.machine.hold, kp=((-20.0,), *app.machine.hold.kp[1:]))
             assert not tuning.apply({"hold": unstable}, "a negative gain")
