@@ -446,16 +446,21 @@ def test_a_joint_may_be_named(realtime: ControlClient) -> None:
                "Up/Down to move 1° by name")
 
 
-def test_a_position_jog_of_25_degrees_travels_at_jog_speed_and_trips_nothing(
+JOG_DEG = 15.0  # the position jog's travel
+
+
+def test_a_position_jog_past_the_following_error_travels_at_jog_speed_and_trips_nothing(
         realtime: ControlClient) -> None:
     """The bug this replaces: a position jog moved Up/Down's hold target 25° at once, the
     duty saturated and the following error latched the E-stop. Now the target travels at
-    the joint's jog speed and the joint follows it. In real time, so that the status is
-    sampled all along the jog's 4 s however loaded the machine."""
+    the joint's jog speed and the joint follows it. 15°: more than Up/Down's 12° following
+    error, as 25° was, in 2.4 s rather than 4 (a jump of it fails the slope at once). In
+    real time, so that the status is sampled all along the jog however loaded the machine."""
     joint = UNIMATE.joints[2]
+    assert joint.following_error < JOG_DEG
     start = realtime.status().desired[2]  # the jog moves the hold target, not the reading
-    realtime.jog_position(2, 25.0)
-    goal = min(start + 25.0, joint.upper)
+    realtime.jog_position(2, JOG_DEG)
+    goal = min(start + JOG_DEG, joint.upper)
     seen = []  # (controller tick, hold target) while the target travels
     deadline = time.monotonic() + 60.0
     while abs((status := realtime.status()).desired[2] - goal) > 1e-9:
