@@ -120,30 +120,264 @@ def count_draws(app: ServodeskApp) -> dict[str, int]:
     return seen
 
 
-def test_an_idle_tick_draws_the_rows_it_changed_not_the_screen(tui) -> None:
-    """Idle on Jog a tick changes the header's loop line (its tick count); on Status also
-    a few numbers of the joints and the loop. The screen draws the rows those changes are on,
-    of the widgets they are in, in one update a tick, and no container under them (the
-    terminal is sent the widgets' cells in front). Textual's own compositor drew every
-    line of every widget whose parent's area met the box around the changes (the screen's
-    48, the tab bar's 44, ...: 111 lines a tick on Jog, 430 on Status), and Status drew the
-    header and the tab in two updates a tick; the first live screen drew the containers
-    behind (6 lines a tick on Jog, 108 on Status)."""
+def test_idle_jog_status_and_scope_draw_and_make_only_what_changed(tui) -> None:
+    """One app, idle, watched for ``OBSERVED_TICKS`` header ticks on Jog, then on Status,
+    then on the Scope, with every counter of its tab on at once (these were nine tests, each
+    with an app of its own, twelve such windows in all; each claim is checked as it was, by
+    its own assert, after its tab's window: ``idle_jog``, ``idle_status``, ``live_scope``)."""
+    app = tui.app(lockstep=False)
 
     async def scenario() -> None:
-        app = tui.app(lockstep=False)
         async with app.run_test(size=(160, 48)) as pilot:
             await tui.ready(app, pilot)
-            for key, most in (("f1", 4), ("f4", 30)):
-                await pilot.press(key)
-                await watch_ticks(app, 5)  # the tab's first frames drawn
-                seen = count_draws(app)
-                await watch_ticks(app, OBSERVED_TICKS)
-                assert 0 < seen["lines"] <= most * OBSERVED_TICKS, (key, seen)
-                assert seen["container lines"] == 0, (key, seen)
-                assert seen["updates"] <= OBSERVED_TICKS + 3, (key, seen)
+            assert app.sampler is not None
+            assert app.sampler.period == pytest.approx(1 / 50)  # Jog
+            await idle_jog(app, pilot)
+            await idle_status(app, pilot)
+            await live_scope(app, pilot)
 
     asyncio.run(scenario())
+
+
+async def idle_jog(app: ServodeskApp, pilot) -> None:
+    """Idle on Jog:
+
+    An idle tick changes the header's loop line (its tick count). The screen draws the rows
+    that change is on, of the widgets it is in, in one update a tick, and no container under
+    them (the terminal is sent the widgets' cells in front). Textual's own compositor drew
+    every line of every widget whose parent's area met the box around the changes (the
+    screen's 48, the tab bar's 44, ...: 111 lines a tick on Jog); the first live screen drew
+    the containers behind (6 lines a tick on Jog).
+
+    The jog pad and the min-PWM note, unchanged, are not drawn again; the loop line, which
+    changes every status, is drawn at most at 10 Hz.
+
+    The client's event thread waits on the channel, woken by an event or the controller's
+    end closing; idle it wakes ten times a second to look for a controller gone without
+    closing it. The old thread woke every 10 ms: a hundred times a second (twice that counted
+    here when it waited for the interpreter's lock), half a percent of a core on every tab."""
+    await pilot.press("f1")
+    await watch_ticks(app, 5)  # the tab's first frames drawn
+    pad = app.query_one("#jog-pad")
+    note = app.query_one("#jog-dead-band", LiveText)
+    loop = app.query_one("#header-loop", LiveText)
+    shown = (pad.render().plain, note.text)
+    pad_drawn, note_drawn, loop_drawn = (count_renders(w) for w in (pad, note, loop))
+    seen = count_draws(app)
+    events = next(t for t in threading.enumerate() if t.name == "servodesk-events")
+    before, started = thread_wakeups(events), time.monotonic()
+    elapsed = await watch_ticks(app, OBSERVED_TICKS)
+    rate = (thread_wakeups(events) - before) / (time.monotonic() - started)
+    assert 0 < seen["lines"] <= 4 * OBSERVED_TICKS, ("f1", seen)
+    assert seen["container lines"] == 0, ("f1", seen)
+    assert seen["updates"] <= OBSERVED_TICKS + 3, ("f1", seen)
+    drawn = pad_drawn[0], note_drawn[0], loop_drawn[0]
+    assert (pad.render().plain, note.text) == shown  # nothing pressed: the same
+    assert drawn[0] == 0, f"the jog pad: {drawn[0]} lines drawn again unchanged"
+    assert drawn[1] == 0, f"the min-PWM note: {drawn[1]} lines drawn again unchanged"
+    # the loop line changes every status (its tick count): drawn, at most at 10 Hz
+    assert 0 < drawn[2] <= STATUS_HZ * elapsed + 2, (drawn[2], elapsed)
+    assert rate <= 40, f"the event thread woke {rate:.0f} times a second, idle"
+
+
+async def idle_status(app: ServodeskApp, pilot) -> None:
+    """Idle on Status (F4):
+
+    A tick changes the header's loop line, a few numbers of the joints and the loop: the
+    screen draws the rows those changes are on, of the widgets they are in, in one update a
+    tick, and no container under them. Textual's own compositor drew 430 lines a tick here,
+    and the old Status drew the header and the tab in two updates a tick; the first live
+    screen drew the containers behind (108 lines a tick).
+
+    The joints' and the loop's blocks are drawn at most ten times a second, the link's
+    (unchanged: the simulator's link counters stay at zero) not again.
+
+    A block is made again only when what it is made of changed: the link's is made once, not
+    ten times a second (the old tab made every block every tick and compared the lines it
+    drew).
+
+    Every joint's glitch count climbs each tick, so the joints' block changes ten times a
+    second; a line of it that reads as before is the very line shown before (its title, the
+    columns' heads, a joint at rest), and a joint's row whose count changed within its width
+    has the new digits written into its line: no row is laid out again whole but when a count
+    gains a digit. The old tab laid out the whole table again every tick.
+
+    On the header's tick the tab shows the status the header was given (the sampler's
+    newest), in the same screen update; the old tab read and decoded a status of its own
+    from shared memory each tick.
+
+    Each block is made as its lines and shown so (``show_rows``): the old tab joined the
+    lines into one Text that the widget split into lines again, for the joints and the loop
+    every tick (a fifth of the tab's own CPU).
+
+    Its blocks have no border, padding or tint: their lines go to the screen as their widgets
+    draw them, not through Textual's styles cache (whose work a call cost more than the lines
+    that changed: the old widgets went through it three times a tick), and those lines are
+    the very lines the styles cache gives of them."""
+    await pilot.press("f4")
+    joints, loop, link = (app.query_one(f"#status-{name}", LiveText)
+                          for name in ("joints", "loop", "link"))
+    for block, shows in ((joints, "Swivel"), (loop, "controller time"), (link, "crc errors")):
+        await Tui.until(lambda block=block, shows=shows: shows in Tui.text(block),
+                        what=f"{shows} in {block.id}")
+    await watch_ticks(app, 5)  # the tab's first frames drawn
+    widgets = [w for w in app.screen.query(LiveLines) if w.region.area]
+    assert widgets, "f4"
+    seen = count_draws(app)
+    link_shown, loop_before = Tui.text(link), Tui.text(loop)
+    drawn = {block.id: count_renders(block) for block in (joints, loop, link)}
+    made: list[int] = []
+    link_block = StatusTab._link
+
+    def link_made(self: StatusTab, status: object) -> list[Text]:
+        made.append(1)
+        return link_block(self, status)  # type: ignore[arg-type]
+
+    shown: list[list[Text]] = []
+    show_rows = LiveLines.show_rows
+
+    def recorded(self: LiveLines, rows: list[Text]) -> None:
+        if self is joints:
+            shown.append(list(rows))
+        show_rows(self, rows)
+
+    split: list[str] = []
+    show = LiveLines.show
+
+    def split_again(self: LiveLines, renderable: object) -> None:
+        if isinstance(renderable, Text) and (self.id or "").startswith("status-"):
+            split.append(self.id or "")
+        show(self, renderable)  # type: ignore[arg-type]
+
+    cached: list[Widget] = []
+    render_widget = StylesCache.render_widget
+
+    def through_cache(self: StylesCache, widget: Widget, crop: Region) -> list[Strip]:
+        cached.append(widget)
+        return render_widget(self, widget, crop)
+
+    client = app.client
+    read: list[int] = []
+    status = client.status
+
+    def read_again() -> object:
+        read.append(1)
+        return status()
+
+    table = app.tab("status")._tables["joints"]
+    laid_out = table.laid_out
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(StatusTab, "_link", link_made)
+        patch.setattr(LiveLines, "show_rows", recorded)
+        patch.setattr(LiveLines, "show", split_again)
+        patch.setattr(StylesCache, "render_widget", through_cache)
+        patch.setattr(client, "status", read_again)  # the sampler reads its own reference
+        elapsed = await watch_ticks(app, OBSERVED_TICKS)
+    # the screen's updates
+    assert 0 < seen["lines"] <= 30 * OBSERVED_TICKS, ("f4", seen)
+    assert seen["container lines"] == 0, ("f4", seen)
+    assert seen["updates"] <= OBSERVED_TICKS + 3, ("f4", seen)
+    # at most ten times a second, and only what changed
+    counts = {name: count[0] for name, count in drawn.items()}
+    for block in (joints, loop):  # the sample count, the raw words: every status
+        assert 0 < counts[block.id] <= (STATUS_HZ * elapsed + 2) * block.size.height, (
+            block.id, counts, elapsed)
+    assert Tui.text(link) == link_shown  # the simulator's link counters stay at zero
+    assert counts[link.id] == 0, f"the link block: {counts[link.id]} lines drawn unchanged"
+    # a block that reads the same is not made again
+    assert len(made) <= 1, f"the link block made {len(made)} times unchanged"
+    assert "crc errors" in Tui.text(link)
+    # only the lines and cells that changed are made again
+    changed, made_again = 0, []
+    for before, after in itertools.pairwise(shown):
+        for old, new in zip(before, after, strict=True):
+            if old.plain != new.plain or old.spans != new.spans:
+                changed += 1
+            elif old is not new:
+                made_again.append(old.plain.split()[0])
+    assert len(shown) >= OBSERVED_TICKS - 2, len(shown)
+    assert changed >= OBSERVED_TICKS // 2, "the glitch counts did not climb"
+    assert not made_again, f"lines reading as before made again: {made_again[:8]}"
+    assert table.laid_out - laid_out <= app.machine.n_joints, (
+        f"{table.laid_out - laid_out} rows laid out again in {OBSERVED_TICKS} ticks")
+    # shown by its lines, not split each tick
+    assert Tui.text(loop) != loop_before  # the sample count moved on
+    assert not split, f"blocks split into lines again: {sorted(set(split))}"
+    # to the screen as drawn, and the same as through the styles cache
+    through = {str(w) for w in cached if w in widgets}
+    assert not through, f"f4: through the styles cache: {sorted(through)}"
+    assert all(w.direct() for w in widgets), "f4"
+    for widget in widgets:
+        whole = Region(0, 0, *widget.size)
+        assert widget.render_lines(whole) == Widget.render_lines(widget, whole), widget
+    # the status the header shows, not one read again
+    assert not read, f"the tab read the status {len(read)} times itself"
+    await watch_ticks(app, 1)
+    sample = next(line for line in Tui.text(loop).splitlines() if "sample" in line)
+    assert int(sample.split()[-1]) == app.header.status.tick
+
+
+async def live_scope(app: ServodeskApp, pilot) -> None:
+    """On the Scope (F3), then back to Status:
+
+    The sampler reads the status 200 times a second for the Scope's plots; on the other
+    tabs 50 are enough (the Scope's past is then drawn from those), at a quarter of the CPU.
+    The old sampler read at 200 Hz on every tab.
+
+    Its plots have no border, padding or tint: their lines go to the screen as drawn, not
+    through Textual's styles cache (the old ones went through it seven times a frame), and
+    are the very lines the styles cache gives of them.
+
+    A frame rasters the traces of its twelve plots (six joints' desired, actual and duty over
+    one time axis) in one pass of array operations, and each plot shows what it would drawn
+    alone. The old frame rastered them trace by trace: eighteen passes a frame, most of the
+    Scope's CPU."""
+    assert app.sampler is not None
+    await pilot.press("f3")
+    scope = app.tab("scope")
+    await Tui.until(lambda: scope.visible_now, what="the Scope shown")
+    assert app.sampler.period == pytest.approx(1 / 200)
+    samples = len(app.history)
+    await watch_ticks(app, 5)
+    widgets = [w for w in app.screen.query(ScopePlot) if w.region.area]
+    assert widgets, "f3"
+    cached: list[Widget] = []
+    render_widget = StylesCache.render_widget
+
+    def through_cache(self: StylesCache, widget: Widget, crop: Region) -> list[Strip]:
+        cached.append(widget)
+        return render_widget(self, widget, crop)
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(StylesCache, "render_widget", through_cache)
+        await watch_ticks(app, OBSERVED_TICKS)
+    through = {str(w) for w in cached if w in widgets}
+    assert not through, f"f3: through the styles cache: {sorted(through)}"
+    assert all(w.direct() for w in widgets), "f3"
+    for widget in widgets:
+        whole = Region(0, 0, *widget.size)
+        assert widget.render_lines(whole) == Widget.render_lines(widget, whole), widget
+    await Tui.until(lambda: len(app.history) >= samples + 100, timeout=20,
+                    what="a hundred samples more")
+    passes: list[int] = []
+    columns_many = braille.columns_many
+
+    def counted(x: np.ndarray, ys: np.ndarray, *args: object) -> tuple[np.ndarray, np.ndarray]:
+        passes.append(ys.shape[1])
+        return columns_many(x, ys, *args)  # type: ignore[arg-type]
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(braille, "columns_many", counted)
+        scope.refresh_live()
+    assert passes == [18], passes  # desired, actual and duty of six joints at once
+    for plot in scope.query(ScopePlot):
+        alone = plot_strips(plot._traces, plot._x_range, plot._y_range, plot._title,
+                            plot.size.width, plot.size.height, app.console,
+                            zero_line=plot._zero_line, x_labels=plot._x_labels)
+        assert plot._lines == alone
+    await pilot.press("f4")
+    await Tui.until(lambda: app.tab("status").visible_now, what="the Status shown")
+    assert app.sampler.period == pytest.approx(1 / 50)
 
 
 class Nested(App[None]):
@@ -208,212 +442,6 @@ def test_the_changed_rows_compositor_sends_what_textuals_sends() -> None:
                     assert (live.render_segments(app.console)
                             == textual.render_segments(app.console)), regions
                 screen._dirty_widgets.clear()
-
-    asyncio.run(scenario())
-
-
-def test_idle_jog_draws_only_what_changed(tui) -> None:
-    async def scenario() -> None:
-        app = tui.app(lockstep=False)
-        async with app.run_test(size=(160, 48)) as pilot:
-            await tui.ready(app, pilot)
-            await watch_ticks(app, 5)  # the first frames of every line are drawn
-            pad = app.query_one("#jog-pad")
-            note = app.query_one("#jog-dead-band", LiveText)
-            loop = app.query_one("#header-loop", LiveText)
-            shown = (pad.render().plain, note.text)
-            pad_drawn, note_drawn, loop_drawn = (count_renders(w) for w in (pad, note, loop))
-            elapsed = await watch_ticks(app, OBSERVED_TICKS)
-            drawn = pad_drawn[0], note_drawn[0], loop_drawn[0]
-            assert (pad.render().plain, note.text) == shown  # nothing pressed: the same
-            assert drawn[0] == 0, f"the jog pad: {drawn[0]} lines drawn again unchanged"
-            assert drawn[1] == 0, f"the min-PWM note: {drawn[1]} lines drawn again unchanged"
-            # the loop line changes every status (its tick count): drawn, at most at 10 Hz
-            assert 0 < drawn[2] <= STATUS_HZ * elapsed + 2, (drawn[2], elapsed)
-
-    asyncio.run(scenario())
-
-
-def test_status_is_drawn_at_most_ten_times_a_second_and_only_what_changed(tui) -> None:
-    async def scenario() -> None:
-        app = tui.app(lockstep=False)
-        async with app.run_test(size=(160, 48)) as pilot:
-            await tui.ready(app, pilot)
-            await pilot.press("f4")
-            joints = app.query_one("#status-joints", LiveText)
-            await tui.until(lambda: "Swivel" in tui.text(joints), what="the joints' table")
-            link = app.query_one("#status-link", LiveText)
-            shown = tui.text(link)
-            drawn = {name: count_renders(app.query_one(f"#status-{name}", LiveText))
-                     for name in ("joints", "loop", "link")}
-            elapsed = await watch_ticks(app, OBSERVED_TICKS)
-            counts = {name: count[0] for name, count in drawn.items()}
-            for name in ("joints", "loop"):  # the sample count, the raw words: every status
-                height = app.query_one(f"#status-{name}").size.height
-                assert 0 < counts[name] <= (STATUS_HZ * elapsed + 2) * height, (
-                    name, counts, elapsed)
-            assert tui.text(link) == shown  # the simulator's link counters stay at zero
-            assert counts["link"] == 0, f"the link block: {counts['link']} lines drawn unchanged"
-
-    asyncio.run(scenario())
-
-
-async def status_block_shown(tui, app, pilot, name: str, shows: str) -> LiveText:
-    """The app live on its Status tab (F4), its block ``name`` showing ``shows``."""
-    await tui.ready(app, pilot)
-    await pilot.press("f4")
-    block = app.query_one(f"#status-{name}", LiveText)
-    await tui.until(lambda: shows in tui.text(block), what=f"the {name} block")
-    return block
-
-
-def test_a_status_block_that_reads_the_same_is_not_made_again(tui, monkeypatch) -> None:
-    """The Status tab makes a block again only when what it is made of changed: the link's
-    counters stay at zero on the simulator, so its block is made once, not ten times a
-    second (the old tab made every block every tick and compared the lines it drew)."""
-    made: list[int] = []
-    link = StatusTab._link
-
-    def counted(self: StatusTab, status: object) -> list[Text]:
-        made.append(1)
-        return link(self, status)  # type: ignore[arg-type]
-
-    async def scenario() -> None:
-        app = tui.app(lockstep=False)
-        async with app.run_test(size=(160, 48)) as pilot:
-            block = await status_block_shown(tui, app, pilot, "link", "crc errors")
-            monkeypatch.setattr(StatusTab, "_link", counted)
-            await watch_ticks(app, OBSERVED_TICKS)
-            assert len(made) <= 1, f"the link block made {len(made)} times unchanged"
-            assert "crc errors" in tui.text(block)
-
-    asyncio.run(scenario())
-
-
-def test_an_idle_status_tick_makes_again_only_the_lines_and_cells_that_changed(
-        tui, monkeypatch) -> None:
-    """Idle, every joint's glitch count climbs each tick, so the joints' block changes ten
-    times a second; a line of it that reads as before is the very line shown before (its
-    title, the columns' heads, a joint at rest), and a joint's row whose count changed within
-    its width has the new digits written into its line: no row is laid out again whole but
-    when a count gains a digit. The old tab laid out the whole table again every tick."""
-    shown: list[list[Text]] = []
-    show_rows = LiveLines.show_rows
-
-    async def scenario() -> None:
-        app = tui.app(lockstep=False)
-        async with app.run_test(size=(160, 48)) as pilot:
-            joints = await status_block_shown(tui, app, pilot, "joints", "Swivel")
-
-            def recorded(self: LiveLines, rows: list[Text]) -> None:
-                if self is joints:
-                    shown.append(list(rows))
-                show_rows(self, rows)
-
-            monkeypatch.setattr(LiveLines, "show_rows", recorded)
-            table = app.tab("status")._tables["joints"]
-            laid_out = table.laid_out
-            await watch_ticks(app, OBSERVED_TICKS)
-            changed, made_again = 0, []
-            for before, after in itertools.pairwise(shown):
-                for old, new in zip(before, after, strict=True):
-                    if old.plain != new.plain or old.spans != new.spans:
-                        changed += 1
-                    elif old is not new:
-                        made_again.append(old.plain.split()[0])
-            assert len(shown) >= OBSERVED_TICKS - 2, len(shown)
-            assert changed >= OBSERVED_TICKS // 2, "the glitch counts did not climb"
-            assert not made_again, f"lines reading as before made again: {made_again[:8]}"
-            assert table.laid_out - laid_out <= app.machine.n_joints, (
-                f"{table.laid_out - laid_out} rows laid out again in {OBSERVED_TICKS} ticks")
-
-    asyncio.run(scenario())
-
-
-def test_status_shows_the_status_the_header_shows_not_one_read_again(tui) -> None:
-    """On the header's tick the Status tab shows the status the header was given (the
-    sampler's newest), in the same screen update; the old tab read and decoded a status of its
-    own from shared memory each tick."""
-
-    async def scenario() -> None:
-        app = tui.app(lockstep=False)
-        async with app.run_test(size=(160, 48)) as pilot:
-            loop = await status_block_shown(tui, app, pilot, "loop", "controller time")
-            client = app.client
-            read: list[int] = []
-            status = client.status
-
-            def counted() -> object:
-                read.append(1)
-                return status()
-
-            client.status = counted  # the sampler's thread reads through its own reference
-            await watch_ticks(app, OBSERVED_TICKS)
-            assert not read, f"the tab read the status {len(read)} times itself"
-            await watch_ticks(app, 1)
-            sample = next(line for line in tui.text(loop).splitlines() if "sample" in line)
-            assert int(sample.split()[-1]) == app.header.status.tick
-
-    asyncio.run(scenario())
-
-
-def test_a_status_block_is_shown_by_its_lines_not_split_each_tick(tui, monkeypatch) -> None:
-    """The Status tab makes each block as its lines and shows them so (``show_rows``): the
-    old tab joined the lines into one Text that the widget split into lines again, for the
-    joints and the loop every tick (a fifth of the tab's own CPU)."""
-    split: list[str] = []
-    show = LiveLines.show
-
-    def counted(self: LiveLines, renderable: object) -> None:
-        if isinstance(renderable, Text) and (self.id or "").startswith("status-"):
-            split.append(self.id or "")
-        show(self, renderable)  # type: ignore[arg-type]
-
-    async def scenario() -> None:
-        app = tui.app(lockstep=False)
-        async with app.run_test(size=(160, 48)) as pilot:
-            loop = await status_block_shown(tui, app, pilot, "loop", "controller time")
-            monkeypatch.setattr(LiveLines, "show", counted)
-            before = tui.text(loop)
-            await watch_ticks(app, OBSERVED_TICKS)
-            assert tui.text(loop) != before  # the sample count moved on
-            assert not split, f"blocks split into lines again: {sorted(set(split))}"
-
-    asyncio.run(scenario())
-
-
-def test_live_blocks_and_plots_go_to_the_screen_as_drawn_and_the_same(tui) -> None:
-    """Status' blocks and the Scope's plots have no border, padding or tint: their lines go to
-    the screen as their widgets draw them, not through Textual's styles cache (whose work a
-    call cost more than the lines that changed: the old widgets went through it each tick,
-    three times on Status, seven a frame on the Scope); and those lines are the very lines the
-    styles cache gives of them."""
-    cached: list[Widget] = []
-    render_widget = StylesCache.render_widget
-
-    def counted(self: StylesCache, widget: Widget, crop: Region) -> list[Strip]:
-        cached.append(widget)
-        return render_widget(self, widget, crop)
-
-    async def scenario() -> None:
-        app = tui.app(lockstep=False)
-        async with app.run_test(size=(160, 48)) as pilot:
-            await tui.ready(app, pilot)
-            for key, kind in (("f4", LiveLines), ("f3", ScopePlot)):
-                await pilot.press(key)
-                await watch_ticks(app, 5)
-                widgets = [w for w in app.screen.query(kind) if w.region.area]
-                assert widgets, key
-                with pytest.MonkeyPatch.context() as patch:
-                    patch.setattr(StylesCache, "render_widget", counted)
-                    await watch_ticks(app, OBSERVED_TICKS)
-                drawn = {str(w) for w in cached if w in widgets}
-                assert not drawn, f"{key}: through the styles cache: {sorted(drawn)}"
-                assert all(w.direct() for w in widgets), key
-                for widget in widgets:
-                    whole = Region(0, 0, *widget.size)
-                    assert (widget.render_lines(whole)
-                            == Widget.render_lines(widget, whole)), widget
 
     asyncio.run(scenario())
 
@@ -678,30 +706,6 @@ def test_a_line_whose_few_characters_changed_is_written_into_its_drawn_line() ->
     asyncio.run(scenario())
 
 
-def test_the_history_is_sampled_at_full_rate_only_while_the_scope_shows(tui) -> None:
-    """The sampler reads the status 200 times a second for the Scope's plots; on the other
-    tabs 50 are enough (the Scope's past is then drawn from those), at a quarter of the CPU.
-    The old sampler read at 200 Hz on every tab."""
-
-    async def scenario() -> None:
-        app = tui.app(lockstep=False)
-        async with app.run_test(size=(160, 48)) as pilot:
-            await tui.ready(app, pilot)
-            assert app.sampler is not None
-            assert app.sampler.period == pytest.approx(1 / 50)  # Jog
-            await pilot.press("f3")
-            await tui.until(lambda: app.tab("scope").visible_now, what="the Scope shown")
-            assert app.sampler.period == pytest.approx(1 / 200)
-            samples = len(app.history)
-            await tui.until(lambda: len(app.history) >= samples + 100, timeout=20,
-                            what="a hundred samples more")
-            await pilot.press("f4")
-            await tui.until(lambda: app.tab("status").visible_now, what="the Status shown")
-            assert app.sampler.period == pytest.approx(1 / 50)
-
-    asyncio.run(scenario())
-
-
 def test_a_plot_makes_again_only_the_rows_that_changed() -> None:
     """A live plot keeps its rows as drawn (``braille.Rows``): a frame whose dots are the same
     hands back the very strips of the last one, and a change makes new strips only for the
@@ -726,38 +730,6 @@ def test_a_plot_makes_again_only_the_rows_that_changed() -> None:
     assert third == draw(stepped, None)
 
 
-def test_a_scope_frame_rasters_all_its_plots_in_one_pass(tui, monkeypatch) -> None:
-    """A Scope frame rasters the traces of its twelve plots (six joints' desired, actual and
-    duty over one time axis) in one pass of array operations, and each plot shows what it
-    would drawn alone. The old frame rastered them trace by trace: eighteen passes a frame,
-    most of the Scope's CPU."""
-    passes: list[int] = []
-    columns_many = braille.columns_many
-
-    def counted(x: np.ndarray, ys: np.ndarray, *args: object) -> tuple[np.ndarray, np.ndarray]:
-        passes.append(ys.shape[1])
-        return columns_many(x, ys, *args)  # type: ignore[arg-type]
-
-    async def scenario() -> None:
-        app = tui.app(lockstep=False)
-        async with app.run_test(size=(160, 48)) as pilot:
-            await tui.ready(app, pilot)
-            await pilot.press("f3")
-            scope = app.tab("scope")
-            await tui.until(lambda: scope.visible_now and len(app.history) > 50,
-                            what="samples in the scope")
-            monkeypatch.setattr(braille, "columns_many", counted)
-            scope.refresh_live()
-            assert passes == [18], passes  # desired, actual and duty of six joints at once
-            for plot in scope.query(ScopePlot):
-                alone = plot_strips(plot._traces, plot._x_range, plot._y_range, plot._title,
-                                    plot.size.width, plot.size.height, app.console,
-                                    zero_line=plot._zero_line, x_labels=plot._x_labels)
-                assert plot._lines == alone
-
-    asyncio.run(scenario())
-
-
 def test_a_flat_line_in_the_middle_of_its_plot_stays_on_its_row_through_noise() -> None:
     """An auto-scaled plot centres a joint at rest: its line lies on the middle of the range,
     which is now a row's middle, so noise far below a dot's height leaves the picture as it
@@ -776,23 +748,3 @@ def thread_wakeups(thread: threading.Thread) -> int:
     status = Path(f"/proc/self/task/{thread.native_id}/status").read_text()
     return int(next(line.split()[1] for line in status.splitlines()
                     if line.startswith("voluntary_ctxt_switches")))
-
-
-def test_the_client_event_thread_sleeps_until_an_event_when_idle(tui) -> None:
-    """The client's event thread waits on the channel, woken by an event or the controller's
-    end closing; idle it wakes ten times a second to look for a controller gone without
-    closing it. The old thread woke every 10 ms: a hundred times a second (twice that counted
-    here when it waited for the interpreter's lock), half a percent of a core on every tab."""
-
-    async def scenario() -> None:
-        app = tui.app(lockstep=False)
-        async with app.run_test(size=(160, 48)) as pilot:
-            await tui.ready(app, pilot)
-            events = next(t for t in threading.enumerate() if t.name == "servodesk-events")
-            await watch_ticks(app, 5)
-            before, started = thread_wakeups(events), time.monotonic()
-            await watch_ticks(app, OBSERVED_TICKS)
-            rate = (thread_wakeups(events) - before) / (time.monotonic() - started)
-            assert rate <= 40, f"the event thread woke {rate:.0f} times a second, idle"
-
-    asyncio.run(scenario())
