@@ -1,6 +1,8 @@
 """The Cartesian servo on a real-time controller (issue 25 item 3): a held jog is one
 continuous motion along its line, brakes along it on release, halts before the wrist
-singularity would need a joint past its max_speed, and ends at once on an E-stop."""
+singularity would need a joint past its max_speed, and ends at once on an E-stop.
+The tests share one controller and run in this order: those from START first, then the ones
+farther off, so that each go_to there is short (In/Out 480 mm back from its limit was 2 s)."""
 
 from __future__ import annotations
 
@@ -112,6 +114,17 @@ def test_the_feed_override_scales_a_held_jog(controller: ControlClient) -> None:
     assert 18.0 <= moved <= 32.0, moved  # 25 mm, the ramps and a loaded machine's periods
 
 
+def test_an_estop_ends_the_servo_at_once(controller: ControlClient) -> None:
+    robot = at(controller, START)
+    servo = CartesianServo(robot, [0, 25.0, 0, 0, 0, 0], "world")
+    servo.start()
+    wait_until(lambda: robot.status().mode == Mode.HOLD and np.any(
+        np.abs(np.array(robot.status().desired) - START) > 0.5), 5, "the tool moving")
+    robot.estop()
+    report = servo.wait(5.0)
+    assert report.stopped == "E-stop", report
+
+
 def test_the_servo_halts_before_the_wrist_singularity_naming_the_joint(
         controller: ControlClient) -> None:
     """Turning the tool about its y axis from Yaw 10° takes Yaw towards 0°, where Bend and
@@ -147,17 +160,6 @@ def test_the_servo_brakes_along_its_line_before_a_joint_limit(controller: Contro
     assert desired[0] < UNIMATE.joints[0].upper
     moved = MODEL.pose(desired) - start
     assert 30.0 < moved[0] < 62.0 and report.drift < 1.0, (moved, report)
-
-
-def test_an_estop_ends_the_servo_at_once(controller: ControlClient) -> None:
-    robot = at(controller, START)
-    servo = CartesianServo(robot, [0, 25.0, 0, 0, 0, 0], "world")
-    servo.start()
-    wait_until(lambda: robot.status().mode == Mode.HOLD and np.any(
-        np.abs(np.array(robot.status().desired) - START) > 0.5), 5, "the tool moving")
-    robot.estop()
-    report = servo.wait(5.0)
-    assert report.stopped == "E-stop", report
 
 
 def test_a_velocity_faster_than_the_cartesian_jog_speed_is_refused(
