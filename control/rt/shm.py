@@ -98,13 +98,20 @@ def owner_pid(name: str) -> int | None:
 
 
 def pid_alive(pid: int) -> bool:
+    """Whether process ``pid`` still runs. An exited one not yet reaped (a zombie: its parent
+    gone, a lazy init) does not: it holds no memory and never runs again, and a saver
+    waiting for it (``control/recovery.py``) waited until the reaping, 1.6 s in a VM."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
         return False
     except PermissionError:
         return True
-    return True
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_bytes()
+    except OSError:  # no procfs, or reaped meanwhile: os.kill's answer stands
+        return True
+    return stat[stat.rfind(b")") + 2:][:1] not in (b"Z", b"X")
 
 
 def leftover_segments() -> list[str]:

@@ -61,6 +61,23 @@ KILL_POINTS = [("_place", 0, "before"), ("_place", 1, "before"), ("_place", 2, "
                ("_sync_dir", 0, "after")]
 
 
+def test_an_exited_process_not_yet_reaped_is_dead_to_the_savers() -> None:
+    """A process that has exited but is not reaped yet (a zombie: a controller whose client
+    died waits for init to reap it, 1.6 s in this VM) is gone for ``shm.pid_alive``, which a
+    saver waits on (``control/recovery.py --after``) and the next start's recovery asks."""
+    child = subprocess.Popen([sys.executable, "-c", "pass"])
+    stat = Path(f"/proc/{child.pid}/stat")
+    deadline = time.monotonic() + 30.0
+    while stat.read_text().rsplit(")", 1)[1].split()[0] != "Z":
+        assert time.monotonic() < deadline, "the child never exited"
+        time.sleep(0.005)
+    try:
+        assert not shm.pid_alive(child.pid), "a zombie counted as alive"
+    finally:
+        child.wait()
+    assert shm.pid_alive(os.getpid())
+
+
 def wait_dead(pid: int, timeout: float = 30.0) -> None:
     deadline = time.monotonic() + timeout
     while shm.pid_alive(pid):
