@@ -32,6 +32,7 @@ def test_estop_from_every_tab_closes_the_valves(tui) -> None:
         async with app.run_test(size=SIZE) as pilot:
             await tui.ready(app, pilot)
             client = app.client
+            seen = tui.notifications(app)
             for i, (name, _) in enumerate(TABS):
                 tui.post_key(app, f"f{i + 1}")  # keys as the terminal sends them, no idle waits
                 await tui.until(lambda name=name: app.query_one("#tabs").active == f"pane-{name}")
@@ -45,8 +46,12 @@ def test_estop_from_every_tab_closes_the_valves(tui) -> None:
                 await tui.until(lambda: "E-STOP latched" in app.query_one(FaultBanner).message,
                                 what="the E-stop banner")
                 assert "^R to release" in app.query_one(FaultBanner).message
-                client.jog(OPEN)  # refused while latched
-                await asyncio.sleep(0.05)
+                said = len(seen)
+                client.jog(OPEN)  # refused while latched: the controller says so, and the
+                # status of the tick that refused it is out by then (waited for, not a time)
+                await tui.until(lambda n=said: any("manual actuation refused: E-stop latched"
+                                                   in m for m in seen[n:]),
+                                what=f"the jog refused while latched ({name})")
                 assert not any(client.status().valve)
                 tui.post_key(app, "ctrl+r")
                 await tui.until(lambda: isinstance(app.screen, ConfirmScreen), what="the dialog")
