@@ -83,7 +83,7 @@ def test_teach_list_rename_go_to_and_delete(tui, data_dir: Path) -> None:
 
             # go home (machine file), then back to the taught one: the robot gets there
             state = app.query_one("#positions-state", LiveText)
-            app.query_one("#positions-speed Input", Input).value = "0.4"
+            app.query_one("#positions-speed Input", Input).value = "0.9"
 
             async def go_to(row: int, name: str, target: np.ndarray) -> None:
                 table.move_cursor(row=row)
@@ -99,7 +99,7 @@ def test_teach_list_rename_go_to_and_delete(tui, data_dir: Path) -> None:
             await go_to(2, "bench", np.array(taught.joints))
             runs = [load_run(info.files.json) for info in list_runs(data_dir)]
             assert sorted((r.meta["position"], r.meta["speed_fraction"]) for r in runs
-                          if r.kind == "go_to") == [("bench", 0.4), ("home", 0.4)]  # saved
+                          if r.kind == "go_to") == [("bench", 0.9), ("home", 0.9)]  # saved
 
             # E-stop latched: go to is refused with the reason, nothing moves
             await pilot.press("ctrl+e")
