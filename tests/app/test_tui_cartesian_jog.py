@@ -147,7 +147,12 @@ def test_steps_pressed_while_a_step_runs_are_queued_as_far_as_they_fit(tui) -> N
     asyncio.run(scenario())
 
 
-def test_a_step_into_the_wrist_singularity_is_refused_and_says_why(tui) -> None:
+def test_near_the_wrist_singularity_the_pose_line_warns_and_a_step_into_it_is_refused(
+        tui) -> None:
+    """Issue 25 item 2: the simulator starts at Yaw 2.5°, where a world-frame α turn (and a
+    tool-frame γ turn) cannot run; the pose line says so, a tool-frame step towards Yaw 0° is
+    refused saying why (nothing moves), and the pose line stops warning once Yaw is jogged
+    away from 0°. One app for both claims: each starts where the simulator starts the arm."""
     async def scenario() -> None:
         app = tui.app()
         async with app.run_test(size=SIZE) as pilot:
@@ -155,29 +160,6 @@ def test_a_step_into_the_wrist_singularity_is_refused_and_says_why(tui) -> None:
             client = app.client
             assert 0.0 < before.position[4] < 5.0  # the simulator starts with Yaw near 0°
             seen = tui.notifications(app)
-            await pilot.press("w", "w", "9", "g")  # tool frame, β +5°: towards Yaw 0°
-            await tui.until(lambda: any("wrist singularity" in m for m in seen), timeout=10,
-                            what="the refusal naming the wrist singularity")
-            tab = app.query_one(JogTab)
-            tab.refresh_live()
-            note = app.query_one("#jog-cartesian-note", LiveText).text
-            assert "jog refused" in note and "wrist singularity" in note
-            status = client.status()
-            assert status.mode == Mode.HOLD and status.desired == before.desired
-
-    asyncio.run(scenario())
-
-
-def test_the_pose_line_warns_near_the_wrist_singularity(tui) -> None:
-    """Issue 25 item 2: the simulator starts at Yaw 2.5°, where a world-frame α turn (and a
-    tool-frame γ turn) cannot run; the pose line says so, and stops saying it once Yaw is
-    jogged away from 0°."""
-    async def scenario() -> None:
-        app = tui.app()
-        async with app.run_test(size=SIZE) as pilot:
-            before = await tui.ready(app, pilot)
-            client = app.client
-            assert 0.0 < before.position[4] < 5.0
             await pilot.press("w")  # world frame
             tab = app.query_one(JogTab)
 
@@ -188,6 +170,16 @@ def test_the_pose_line_warns_near_the_wrist_singularity(tui) -> None:
             assert "wrist singularity near: Yaw 2.5° from 0°; world jog α stops (Bend)" in pose()
             await pilot.press("w")  # tool frame
             assert "tool jog γ stops (Bend)" in pose()
+
+            await pilot.press("9", "g")  # β +5°: towards Yaw 0°
+            await tui.until(lambda: any("wrist singularity" in m for m in seen), timeout=10,
+                            what="the refusal naming the wrist singularity")
+            tab.refresh_live()
+            note = app.query_one("#jog-cartesian-note", LiveText).text
+            assert "jog refused" in note and "wrist singularity" in note, note
+            status = client.status()
+            assert status.mode == Mode.HOLD and status.desired == before.desired, status
+
             client.go_to([*before.desired[:4], 45.0, before.desired[5]], speed=1.0)
             await tui.until(lambda: "⚠" not in pose() and client.status().mode == Mode.HOLD,
                             timeout=30, what=lambda: f"no warning at Yaw 45°: {pose()}")
