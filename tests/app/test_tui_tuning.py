@@ -42,18 +42,40 @@ def test_changes_between_two_sets_are_listed_by_joint_and_key() -> None:
     assert coefficient_changes(track, track, UNIMATE) == []
 
 
-def test_load_shows_the_differences_and_applies_only_on_confirm_then_undo(tui,
-                                                                           tmp_path: Path
-                                                                           ) -> None:
+def test_save_asks_load_applies_only_on_confirm_then_undo_and_a_refused_file_applies_nothing(
+        tui, tmp_path: Path) -> None:
+    """On one app, each part starting from the sets in use (the undo puts them back): Save asks
+    before replacing a file; Load shows the differences and applies only on confirm, ^Z puts
+    back the set before; a file whose hold set passes the check and whose track set (In/Out's
+    kp negated) does not applies neither, and the reason stays in the tab."""
     async def scenario() -> None:
         app = tui.app()
         async with app.run_test(size=SIZE) as pilot:
             table = await open_tuning(tui, app, pilot)
             client = app.client
+            path_field = app.query_one("#tuning-path", Input)
+
+            # Save asks before replacing a file
+            mine = tmp_path / "mine.toml"
+            mine.write_text("# the operator's own notes\n")
+            path_field.value = str(mine)
+            await pilot.click("#tuning-save")
+            await tui.until(lambda: isinstance(app.screen, ConfirmScreen), what="the question")
+            await pilot.press("n")
+            await tui.until(lambda: not isinstance(app.screen, ConfirmScreen))
+            assert mine.read_text() == "# the operator's own notes\n", "replaced after no"
+            await pilot.click("#tuning-save")
+            await tui.until(lambda: isinstance(app.screen, ConfirmScreen), what="the question")
+            await pilot.press("y")
+            await tui.until(lambda: "[coefficients.track]" in mine.read_text(), what="saved")
+            assert load_coefficients(mine, app.machine)["track"] == client.coefficients[
+                "track"], "the file saved is not the track set in use"
+
+            # Load: the differences, applied only on confirm, then undone
             live = client.coefficients["track"]
             tuned = replace(live, kp=((18.0,), *live.kp[1:]))  # In/Out's kp → 18
             path = save_coefficients(tmp_path / "tuned", {"track": tuned}, app.machine)
-            app.query_one("#tuning-path", Input).value = str(path)
+            path_field.value = str(path)
             await pilot.click("#tuning-load")
             await tui.until(lambda: isinstance(app.screen, ReviewScreen), what="the review")
             review = "\n".join(str(s.render()) for s in app.screen.query(Static))
@@ -77,24 +99,11 @@ def test_load_shows_the_differences_and_applies_only_on_confirm_then_undo(tui,
             await pilot.press("ctrl+z")  # nothing left to undo: nothing changes
             assert client.coefficients["track"] == live
 
-    asyncio.run(scenario())
-
-
-def test_a_file_with_a_refused_set_applies_nothing_and_says_why_in_the_tab(tui,
-                                                                           tmp_path: Path
-                                                                           ) -> None:
-    """hold changed within the check, track with In/Out's kp negated: the gain check refuses
-    the track set, so neither is applied, and the reason stays in the tab."""
-    async def scenario() -> None:
-        app = tui.app()
-        async with app.run_test(size=SIZE) as pilot:
-            await open_tuning(tui, app, pilot)
-            client = app.client
+            # a file with a refused set applies nothing, and says why in the tab
             hold, track = client.coefficients["hold"], client.coefficients["track"]
             sets = {"hold": replace(hold, ki=(hold.ki[0] * 0.5, *hold.ki[1:])),
                     "track": replace(track, kp=((-20.0,), *track.kp[1:]))}
-            path = save_coefficients(tmp_path / "mixed", sets, app.machine)
-            app.query_one("#tuning-path", Input).value = str(path)
+            path_field.value = str(save_coefficients(tmp_path / "mixed", sets, app.machine))
             await pilot.click("#tuning-load")
             await tui.until(lambda: isinstance(app.screen, ReviewScreen), what="the review")
             await pilot.press("y")
@@ -102,28 +111,5 @@ def test_a_file_with_a_refused_set_applies_nothing_and_says_why_in_the_tab(tui,
             await tui.until(lambda: "refused" in shown(outcome), what="the refusal in the tab")
             assert "In/Out: unstable on the nominal model: negative gain" in shown(outcome)
             assert client.coefficients == {"hold": hold, "track": track}
-
-    asyncio.run(scenario())
-
-
-def test_save_asks_before_replacing_a_file(tui, tmp_path: Path) -> None:
-    async def scenario() -> None:
-        app = tui.app()
-        async with app.run_test(size=SIZE) as pilot:
-            await open_tuning(tui, app, pilot)
-            path = tmp_path / "mine.toml"
-            path.write_text("# the operator's own notes\n")
-            app.query_one("#tuning-path", Input).value = str(path)
-            await pilot.click("#tuning-save")
-            await tui.until(lambda: isinstance(app.screen, ConfirmScreen), what="the question")
-            await pilot.press("n")
-            await tui.until(lambda: not isinstance(app.screen, ConfirmScreen))
-            assert path.read_text() == "# the operator's own notes\n"
-            await pilot.click("#tuning-save")
-            await tui.until(lambda: isinstance(app.screen, ConfirmScreen), what="the question")
-            await pilot.press("y")
-            await tui.until(lambda: "[coefficients.track]" in path.read_text(), what="saved")
-            assert load_coefficients(path, app.machine)["track"] == app.client.coefficients[
-                "track"]
 
     asyncio.run(scenario())
