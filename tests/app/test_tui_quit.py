@@ -6,6 +6,7 @@ from __future__ import annotations
 import asyncio
 
 from app.tui import QuitScreen
+from app.widgets.dialogs import ConfirmScreen
 from control.motion import moves
 
 SIZE = (160, 48)
@@ -50,10 +51,13 @@ def test_quitting_while_latched_asks_and_otherwise_quits_at_once(tui) -> None:
             await pilot.press("n")
             await tui.until(lambda: not isinstance(app.screen, QuitScreen), what="the answer")
             assert app.is_running and app.client.status().estop
-        quiet = tui.app()
-        async with quiet.run_test(size=SIZE) as pilot:
-            await tui.ready(quiet, pilot)
+            # released (asked first), nothing runs and nothing is latched: ^Q quits unasked
+            await pilot.press("ctrl+r")
+            await tui.until(lambda: isinstance(app.screen, ConfirmScreen), what="the release")
+            await pilot.press("y")
+            await tui.until(lambda: not app.client.status().estop and not app.estop_latched,
+                            what="the E-stop released")
             await pilot.press("ctrl+q")
-            await tui.until(lambda: not quiet.is_running, what="the app to quit unasked")
+            await tui.until(lambda: not app.is_running, what="the app to quit unasked")
 
     asyncio.run(scenario())
