@@ -67,21 +67,6 @@ def test_estop_from_every_tab_closes_the_valves(tui) -> None:
     asyncio.run(scenario())
 
 
-def test_estop_closes_an_open_dialog(tui) -> None:
-    async def scenario() -> None:
-        app = tui.app()
-        async with app.run_test(size=SIZE) as pilot:
-            await tui.ready(app, pilot)
-            await pilot.press("ctrl+e", "ctrl+r")  # the release dialog is open
-            await tui.until(lambda: app.client.status().estop)
-            assert isinstance(app.screen, ConfirmScreen)
-            await pilot.press("escape")
-            assert not isinstance(app.screen, ConfirmScreen)
-            assert app.client.status().estop
-
-    asyncio.run(scenario())
-
-
 def test_a_limit_fault_says_what_happened_and_what_to_do(tui) -> None:
     async def scenario() -> None:
         app = tui.app()
@@ -115,10 +100,12 @@ def test_a_dead_controller_is_reported_at_once(tui) -> None:
     asyncio.run(scenario())
 
 
-def test_an_estop_clears_the_jog_duties_and_keys_while_latched_do_nothing(tui) -> None:
+def test_an_estop_clears_the_jog_duties_keys_while_latched_do_nothing_and_it_closes_a_dialog(
+        tui) -> None:
     """The bug report's sequence: Jog tab, duty mode, increment 5, Esc, then ``s`` six times.
     While latched the command column stays 0, the controller is sent nothing and the
-    operator is told why; after the release and one ``s`` Rotate's duty is +5 %, not +35 %."""
+    operator is told why; after the release and one ``s`` Rotate's duty is +5 %, not +35 %.
+    Then, on the same app, an E-stop closes an open dialog."""
     async def scenario() -> None:
         app = tui.app()
         async with app.run_test(size=SIZE) as pilot:
@@ -152,6 +139,14 @@ def test_an_estop_clears_the_jog_duties_and_keys_while_latched_do_nothing(tui) -
                             what="manual actuation")
             assert client.status().duty == (0.0, 5.0, 0.0, 0.0, 0.0, 0.0)
             assert "+5" in command_cell(app, 1)
+
+            # an E-stop closes an open dialog (the release's own: Esc is the E-stop key)
+            await pilot.press("ctrl+e", "ctrl+r")  # the release dialog is open
+            await tui.until(lambda: client.status().estop, what="the latch")
+            assert isinstance(app.screen, ConfirmScreen), app.screen
+            await pilot.press("escape")
+            assert not isinstance(app.screen, ConfirmScreen), "the dialog stayed open"
+            assert client.status().estop
 
     asyncio.run(scenario())
 
