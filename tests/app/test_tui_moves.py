@@ -60,8 +60,9 @@ def test_step_runs_on_the_simulator_and_appears_in_runs(tui, data_dir: Path) -> 
             target = round(start.position[2] + 5.0, 1)
             app.query_one("#form-step JointField Select").value = 2  # Up/Down
             field(app, "step", "target").text = str(target)
-            await pilot.pause(0.5)
-            assert "step Up/Down" in app.query_one("#move-preview-title").render().plain
+            title = app.query_one("#move-preview-title")
+            await tui.until(lambda: "step Up/Down" in title.render().plain,
+                            what=lambda: f"the step previewed: {title.render().plain}")
             tab = await run_and_wait(tui, app, pilot)
             result = tab.last_result
             assert result is not None and result.complete, result and result.status
@@ -296,9 +297,9 @@ def test_via_points_preview_and_run_in_joint_space_and_cartesian(tui) -> None:
             via = q + np.array([40.0, 5.0, 2.0, 5.0, 0.0, 0.0])
             back = q + np.array([0.0, 10.0, 0.0, 0.0, 0.0, 0.0])
             area.text = "\n".join(" ".join(f"{v:.3f}" for v in row) for row in (via, back))
-            await pilot.pause(0.5)
-            title = app.query_one("#move-preview-title").render().plain
-            assert "path through 2 via points" in title, title
+            title = app.query_one("#move-preview-title")
+            await tui.until(lambda: "path through 2 via points" in title.render().plain,
+                            what=lambda: f"the path previewed: {title.render().plain}")
             tab = await run_and_wait(tui, app, pilot)
             result = tab.last_result
             assert result.complete and result.run.kind == "via_points", result.status
@@ -309,9 +310,8 @@ def test_via_points_preview_and_run_in_joint_space_and_cartesian(tui) -> None:
             start = MODEL.pose(final)[:3]
             area.text = (f"{start[0] + 40:.2f} {start[1]:.2f} {start[2]:.2f}\n"
                          f"{start[0] + 40:.2f} {start[1] + 60:.2f} {start[2] + 20:.2f}")
-            await pilot.pause(0.5)
-            assert "Cartesian path through 2 points" in \
-                app.query_one("#move-preview-title").render().plain
+            await tui.until(lambda: "Cartesian path through 2 points" in title.render().plain,
+                            what=lambda: f"the Cartesian path previewed: {title.render().plain}")
             tab = await run_and_wait(tui, app, pilot)
             assert tab.last_result.complete and tab.last_result.run.kind == "cartesian"
             desired = tab.last_result.run.desired
