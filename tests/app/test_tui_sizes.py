@@ -205,13 +205,23 @@ async def scope_plots_tall(app: ServodeskApp, pilot) -> None:
 
 
 def test_every_tab_shows_what_it_is_for(tui) -> None:
+    """Every tab at each size, the Moves tab with a multi-step of all six joints in its form
+    (``six_previewed``: checked on the app that goes through the sizes, not on one of its
+    own)."""
     a_saved_run(tui.data_dir)
 
     async def scenario() -> None:
         app = tui.app(build_behind=True)  # every tab is opened
         async with app.run_test(size=SIZES[-1]) as pilot:
-            await tui.ready(app, pilot)
+            status = await tui.ready(app, pilot)
             app.record_event(LogEntry(time.time(), "notice", LONG_EVENT))
+            await pilot.press("f2")
+            kinds = app.query_one("#move-kinds", OptionList)
+            kinds.highlighted = next(i for i in range(kinds.option_count)
+                                     if str(kinds.get_option_at_index(i).prompt) == "Multi-step")
+            await pilot.pause()
+            for j, q in enumerate(status.position):
+                app.query_one(f"#form-multi_step #target{j}", NumberField).text = f"{q + 3:.1f}"
             for size in SIZES:
                 await resize(tui, app, pilot, size)
                 with at(size):
@@ -219,12 +229,12 @@ def test_every_tab_shows_what_it_is_for(tui) -> None:
                     await pilot.pause()
                     tab_bar_whole(app)
                     await header_whole(tui, app)
-                    await every_tab(tui, app, pilot)
+                    await every_tab(tui, app, pilot, size)
 
     asyncio.run(scenario())
 
 
-async def every_tab(tui, app: ServodeskApp, pilot) -> None:
+async def every_tab(tui, app: ServodeskApp, pilot, size: tuple[int, int]) -> None:
     for i, (name, _) in enumerate(TABS):
         await pilot.press(f"f{i + 1}")
         tab = app.tab(name)
@@ -248,6 +258,7 @@ async def every_tab(tui, app: ServodeskApp, pilot) -> None:
         if name == "moves":  # each kind on one line, the feed hold's label whole
             assert "Multi-step" in tui.text(app.query_one("#move-kinds"))
             assert app.query_one("#feed-hold").region.height == 1
+            await six_previewed(tui, app.query_one("#move-preview", FigurePlot), size)
         if name == "scope":
             await scope_plots_tall(app, pilot)
         if name == "latency":  # every bin's span, count and share whole
@@ -272,32 +283,10 @@ async def every_tab(tui, app: ServodeskApp, pilot) -> None:
             assert all(braille(plot, r) for r in plot.panel_regions())
 
 
-def test_six_joints_are_previewed_legibly(tui) -> None:
+async def six_previewed(tui, plot: FigurePlot, size: tuple[int, int]) -> None:
     """A multi-step of all six joints: at 160×48 six panels with a height and a curve each,
     side by side without overlapping; on a smaller screen at least the one-panel summary of
     every joint (never an empty plot)."""
-
-    async def scenario() -> None:
-        app = tui.app()
-        async with app.run_test(size=SIZES[-1]) as pilot:
-            status = await tui.ready(app, pilot)
-            await pilot.press("f2")
-            kinds = app.query_one("#move-kinds", OptionList)
-            kinds.highlighted = next(i for i in range(kinds.option_count)
-                                     if str(kinds.get_option_at_index(i).prompt) == "Multi-step")
-            await pilot.pause()
-            for j, q in enumerate(status.position):
-                app.query_one(f"#form-multi_step #target{j}", NumberField).text = f"{q + 3:.1f}"
-            plot = app.query_one("#move-preview", FigurePlot)
-            for size in SIZES:
-                await resize(tui, app, pilot, size)
-                with at(size):
-                    await six_previewed(tui, plot, size)
-
-    asyncio.run(scenario())
-
-
-async def six_previewed(tui, plot: FigurePlot, size: tuple[int, int]) -> None:
     await tui.until(lambda: plot.drawn is not None and len(plot.drawn.panels) in (1, 6)
                     and plot.figure is not None and len(plot.figure.panels) == 6
                     and plot.size.width > 0, what="the six joints previewed")
