@@ -52,17 +52,18 @@ def free_tcp_port() -> int:
         return s.getsockname()[1]
 
 
-def test_corrupted_bytes_at_1e_3_are_counted_and_never_acted_on(
+def test_corrupted_bytes_at_5e_3_are_counted_and_never_acted_on(
         controller, emulator, measured) -> None:
-    """A 10 s move with one frame in a thousand bit-flipped in each direction: the move
+    """A 2 s move with one frame in two hundred bit-flipped in each direction: the move
     completes without a fault, the host counts the damaged reports and the board the
     damaged commands, the board refuses none (a NAK would mean a damaged frame passed its
     CRC), nothing arrives out of order and the glitch filter rejects no reading: nothing
-    damaged was acted on."""
-    board = emulator("--corrupt-rate", "1e-3", "--corrupt-rx-rate", "1e-3",
+    damaged was acted on. (Each damaged frame is judged alone: ~10 each way show it, as a
+    10 s move at 1e-3 did, in a fifth of the time.)"""
+    board = emulator("--corrupt-rate", "5e-3", "--corrupt-rx-rate", "5e-3",
                      "--glitch-scale", "0", "--seed", "11")
     client = controller(backend="serial", port=board.url)
-    result = client.wait(client.move(slow_path(client.status().position, 10.0), kind="sine"),
+    result = client.wait(client.move(slow_path(client.status().position, 2.0), kind="sine"),
                          timeout=60)
     status = client.status()
     summary = board.stop()
@@ -73,7 +74,7 @@ def test_corrupted_bytes_at_1e_3_are_counted_and_never_acted_on(
     host = measured("host_damaged_frames", link["crc_errors"] + link["truncated"])
     board_side = measured("board_damaged_frames", summary["crc_errors"] + summary["truncated"])
     measured("frames_each_way", link["frames_tx"])
-    assert host > 0 and board_side > 0, "1e-3 of ~10,000 frames each way"
+    assert host > 0 and board_side > 0, "5e-3 of ~2,000 frames each way"
     assert link["out_of_order"] == 0 and link["link_lost"] == 0
     assert summary["naks"] == 0
     assert sum(status.glitches) == 0
@@ -87,7 +88,7 @@ def test_dropped_reports_leave_the_loop_running_on_its_last_reading(
     shows the drops, the move completes and no reading is rejected as a jump."""
     board = emulator("--drop-rate", "0.02", "--glitch-scale", "0", "--seed", "3")
     client = controller(backend="serial", port=board.url)
-    result = client.wait(client.move(slow_path(client.status().position, 3.0), kind="sine"),
+    result = client.wait(client.move(slow_path(client.status().position, 2.0), kind="sine"),
                          timeout=60)
     status = client.status()
     assert result.complete, result.status
@@ -183,7 +184,6 @@ def test_the_port_vanishing_stops_motion_and_only_the_operator_reconnects(
     released = client.wait_event("estop", 10.0, lambda e: not e.payload["latched"])
     assert released.payload["reason"] == "reset by operator"
     until(lambda: not client.status().flags & Flag.LINK_FAULT, 2.0, "the link to be back")
-    time.sleep(1.5)
     final = client.wait(client.move(sine_path(client.status().position, 1.0), kind="sine"),
                         timeout=30)
     assert final.complete, final.status
