@@ -192,10 +192,10 @@ def test_a_frozen_client_makes_the_controller_hold_and_it_is_alive_on_resume(
         hold_s = until(watch.holding_without_client, 5.0, "the controller to hold")
         measured("hold_after_freeze_ms", hold_s * 1e3, "ms")
         assert hold_s < 2.0, "design: the controller holds 250 ms after the last heartbeat"
-        ticks, counted, latest_us = ticks_keep_coming(watch, 1.0)
-        measured("ticks_per_s_while_frozen", ticks)
+        ticks, counted, latest_us = ticks_keep_coming(watch, 0.5)
+        measured("ticks_per_s_while_frozen", ticks / 0.5)
         measured("latest_wakeup_while_frozen_us", latest_us, "µs")
-        assert ticks > 500 and counted > 500, "the loop must not block on a frozen client"
+        assert ticks > 250 and counted > 250, "the loop must not block on a frozen client"
         assert list_runs(runs) == [], "the loop saved a run: file I/O in the tick"
 
         os.kill(script.proc.pid, signal.SIGCONT)
@@ -295,7 +295,7 @@ def test_a_stall_of_the_whole_machine_is_not_the_clients_silence(tmp_path: Path,
     move completes and its run lists the stall. (A client frozen alone is lost: above.) The
     step is small and over before the stall: a valve left open through a stall moves the
     joint, and the supervisor's answer to that is not this test's subject."""
-    script = ClientScript(tmp_path / "runs", orphan_timeout_s=30.0, seconds=3.0, degrees=2.0)
+    script = ClientScript(tmp_path / "runs", orphan_timeout_s=30.0, seconds=1.5, degrees=2.0)
     watch = StatusWatch(script.segment)
     try:
         until(lambda: watch.status().move_done >= 300, 10.0, "the move to run")
