@@ -54,6 +54,14 @@ class StatusTap:
                 last = status.tick
             time.sleep(0.0001)
 
+    def latest(self) -> Status | None:
+        return self.seen[-1][1] if self.seen else None
+
+    def ticks_latched(self) -> int:
+        """Ticks seen since the first latched one (0: none latched yet)."""
+        first = next((s.tick for _, s in self.seen if s.estop), None)
+        return 0 if first is None else self.seen[-1][1].tick - first
+
     def around(self, sent: float) -> tuple[Status, list[tuple[float, Status]]]:
         """The last status read before ``sent`` and every latched one read after it."""
         before = [s for t, s in self.seen if t < sent]
@@ -94,6 +102,8 @@ MODES: dict[str, tuple[Mode, Callable[[ControlClient], MoveHandle | None]]] = {
     "initialise": (Mode.INITIALISE, start_initialise),
 }
 REASONS = {"operator": "operator E-stop", "button": "E-stop input pressed"}
+AFTER_TICKS = 50  # latched ticks watched after the latching one: a valve reopened shows at once
+MOVE_ROWS = 100  # rows a move has recorded when the E-stop comes
 
 
 def press(client: ControlClient, source: str) -> None:
@@ -130,28 +140,29 @@ def test_estop_closes_every_valve_on_the_latching_tick(controller, until, measur
     """In each mode (hold moving to a new target, follow_track, manual_actuate,
     tracking_actuate, the rig's initialise), with motion under way, an E-stop from the
     operator or from the E-stop input latches, and the first status that shows the latch
-    already has every valve and every controller output at 0, as have all after it; a move
-    in progress ends as "estop: …" with its run on disk; a reset returns to hold."""
+    already has every valve and every controller output at 0, as have the fifty ticks after
+    it (``AFTER_TICKS``); a move in progress (a hundred samples of it) ends as "estop: …"
+    with its run on disk; a reset returns to hold."""
     expected, start = MODES[mode]
     rig = mode == "initialise"
     client = controller("rig" if rig else "unimate2000b",
                         sim_options={"initial": [400.0]} if rig else {})
     with StatusTap(client) as tap:
         handle = start(client)
-        until(lambda: client.status().mode == expected and any(client.status().valve), 5.0,
-              f"{mode} to move a joint")
-        time.sleep(0.2)
+        until(lambda: (seen := tap.latest()) is not None and seen.mode == expected
+              and any(seen.valve) and (handle is None or seen.move_done > MOVE_ROWS), 5.0,
+              f"the tap to see {mode} move a joint")
         sent = time.monotonic()
         press(client, source)
         event = client.wait_event("estop", 5.0, lambda e: e.payload["latched"])
-        time.sleep(0.2)
+        until(lambda: tap.ticks_latched() >= AFTER_TICKS, 5.0, "the tap to see ticks latched")
     assert event.payload["reason"] == REASONS[source]
     first = assert_closed_on_the_latching_tick(tap, sent, expected, measured)
     assert first.fault == REASONS[source]
     if handle is not None:
         result = client.wait(handle, timeout=5.0)
         assert result.status == f"estop: {REASONS[source]}"
-        assert load_run(result.files.json).samples > 100
+        assert load_run(result.files.json).samples > MOVE_ROWS
     release(client, source)
     until(lambda: not client.status().estop, 2.0, "the reset")
     assert client.status().mode == Mode.HOLD
@@ -171,7 +182,7 @@ def test_the_boards_estop_button_closes_the_valves_over_the_serial_link(
         sent = time.monotonic()
         board.send(signal.SIGUSR1)
         event = client.wait_event("estop", 5.0, lambda e: e.payload["latched"])
-        time.sleep(0.2)
+        until(lambda: tap.ticks_latched() >= AFTER_TICKS, 5.0, "the tap to see ticks latched")
     assert event.payload["reason"] == REASONS["button"]
     assert_closed_on_the_latching_tick(tap, sent, Mode.FOLLOW_TRACK, measured)
     board.send(signal.SIGUSR2)
