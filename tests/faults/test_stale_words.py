@@ -92,15 +92,16 @@ def until_held(client: ControlClient, seconds: float, wait: Callable[..., float]
 @pytest.mark.parametrize("hold_ms", [3, 6, 10])
 def test_one_wrong_word_read_through_late_answers_is_one_glitch_not_a_fault(
         controller, emulator, until, measured, hold_ms: int) -> None:
-    """Rotate holding still; every 0.3 s one wrong Rotate word, then the board's answers
+    """Rotate holding still; every 0.1 s one wrong Rotate word, then the board's answers
     held back ``hold_ms``: the controller re-reads that word every tick of the hold. Each
     wrong word is rejected once (no more glitches than wrong words sent) and no feedback
     fault comes, however long the hold (it used to be five rejections in a row, a feedback
-    fault, from 3-6 ms of hold on)."""
+    fault, from 3-6 ms of hold on). The wrong words come 100 ms apart, ten times the longest
+    hold, so each is judged alone, as when they came every 0.3 s; five come in 0.5 s."""
     board = emulator("--glitch-scale", "0", "--flip-word", f"{ROTATE}:{WRONG_BIT}",
-                     "--hold-replies", str(hold_ms), "--fault-every", "0.3")
+                     "--hold-replies", str(hold_ms), "--fault-every", "0.1")
     client = controller(backend="serial", port=board.url)
-    while not (status := until_held(client, 0.3, until)).estop:
+    while not (status := until_held(client, 0.1, until)).estop:
         if status.glitches[ROTATE] >= 5:
             break
     assert not status.estop, status.fault
@@ -163,9 +164,10 @@ def test_resets_after_watchdog_trips_hold_where_the_arm_is_beside_a_cpu_burner(
     watchdog; the operator's reset reconnects, and the board's first answer after each
     configuration has a wrong Bend word. The resync asks the board for new samples and
     believes the true words over the wrong one, so each reset is released and the arm then
-    holds where it was, without a fault, for 0.3 s of the controller's time. (A resync that
+    holds where it was, without a fault, for 0.1 s of the controller's time. (A resync that
     re-read the first answer confirmed its wrong word, and the true ones after it were a
-    feedback fault.)"""
+    feedback fault: ``glitch_limit``, five, rejections in a row, 5 ms after the release; a
+    hold toward a wrong Bend word, tens of degrees off, moves the arm within ms.)"""
     board = emulator("--tcp", str(free_tcp_port()), "--glitch-scale", "0",
                      "--flip-first", f"{BEND}:{WRONG_BIT}")
     client = controller(backend="serial", port=board.url)
@@ -182,7 +184,7 @@ def test_resets_after_watchdog_trips_hold_where_the_arm_is_beside_a_cpu_burner(
             client.reset()
             released = client.wait_event("estop", 5.0, lambda e: not e.payload["latched"])
             assert released.payload["reason"] == "reset by operator", attempt
-            status = until_held(client, 0.3, until)
+            status = until_held(client, 0.1, until)
             assert not status.estop, f"attempt {attempt + 1}: {status.fault}"
             moved = np.abs(np.array(status.position) - where)
             assert np.all(moved <= 3 * TOLERANCE), (attempt, moved.round(2).tolist())
