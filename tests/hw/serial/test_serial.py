@@ -310,15 +310,21 @@ def test_the_first_answer_after_every_configuration_can_be_made_wrong() -> None:
 
 
 def test_corrupted_frames_are_counted_and_never_acted_on(emulator, connect) -> None:
+    """One frame in five corrupted each way, driven until each side has counted more than
+    ten (each damaged frame is judged alone: a fixed 1.5 s drive showed nothing more): none
+    was acted on, no reading jumps."""
     board = emulator("--corrupt-rate", "0.2", "--corrupt-rx-rate", "0.2", "--seed", "5",
                      "--glitch-scale", "0")  # the encoders' own wrong readings would blur this
     backend = connect(board.url, watchdog_s=PATIENT_S)
-    readings = drive(backend, [0.0] * 6, 1.5)
+    c = backend.counters
+    readings: list[list[int]] = []
+    end = time.monotonic() + 10.0
+    while not (c.crc_errors > 10 and backend.last_report.rx_errors > 10):
+        assert time.monotonic() < end, (c.crc_errors, backend.last_report.rx_errors)
+        readings += drive(backend, [0.0] * 6, 0.05)
 
     assert backend.fault == ""  # no corrupted command was NAKed or applied, no report forged
-    c = backend.counters
-    assert c.crc_errors > 10 and c.out_of_order == 0
-    assert backend.last_report.rx_errors > 10  # the board saw the host's frames garbled too
+    assert c.out_of_order == 0  # and the board saw the host's frames garbled too (rx_errors)
     counts = [[gray_to_binary(w) for w in r] for r in readings]
     steps = [abs(a - b) for prev, cur in itertools.pairwise(counts)
              for a, b in zip(prev, cur, strict=True)]
