@@ -90,9 +90,14 @@ def test_ctrl_k_in_a_text_field_is_the_fields(controller_service, tui) -> None:
     asyncio.run(scenario())
 
 
-def test_a_refused_gain_set_says_what_to_do_in_the_tui(tui) -> None:
-    """The gain check's refusal, in the Tuning tab, the notice and the log: the joint and why,
-    and what to do with the TUI's keys, not an API call."""
+def test_the_tuning_tab_says_what_to_do_and_its_preset_list_shows_the_set_chosen(tui) -> None:
+    """One app's Tuning tab (these were two tests, each with an app of its own):
+
+    The gain check's refusal, in the tab, the notice and the log: the joint and why, and what
+    to do with the TUI's keys, not an API call. The refusal applies nothing: the preset list
+    is then checked on the sets the tab started with.
+
+    Choosing the hold set puts the preset list on "hold" (it kept saying "track")."""
 
     async def scenario() -> None:
         app = tui.app()
@@ -101,6 +106,7 @@ def test_a_refused_gain_set_says_what_to_do_in_the_tui(tui) -> None:
             said = tui.notifications(app)
             await pilot.press("f5")
             tab = app.query_one(TuningTab)
+            before = app.client.coefficients
             refused = replace(app.machine.hold, kp=((-20.0,), *app.machine.hold.kp[1:]))
             assert not tab.apply({"hold": refused}, "a test")
             outcome = str(app.query_one("#tuning-outcome", Static).render())
@@ -108,22 +114,12 @@ def test_a_refused_gain_set_says_what_to_do_in_the_tui(tui) -> None:
             for text in (outcome, said[-1], logged[-1]):
                 assert "In/Out" in text and "Identify tab" in text, text
                 assert "set_coefficients" not in text and "override=" not in text, text
-
-    asyncio.run(scenario())
-
-
-def test_the_preset_list_shows_the_set_chosen(tui) -> None:
-    """Choosing the hold set puts the preset list on "hold" (it kept saying "track")."""
-
-    async def scenario() -> None:
-        app = tui.app()
-        async with app.run_test(size=(160, 48)) as pilot:
-            await tui.ready(app, pilot)
-            await pilot.press("f5")
+            assert app.client.coefficients == before, "the refused set was applied"
+            # the preset list on the set chosen
             preset = app.query_one("#tuning-preset", Select)
             assert preset.value == "track"
             await pilot.click(app.query_one("#which-hold", RadioButton))
-            await tui.until(lambda: app.query_one(TuningTab).which == "hold", what="hold chosen")
+            await tui.until(lambda: tab.which == "hold", what="hold chosen")
             await tui.until(lambda: preset.value == "hold", what=lambda: f"{preset.value!r}")
             await pilot.click(app.query_one("#which-track", RadioButton))
             await tui.until(lambda: preset.value == "track", what=lambda: f"{preset.value!r}")
