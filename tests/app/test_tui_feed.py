@@ -15,7 +15,9 @@ SIZE = (160, 48)
 UNIMATE = load_machine("unimate2000b")
 
 
-def test_feed_keys_slow_hold_and_resume_a_running_move(tui) -> None:
+def test_feed_keys_and_the_moves_tabs_buttons_slow_hold_and_resume_a_running_move(tui) -> None:
+    """The keys on the Jog tab, then the Moves tab's buttons on a second ramp of the same app
+    (the override put back to 100 % first: it holds for the moves after)."""
     async def scenario() -> None:
         app = tui.app(lockstep=False)
         async with app.run_test(size=SIZE) as pilot:
@@ -48,17 +50,12 @@ def test_feed_keys_slow_hold_and_resume_a_running_move(tui) -> None:
             assert not result.complete and result.run.meta["feed"][-1][1] == 0.6
             assert len(result.run.meta["pauses"]) == 1
 
-    asyncio.run(scenario())
-
-
-def test_the_moves_tabs_feed_buttons_slow_hold_and_resume(tui) -> None:
-    async def scenario() -> None:
-        app = tui.app(lockstep=False)
-        async with app.run_test(size=SIZE) as pilot:
-            status = await tui.ready(app, pilot)
-            client = app.client
+            # the Moves tab's buttons
+            for _ in range(4):
+                tui.post_key(app, "ctrl+up")
+            await tui.until(lambda: client.status().feed_override == 1.0, what="100 % again")
             await pilot.press("f2")
-            start = np.array(status.position)
+            start = np.array(client.status().position)
             end = start.copy()
             end[1] += 20.0
             handle = client.move(moves.ramp(start, end, ramp_time=20.0, machine=UNIMATE),
