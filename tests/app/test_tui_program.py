@@ -181,7 +181,9 @@ def test_a_program_is_taught_saved_opened_stepped_and_run(tui, data_dir: Path) -
             await tui.until(lambda: tab.runner is not None and tab.runner.state
                             is RunnerState.HELD, RUN_S, what="one step done, held")
             assert [r.visit.step.number for r in tab.runner.results] == [1]
-            assert tab.at == 2  # the next marked
+            # the next marked, once the tab has the step's report (the runner's thread is
+            # held before the UI's queue reaches it: a loaded run read tab.at == 1)
+            await tui.until(lambda: tab.at == 2, what=lambda: f"step 2 marked, not {tab.at}")
             assert "complete" in (await listed(tui, tab, pilot))[1]
             assert np.allclose(app.client.status().position, app.machine.park, atol=0.5)
             await pilot.press("r")
