@@ -144,35 +144,163 @@ def test_abort_holds_and_an_unsaved_run_is_kept_and_saved_elsewhere(tui, tmp_pat
     asyncio.run(scenario())
 
 
-def test_an_invalid_field_shows_its_error_and_runs_nothing(tui, data_dir: Path) -> None:
+def test_invalid_fields_run_nothing_and_a_late_menu_choice_keeps_the_focus(tui, data_dir: Path
+                                                                          ) -> None:
+    """Two flows of the Step form on one app, one after the other (they were two tests, each
+    with an app of its own; the first moves nothing)."""
+
     async def scenario() -> None:
         app = tui.app()
         async with app.run_test(size=SIZE) as pilot:
             await tui.ready(app, pilot)
-            await pilot.press("f2")
-            await choose(app, pilot, "Step")
-            target = field(app, "step", "target")
-            error = app.query_one("#move-error")
-            for text, expected in (("abc", "is not a number"), ("nan", "not a usable number"),
-                                   ("5000", "outside 976…2041mm")):
-                target.text = text
-                await pilot.pause()
-                shown = str(target.query_one(".field-error").render())
-                assert expected in shown, shown
-                await pilot.press("ctrl+s")
-                assert expected in str(error.render())
-            await asyncio.sleep(0.3)
-            assert app.query_one(MovesTab).handle is None
-            assert app.client.status().mode == Mode.HOLD
-            assert not list(data_dir.glob("*.json"))
-            await choose(app, pilot, "Sine")
-            field(app, "sine", "end").text = "2000"
-            field(app, "sine", "period").text = "0.5"  # far too fast for In/Out
-            await pilot.press("ctrl+s")
-            assert "max_speed" in str(error.render())
-            assert not list(data_dir.glob("*.json"))
+            await an_invalid_field_shows_its_error_and_runs_nothing(app, pilot, data_dir)
+            await a_menu_choice_selected_late_leaves_the_field_the_operator_chose(tui, app, pilot)
 
     asyncio.run(scenario())
+
+
+async def an_invalid_field_shows_its_error_and_runs_nothing(app, pilot, data_dir: Path) -> None:
+    await pilot.press("f2")
+    await choose(app, pilot, "Step")
+    target = field(app, "step", "target")
+    error = app.query_one("#move-error")
+    for text, expected in (("abc", "is not a number"), ("nan", "not a usable number"),
+                           ("5000", "outside 976…2041mm")):
+        target.text = text
+        await pilot.pause()
+        shown = str(target.query_one(".field-error").render())
+        assert expected in shown, shown
+        await pilot.press("ctrl+s")
+        assert expected in str(error.render())
+    await asyncio.sleep(0.3)
+    assert app.query_one(MovesTab).handle is None
+    assert app.client.status().mode == Mode.HOLD
+    assert not list(data_dir.glob("*.json"))
+    await choose(app, pilot, "Sine")
+    field(app, "sine", "end").text = "2000"
+    field(app, "sine", "period").text = "0.5"  # far too fast for In/Out
+    await pilot.press("ctrl+s")
+    assert "max_speed" in str(error.render())
+    assert not list(data_dir.glob("*.json"))
+
+
+async def a_menu_choice_selected_late_leaves_the_field_the_operator_chose(tui, app, pilot
+                                                                          ) -> None:
+    """On a loaded machine a click on the Moves menu is selected late: the operator has
+    clicked a field and typed by then. That selection must not take the focus to the form's
+    first field (the joint chooser), where the keys typed next were lost: the failure of
+    test_typing_tmux under load, seen with a log of every focus change. Chosen from the menu
+    with the focus still on it, the first field takes the keys as before."""
+    await pilot.press("f2")
+    await tui.until(lambda: app.query("#form-step #start"), timeout=30,
+                    what="the Moves tab's step form")
+    await choose(app, pilot, "Step")  # shown, as a fresh app's first form
+    menu = app.query_one("#move-kinds", OptionList)
+    start = field(app, "step", "start")
+    await pilot.click(start.input)
+    await pilot.press("5")
+    await tui.until(lambda: start.text.endswith("5"), what="5 in the start field")
+    index = menu.highlighted or 0
+    menu.post_message(OptionList.OptionSelected(menu, menu.get_option_at_index(index),
+                                                index))
+    await pilot.pause()
+    await pilot.press("0")
+    assert app.focused is not None and start in app.focused.ancestors_with_self, \
+        app.focused
+    assert start.text.endswith("50")
+    menu.focus()
+    await pilot.pause()
+    await pilot.press("enter")
+    await tui.until(lambda: app.focused is not menu, what="a field after Enter")
+    first = next(w for w in app.query_one(MovesTab).form.query("Input, Select")
+                 if w.focusable)
+    assert app.focused is first
+
+
+def test_a_path_file_then_via_points_play(tui, tmp_path: Path) -> None:
+    """The path file's flow, then the via points' (joint space, then Cartesian), on one app
+    (they were two tests, each with an app of its own; each starts from where the arm is)."""
+
+    async def scenario() -> None:
+        app = tui.app()
+        async with app.run_test(size=SIZE) as pilot:
+            await tui.ready(app, pilot)
+            await path_file_plays_and_a_bad_line_is_reported(tui, app, pilot, tmp_path)
+            await via_points_preview_and_run_in_joint_space_and_cartesian(tui, app, pilot)
+
+    asyncio.run(scenario())
+
+
+async def path_file_plays_and_a_bad_line_is_reported(tui, app, pilot, tmp_path: Path) -> None:
+    good = tmp_path / "wave.csv"
+    bad = tmp_path / "bad.csv"
+    status = app.client.status()
+    q = status.position[3]
+    good.write_text(f"t,Bend\n0,{q}\n0.5,{q + 5}\n1.0,{q}\n")
+    bad.write_text(f"t,Bend\n0,{q}\n0.5,{q}+5\n")
+    await pilot.press("f2")
+    await choose(app, pilot, "Path file")
+    path_input = app.query_one("#path-file")
+    path_input.focus()
+    path_input.value = str(bad)
+    await pilot.press("enter")
+    state = app.query_one("#path-state")
+    await tui.until(lambda: "line 3" in str(state.render()), what="the bad line")
+    path_input.value = str(good)
+    await pilot.press("enter")
+    await tui.until(lambda: "3 points" in str(state.render()), what="the file loaded")
+    tab = await run_and_wait(tui, app, pilot)
+    assert tab.last_result.complete, tab.last_result.status
+    assert tab.last_result.run.meta["file"] == str(good.resolve())
+    # the run just saved plays again from the same form, by its JSON
+    first = tab.last_result
+    path_input.value = str(first.files.json)
+    await pilot.press("enter")
+    await tui.until(lambda: f"the path run {first.files.stem}" in str(state.render()),
+                    what="the run loaded")
+    tab = await run_and_wait(tui, app, pilot)
+    again = tab.last_result
+    assert again.complete and again.run.meta["replays"].startswith("the path run")
+    rows = first.run.meta["path_samples"]
+    approach = again.run.meta["approach_samples"]
+    np.testing.assert_allclose(again.run.desired[approach:approach + rows],
+                               first.run.desired[:rows], atol=1e-6)
+
+
+async def via_points_preview_and_run_in_joint_space_and_cartesian(tui, app, pilot) -> None:
+    status = app.client.status()
+    q = np.array(status.position)
+    await pilot.press("f2")
+    await choose(app, pilot, "Via points")
+    area = app.query_one("#via-points", TextArea)
+    area.text = "1500 0 0 0 0 0 0"
+    await pilot.press("ctrl+s")
+    assert "line 1: 7 numbers" in str(app.query_one("#move-error").render())
+    via = q + np.array([40.0, 5.0, 2.0, 5.0, 0.0, 0.0])
+    back = q + np.array([0.0, 10.0, 0.0, 0.0, 0.0, 0.0])
+    area.text = "\n".join(" ".join(f"{v:.3f}" for v in row) for row in (via, back))
+    title = app.query_one("#move-preview-title")
+    await tui.until(lambda: "path through 2 via points" in title.render().plain,
+                    what=lambda: f"the path previewed: {title.render().plain}")
+    tab = await run_and_wait(tui, app, pilot)
+    result = tab.last_result
+    assert result.complete and result.run.kind == "via_points", result.status
+    assert np.allclose(result.run.meta["points"][0], np.round(via, 3))
+    final = np.array(app.client.status().position)
+    assert abs(final[1] - (q[1] + 10.0)) < 1.0, final
+    app.query_one("#via-cartesian", Switch).value = True
+    start = MODEL.pose(final)[:3]
+    area.text = (f"{start[0] + 40:.2f} {start[1]:.2f} {start[2]:.2f}\n"
+                 f"{start[0] + 40:.2f} {start[1] + 60:.2f} {start[2] + 20:.2f}")
+    await tui.until(lambda: "Cartesian path through 2 points" in title.render().plain,
+                    what=lambda: f"the Cartesian path previewed: {title.render().plain}")
+    tab = await run_and_wait(tui, app, pilot)
+    assert tab.last_result.complete and tab.last_result.run.kind == "cartesian"
+    desired = tab.last_result.run.desired
+    assert np.allclose(MODEL.pose(desired[-1])[:3], start + np.array([40, 60, 20]),
+                       atol=0.01)
+    assert np.ptp(desired[:, 4:], axis=0).max() < 1e-6  # γ β held: Yaw, Swivel still
+    assert np.allclose(app.client.status().position, desired[-1], atol=1.0)
 
 
 def test_end_point_lists_every_solution_and_runs_the_one_picked(tui) -> None:
@@ -236,89 +364,6 @@ def test_rig_initialises_then_runs_its_sequence(tui, data_dir: Path) -> None:
             await choose(app, pilot, "Set pulse")
             tab = await run_and_wait(tui, app, pilot)
             assert tab.last_result.complete and tab.last_result.run.kind == "set_pulse"
-
-    asyncio.run(scenario())
-
-
-def test_path_file_plays_and_a_bad_line_is_reported(tui, tmp_path: Path) -> None:
-    good = tmp_path / "wave.csv"
-    bad = tmp_path / "bad.csv"
-
-    async def scenario() -> None:
-        app = tui.app()
-        async with app.run_test(size=SIZE) as pilot:
-            status = await tui.ready(app, pilot)
-            q = status.position[3]
-            good.write_text(f"t,Bend\n0,{q}\n0.5,{q + 5}\n1.0,{q}\n")
-            bad.write_text(f"t,Bend\n0,{q}\n0.5,{q}+5\n")
-            await pilot.press("f2")
-            await choose(app, pilot, "Path file")
-            path_input = app.query_one("#path-file")
-            path_input.focus()
-            path_input.value = str(bad)
-            await pilot.press("enter")
-            state = app.query_one("#path-state")
-            await tui.until(lambda: "line 3" in str(state.render()), what="the bad line")
-            path_input.value = str(good)
-            await pilot.press("enter")
-            await tui.until(lambda: "3 points" in str(state.render()), what="the file loaded")
-            tab = await run_and_wait(tui, app, pilot)
-            assert tab.last_result.complete, tab.last_result.status
-            assert tab.last_result.run.meta["file"] == str(good.resolve())
-            # the run just saved plays again from the same form, by its JSON
-            first = tab.last_result
-            path_input.value = str(first.files.json)
-            await pilot.press("enter")
-            await tui.until(lambda: f"the path run {first.files.stem}" in str(state.render()),
-                            what="the run loaded")
-            tab = await run_and_wait(tui, app, pilot)
-            again = tab.last_result
-            assert again.complete and again.run.meta["replays"].startswith("the path run")
-            rows = first.run.meta["path_samples"]
-            approach = again.run.meta["approach_samples"]
-            np.testing.assert_allclose(again.run.desired[approach:approach + rows],
-                                       first.run.desired[:rows], atol=1e-6)
-
-    asyncio.run(scenario())
-
-
-def test_via_points_preview_and_run_in_joint_space_and_cartesian(tui) -> None:
-    async def scenario() -> None:
-        app = tui.app()
-        async with app.run_test(size=SIZE) as pilot:
-            status = await tui.ready(app, pilot)
-            q = np.array(status.position)
-            await pilot.press("f2")
-            await choose(app, pilot, "Via points")
-            area = app.query_one("#via-points", TextArea)
-            area.text = "1500 0 0 0 0 0 0"
-            await pilot.press("ctrl+s")
-            assert "line 1: 7 numbers" in str(app.query_one("#move-error").render())
-            via = q + np.array([40.0, 5.0, 2.0, 5.0, 0.0, 0.0])
-            back = q + np.array([0.0, 10.0, 0.0, 0.0, 0.0, 0.0])
-            area.text = "\n".join(" ".join(f"{v:.3f}" for v in row) for row in (via, back))
-            title = app.query_one("#move-preview-title")
-            await tui.until(lambda: "path through 2 via points" in title.render().plain,
-                            what=lambda: f"the path previewed: {title.render().plain}")
-            tab = await run_and_wait(tui, app, pilot)
-            result = tab.last_result
-            assert result.complete and result.run.kind == "via_points", result.status
-            assert np.allclose(result.run.meta["points"][0], np.round(via, 3))
-            final = np.array(app.client.status().position)
-            assert abs(final[1] - (q[1] + 10.0)) < 1.0, final
-            app.query_one("#via-cartesian", Switch).value = True
-            start = MODEL.pose(final)[:3]
-            area.text = (f"{start[0] + 40:.2f} {start[1]:.2f} {start[2]:.2f}\n"
-                         f"{start[0] + 40:.2f} {start[1] + 60:.2f} {start[2] + 20:.2f}")
-            await tui.until(lambda: "Cartesian path through 2 points" in title.render().plain,
-                            what=lambda: f"the Cartesian path previewed: {title.render().plain}")
-            tab = await run_and_wait(tui, app, pilot)
-            assert tab.last_result.complete and tab.last_result.run.kind == "cartesian"
-            desired = tab.last_result.run.desired
-            assert np.allclose(MODEL.pose(desired[-1])[:3], start + np.array([40, 60, 20]),
-                               atol=0.01)
-            assert np.ptp(desired[:, 4:], axis=0).max() < 1e-6  # γ β held: Yaw, Swivel still
-            assert np.allclose(app.client.status().position, desired[-1], atol=1.0)
 
     asyncio.run(scenario())
 
@@ -434,42 +479,5 @@ def test_a_field_chosen_while_the_tabs_build_keeps_the_focus(tui, monkeypatch) -
                 assert start.text.endswith("501"), f"the focus went to {app.focused!r}"
         finally:
             held.set()
-
-    asyncio.run(scenario())
-
-
-def test_a_menu_choice_selected_late_leaves_the_field_the_operator_chose(tui) -> None:
-    """On a loaded machine a click on the Moves menu is selected late: the operator has
-    clicked a field and typed by then. That selection must not take the focus to the form's
-    first field (the joint chooser), where the keys typed next were lost: the failure of
-    test_typing_tmux under load, seen with a log of every focus change. Chosen from the menu
-    with the focus still on it, the first field takes the keys as before."""
-    async def scenario() -> None:
-        app = tui.app()
-        async with app.run_test(size=SIZE) as pilot:
-            await tui.ready(app, pilot)
-            await pilot.press("f2")
-            await tui.until(lambda: app.query("#form-step #start"), timeout=30,
-                            what="the Moves tab's step form")
-            menu = app.query_one("#move-kinds", OptionList)
-            start = field(app, "step", "start")
-            await pilot.click(start.input)
-            await pilot.press("5")
-            await tui.until(lambda: start.text.endswith("5"), what="5 in the start field")
-            index = menu.highlighted or 0
-            menu.post_message(OptionList.OptionSelected(menu, menu.get_option_at_index(index),
-                                                        index))
-            await pilot.pause()
-            await pilot.press("0")
-            assert app.focused is not None and start in app.focused.ancestors_with_self, \
-                app.focused
-            assert start.text.endswith("50")
-            menu.focus()
-            await pilot.pause()
-            await pilot.press("enter")
-            await tui.until(lambda: app.focused is not menu, what="a field after Enter")
-            first = next(w for w in app.query_one(MovesTab).form.query("Input, Select")
-                         if w.focusable)
-            assert app.focused is first
 
     asyncio.run(scenario())
