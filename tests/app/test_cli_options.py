@@ -37,11 +37,18 @@ def test_every_global_option_has_a_value_to_try() -> None:
     assert all(GIVEN[name][0][0] in GLOBAL_OPTIONS[name].flags for name in GIVEN)
 
 
+@pytest.fixture(scope="module")
+def whole() -> argparse.ArgumentParser:
+    """The whole parser, built once: parsing a line leaves it as it was."""
+    return cli.build_parser()
+
+
 @pytest.mark.parametrize(("command", "name"), CASES)
-def test_a_global_option_works_before_or_after_the_command(command: str, name: str) -> None:
+def test_a_global_option_works_before_or_after_the_command(
+        command: str, name: str, whole: argparse.ArgumentParser) -> None:
     argv, _ = COMMANDS[command]
     typed, value = GIVEN[name]
-    parse = cli.build_parser().parse_args
+    parse = whole.parse_args
     assert getattr(parse(argv), name) == GLOBAL_OPTIONS[name].default  # not given
     assert getattr(parse([*typed, *argv]), name) == value  # before the command
     assert getattr(parse([*argv, *typed]), name) == value  # after it
@@ -78,17 +85,19 @@ def test_each_help_shows_the_global_options_it_takes_with_their_help(
         assert option.flags[0] in shown and " ".join(option.help.split()) in shown, name
 
 
-@pytest.mark.parametrize(("command", "name"), CASES)
-def test_a_command_line_reads_the_same_with_its_commands_parser_alone(command: str,
-                                                                      name: str) -> None:
+@pytest.mark.parametrize("command", list(COMMANDS))
+def test_a_command_line_reads_the_same_with_its_commands_parser_alone(
+        command: str, whole: argparse.ArgumentParser) -> None:
     """``parse_for_command`` (the named command's module alone, for a quicker start) reads
-    every line the whole parser reads, the same, global options before or after the command."""
-    argv, _ = COMMANDS[command]
-    typed, _ = GIVEN[name]
-    for line in (argv, [*typed, *argv], [*argv, *typed]):
-        alone = cli.parse_for_command(line)
-        assert alone is not None, line
-        assert vars(alone) == vars(cli.build_parser().parse_args(line)), line
+    every line the whole parser reads, the same, each global option the command takes before
+    or after it."""
+    argv, names = COMMANDS[command]
+    for name in names:
+        typed, _ = GIVEN[name]
+        for line in (argv, [*typed, *argv], [*argv, *typed]):
+            alone = cli.parse_for_command(line)
+            assert alone is not None, line
+            assert vars(alone) == vars(whole.parse_args(line)), line
 
 
 @pytest.mark.parametrize("line", [
