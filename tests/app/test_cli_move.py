@@ -4,6 +4,8 @@ nothing started or saved; Ctrl+C during the move, or the board's E-stop, exits 1
 run recorded so far saved; the serial backend against ``servodesk emulate`` on a pty.
 The bad-input cases call the CLI's ``main`` in this process (the code ``python -m app``
 exits with), two processes fewer each; one of them, and bad usage, run as processes too.
+A move's run on disk is read back (``runs list``, ``runs show``) by ``main`` here too: the
+move is this module's subject, and ``runs`` runs in processes in test_cli_runs.py.
 
 The moves run with ``--lockstep`` (the simulator as fast as the controller computes) but
 for the end-to-end ones that are about real time: a step on the simulator, Ctrl+C during a
@@ -11,6 +13,8 @@ move, and the serial backend's two."""
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import os
 import re
@@ -59,10 +63,19 @@ def in_process(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str
     return code, out, err
 
 
+def runs(*args: str, data_dir: Path) -> str:
+    """What ``servodesk runs ARGS`` prints, run by the CLI's ``main`` here: the move's run is
+    read from disk as a later process would (``runs`` in its own processes:
+    test_cli_runs.py)."""
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main(["runs", *args, "--data-dir", str(data_dir)])
+    assert code == 0, err.getvalue()
+    return out.getvalue()
+
+
 def listed(data_dir: Path) -> list[dict]:
-    done = servodesk("runs", "list", "--json", data_dir=data_dir)
-    assert done.returncode == 0, done.stderr
-    return json.loads(done.stdout)
+    return json.loads(runs("list", "--json", data_dir=data_dir))
 
 
 def test_a_step_runs_saves_its_run_and_reports_it_as_json(tmp_path: Path) -> None:
@@ -80,10 +93,9 @@ def test_a_step_runs_saves_its_run_and_reports_it_as_json(tmp_path: Path) -> Non
     assert metric["step"] == pytest.approx(5.0 - MIDDLE[2], abs=0.3)
     assert metric["settling_time_s"] is not None and metric["settling_time_s"] < 1.5
     assert [run["stem"] for run in listed(tmp_path)] == [files["stem"]]
-    shown = servodesk("runs", "show", files["stem"], "--json", data_dir=tmp_path)
-    assert shown.returncode == 0, shown.stderr
+    shown = runs("show", files["stem"], "--json", data_dir=tmp_path)
     # the saved metrics, as the run's JSON writes numbers (10 significant digits)
-    assert json.loads(shown.stdout)["metrics"] == json_numbers(report["metrics"])
+    assert json.loads(shown)["metrics"] == json_numbers(report["metrics"])
 
 
 def test_a_move_not_in_position_within_goal_time_exits_1_and_says_so(tmp_path: Path) -> None:
@@ -161,8 +173,8 @@ def test_every_kind_runs_and_leaves_its_run_on_disk(kind: str, tmp_path: Path) -
     # fundamentals, else a smooth path's tracking error
     second = {"multistep": "step", "sine": "amplitude"}.get(kind, "travel")
     assert any(line.split()[:2] == ["joint", second] for line in lines), done.stdout
-    shown = servodesk("runs", "show", run["stem"], data_dir=tmp_path)
-    assert any(line.split()[:2] == ["joint", second] for line in shown.stdout.splitlines())
+    shown = runs("show", run["stem"], data_dir=tmp_path)
+    assert any(line.split()[:2] == ["joint", second] for line in shown.splitlines())
 
 
 @pytest.mark.parametrize("kind, options, what", [
@@ -336,7 +348,7 @@ def test_a_step_on_the_serial_backend_through_the_emulator(
     assert done.returncode == 0, done.stderr + done.stdout
     report = json.loads(done.stdout)
     assert (report["status"], report["backend"]) == ("complete", "serial")
-    shown = json.loads(servodesk("runs", "show", "latest", "--json", data_dir=tmp_path).stdout)
+    shown = json.loads(runs("show", "latest", "--json", data_dir=tmp_path))
     assert shown["meta"]["backend"] == "serial"
     assert board.stop()["frames_rx"] > 1000
 
