@@ -20,7 +20,7 @@ import pytest
 
 from app.tabs.jog import TOOL_RELEASE, JogPad
 from control import ControlClient
-from tests.app.test_tui_cartesian_jog import START, held_in_world_at_start
+from tests.app.test_tui_cartesian_jog import held_in_world_at_start
 
 SIZE = (160, 48)
 GAP_S = 0.04  # a terminal's auto-repeat, at the slow end of its 30-50 ms
@@ -44,7 +44,7 @@ def standing(client: ControlClient) -> Callable[[], bool]:
 
 def test_a_held_key_outlasts_a_stall_of_the_apps_queue(tui) -> None:
     async def scenario() -> None:
-        app = tui.app(lockstep=False, sim_options={"initial": START.tolist()})  # the arm there
+        app = tui.app(lockstep=False)
         async with app.run_test(size=SIZE) as pilot:
             await held_in_world_at_start(tui, app, pilot)
             pad = app.query_one(JogPad)
