@@ -92,6 +92,7 @@ DEATH_S = 0.25
 # (well inside the 250 ms promised) and how long close() waits for the thread. At 10 ms it
 # woke 100 times a second for nothing, half a percent of a core on every tab
 EVENT_WAIT_S = 0.1
+MONITOR_JOIN_S = 2.0  # close(): how long the event thread may take to deliver what came before
 _MOVES = itertools.count(1)  # a move's segment is named apart (it may outlive its client)
 SPIN_US = 150.0  # spin before each deadline: keeps the core and its caches (benchmarks/loop.py)
 
@@ -391,10 +392,11 @@ class ControlClient:
             self.link.stop(self._moves_end)
         self._closing.set()
         self.link.close()
-        for thread in (self._monitor, self._heart):
-            if thread.is_alive():
-                thread.join(timeout=0.2)
-        self._drain()
+        self._heart.join(timeout=0.2)
+        # the monitor reads what came before the close itself, on its way out: read here too
+        # while it still dispatched, the channel was polled by two threads ("concurrent poll()
+        # invocation") and a listener called from both at once
+        self._monitor.join(timeout=MONITOR_JOIN_S)
         for handle in list(self._moves.values()):
             self._finish(handle, "interrupted: client closed", None)
         self.keeper.wait(KEEP_WAIT_S)
@@ -441,6 +443,7 @@ class ControlClient:
                 self._died(exited)
             if self.dead:
                 self._closing.wait(0.05)
+        self._drain()
 
     def _drain(self) -> None:
         with contextlib.suppress(Broken, Unreadable):

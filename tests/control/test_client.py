@@ -13,6 +13,7 @@ import signal
 import subprocess
 import sys
 import textwrap
+import threading
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -21,12 +22,14 @@ import numpy as np
 import pytest
 
 from control import ControlClient, ControllerError, Flag, Mode
+from control.client import Event
 from control.identify.sysid import DeadbandModel
 from control.motion import moves
 from control.motion.acceptance import check_path
 from control.motion.plan import path_rows
 from control.recorder import as_written, load_run, table_text
 from control.rt import shm
+from control.rt.events import EStop
 from control.rt.layout import ControlLayout
 from control.rt.seqlock import SeqlockReader
 from hw.machine import load_machine
@@ -305,6 +308,38 @@ def test_a_closed_client_says_so_when_read(tmp_path: Path) -> None:
     for read in (client.status, client.histogram):
         with pytest.raises(ControllerError, match="this client is closed"):
             read()
+
+
+def test_close_while_a_listener_is_busy_delivers_the_events_in_order_from_one_thread(
+        tmp_path: Path) -> None:
+    """A listener still busy with one event when the client closes (a loaded UI): the events
+    behind it are delivered after it, by the event thread. close() used to wait 0.2 s for that
+    thread and then read the channel itself, calling the listener from two threads at once
+    (and polling the channel from both: "concurrent poll() invocation" under load)."""
+    calls: list[tuple[bool, str, float, float]] = []
+    busy = threading.Event()
+
+    def listener(event: Event) -> None:
+        if not isinstance(event.record, EStop):
+            return
+        start = time.monotonic()
+        if event.record.latched:
+            busy.set()
+            time.sleep(1.0)  # the listener is busy when close() comes
+        calls.append((event.record.latched, threading.current_thread().name, start,
+                      time.monotonic()))
+
+    client = ControlClient("rig", lockstep=True, data_dir=tmp_path)
+    client.on_event = listener
+    client.estop()
+    assert busy.wait(10.0), "no E-stop event reached the listener"
+    client.reset()
+    wait_until(lambda: not client.status().estop, 10.0, "the reset")
+    client.close()
+    assert [latched for latched, *_ in calls] == [True, False], calls
+    assert len({thread for _, thread, *_ in calls}) == 1, f"delivered from two threads: {calls}"
+    (_, _, _, first_end), (_, _, second_start, _) = calls
+    assert second_start >= first_end, "the second event was delivered during the first"
 
 
 def test_bad_paths_are_refused_before_anything_starts(lockstep: ControlClient,
