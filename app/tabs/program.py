@@ -597,7 +597,6 @@ class ProgramTab(TabPage):
             self._mark(following.step.number if following is not None else None)
         elif isinstance(report, ProgramEnded):
             outcome = report.outcome
-            self.enabling.forget()
             self._mark(None)
             style = "green" if outcome.complete else "bold yellow"
             self._say(f"program {outcome.state.value}: {outcome.reason} · run {outcome.run_id}",
@@ -623,7 +622,6 @@ class ProgramTab(TabPage):
     def action_stop(self) -> None:
         """Hold where the joints are and end the program run."""
         runner = self.runner
-        self.enabling.forget()
         if runner is None or runner.state.over:
             self._refuse("no program run to stop")
             return
@@ -673,7 +671,10 @@ class ProgramTab(TabPage):
     # -- the enabling key (T1) -----------------------------------------------------------------
 
     def action_enable(self) -> None:
-        """Space: held, the program runs in T1; its first press starts or resumes it."""
+        """Space: held, the program runs in T1; its first press starts or resumes it. A hold
+        that goes on through the program's end, a stop or an E-stop starts nothing again:
+        its repeats stay a hold (they used to be forgotten there, and the next repeat, taken
+        for a new press, ran the program again); only a new press does."""
         if not self._reduced():
             self._say("automatic: r runs the program (space is T1's enabling key)", "dim")
             return
@@ -887,10 +888,6 @@ class ProgramTab(TabPage):
     def hidden(self) -> None:
         super().hidden()
         self.enabling.forget()  # its repeats no longer come here: in T1, a release
-
-    def estop(self, latched: bool) -> None:
-        if latched:
-            self.enabling.forget()
 
     def client_down(self, problem: str) -> None:
         super().client_down(problem)

@@ -326,10 +326,17 @@ def test_hold_resume_stop_start_from_a_step_t1s_enabling_key_and_the_refusals(
             assert tab.at == 1 and not tab.runner.results
             # held again: it goes on, step after step, to the end
             await hold_space(lambda: tab.runner.state.over, "the end")
-            outcome = tab.runner.outcome()
+            ended_run = tab.runner
+            outcome = ended_run.outcome()
             assert outcome.complete, outcome.reason
             assert [r.visit.step.number for r in outcome.results] == [1, 2]
             assert client.speed_mode == "reduced"
+            # held on past the end: the hold goes on, and starts nothing (its next repeat
+            # was taken for a new press, and ran the program again)
+            more = time.monotonic() + 0.5
+            await hold_space(lambda: time.monotonic() > more, "half a second past the end")
+            await tui.until(lambda: not tab.enabling.held, what="the release seen")
+            assert tab.runner is ended_run and not client.status().moving
             # n in T1: nothing moves until space is held, and then one step only
             await pilot.press("n")  # waited for: Pilot's idle wait returns early under load
             await tui.until(lambda: "hold space to run one step" in said(tui, tab),
