@@ -304,17 +304,23 @@ async def idle_status(app: ServodeskApp, pilot) -> None:
     assert Tui.text(loop) != loop_before  # the sample count moved on
     assert not split, f"blocks split into lines again: {sorted(set(split))}"
     # to the screen as drawn, and the same as through the styles cache
-    through = {str(w) for w in cached if w in widgets}
-    assert not through, f"f4: through the styles cache: {sorted(through)}"
-    assert all(w.direct() for w in widgets), "f4"
-    for widget in widgets:
-        whole = Region(0, 0, *widget.size)
-        assert widget.render_lines(whole) == Widget.render_lines(widget, whole), widget
+    drawn_directly(widgets, cached, "f4")
     # the status the header shows, not one read again
     assert not read, f"the tab read the status {len(read)} times itself"
     await watch_ticks(app, 1)
     sample = next(line for line in Tui.text(loop).splitlines() if "sample" in line)
     assert int(sample.split()[-1]) == app.header.status.tick
+
+
+def drawn_directly(widgets: list, cached: list[Widget], key: str) -> None:
+    """None of ``widgets`` went through the styles cache (``cached``): each draws its lines
+    directly, and they are the very lines the styles cache gives (``key``: the tab's)."""
+    through = {str(w) for w in cached if w in widgets}
+    assert not through, f"{key}: through the styles cache: {sorted(through)}"
+    assert all(w.direct() for w in widgets), key
+    for widget in widgets:
+        whole = Region(0, 0, *widget.size)
+        assert widget.render_lines(whole) == Widget.render_lines(widget, whole), widget
 
 
 async def live_scope(app: ServodeskApp, pilot) -> None:
@@ -351,12 +357,7 @@ async def live_scope(app: ServodeskApp, pilot) -> None:
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(StylesCache, "render_widget", through_cache)
         await watch_ticks(app, OBSERVED_TICKS)
-    through = {str(w) for w in cached if w in widgets}
-    assert not through, f"f3: through the styles cache: {sorted(through)}"
-    assert all(w.direct() for w in widgets), "f3"
-    for widget in widgets:
-        whole = Region(0, 0, *widget.size)
-        assert widget.render_lines(whole) == Widget.render_lines(widget, whole), widget
+    drawn_directly(widgets, cached, "f3")
     await Tui.until(lambda: len(app.history) >= samples + 100, timeout=20,
                     what="a hundred samples more")
     passes: list[int] = []
