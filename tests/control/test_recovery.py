@@ -31,14 +31,19 @@ def dead_pid() -> int:
 
 
 class LeftSegment:
-    """A move segment as a killed client leaves it: metadata, a record, maybe a status."""
+    """A move segment as a killed client leaves it: metadata, a record, maybe a status. With
+    ``pid`` (this process's), a live client's, as a run keeper gets it: no other process's
+    recovery takes that one (with a dead pid, a controller another test started at the same
+    moment saved it too: two runs listed, one run at -n 3)."""
 
-    def __init__(self, data_dir: Path, status: str = "complete", recorded: int = ROWS) -> None:
-        self.meta = segment_meta(UNIMATE, "step", UNIMATE.sample_time_s, data_dir, dead_pid(),
+    def __init__(self, data_dir: Path, status: str = "complete", recorded: int = ROWS,
+                 pid: int | None = None) -> None:
+        owner = dead_pid() if pid is None else pid
+        self.meta = segment_meta(UNIMATE, "step", UNIMATE.sample_time_s, data_dir, owner,
                                  {"backend": "sim", "coefficients": {}})
         encoded = encode_meta(self.meta)
         self.layout = MoveLayout(ROWS, 6, len(encoded))
-        self.name = shm.segment_name(f"mv{os.urandom(3).hex()}", pid=dead_pid())
+        self.name = shm.segment_name(f"mv{os.urandom(3).hex()}", pid=owner)
         with shm._untracked():
             self.segment = shared_memory.SharedMemory(self.name, create=True,
                                                       size=self.layout.size)
@@ -191,7 +196,7 @@ def test_a_segment_another_start_recovers_is_waited_for_then_left_to_it(left, tm
 
 def test_a_keeper_saves_its_runs_in_the_order_handed_over_and_unlinks_each(left,
                                                                           tmp_path) -> None:
-    segments = [left(), left(), left()]
+    segments = [left(pid=os.getpid()) for _ in range(3)]
     for s in segments:  # one start time: the order shows in the stems' -2, -3
         s.meta["start_time"] = "2024-03-01T09:30:15+00:00"
     keeper, kept = RunKeeper(), []
@@ -217,7 +222,7 @@ def test_a_run_the_disk_refuses_stays_whole_in_its_segment_and_says_why(left, tm
 
 def test_a_keeper_measures_a_run_saves_what_it_measured_and_skips_an_empty_one(
         left, tmp_path) -> None:
-    done, empty = left(), left(recorded=0)
+    done, empty = left(pid=os.getpid()), left(recorded=0, pid=os.getpid())
     keeper, kept = RunKeeper(), []
     measure = lambda run: (("metrics", run.samples), {"results": [run.samples]})  # noqa: E731
     for s in (done, empty):
