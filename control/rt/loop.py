@@ -253,10 +253,7 @@ class Controller:
         self.hold_here()
 
     def on_estop(self, _: cmd.EmergencyStop) -> None:
-        """Latch, unless latched already (the client's E-stop word got here first, or a fault
-        did): the first reason stays, and one E-stop gives one event."""
-        if not self.guards.latched:
-            self.latch_estop("operator E-stop")
+        self.latch_estop("operator E-stop")
 
     def on_reset(self, command: cmd.Reset) -> None:
         if self.backend.estop:

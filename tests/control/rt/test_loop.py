@@ -21,7 +21,7 @@ import pytest
 
 from control.rt import sealed, shm
 from control.rt.channel import client_end, controller_end
-from control.rt.commands import EmergencyStop, JogPosition, Manual, Reset, StartMove
+from control.rt.commands import JogPosition, Manual, Reset, StartMove
 from control.rt.events import Notice
 from control.rt.law import pi
 from control.rt.layout import ESTOP_WORD, ControlLayout, Mode, MoveLayout
@@ -296,21 +296,6 @@ def test_the_client_estop_word_latches_on_the_next_tick(rig) -> None:
     ticks(controller, backend, 1)
     assert controller.guards.latched and backend.written == [0.0] * 6
     assert controller.guards.reason == "operator E-stop"
-
-
-def test_an_estop_while_latched_keeps_the_first_reason_and_sends_no_second_event(rig) -> None:
-    """The word and the message of one press (ControlClient.estop sends both), or a press
-    after a fault latched: one EStop event, and the reason stays the first (it was overwritten
-    with "operator E-stop", hiding the fault from the header)."""
-    controller, backend, client = rig
-    ticks(controller, backend, 2)
-    events(client)
-    controller.latch_estop("following error on Bend while holding")
-    controller.client.words[ESTOP_WORD] += 1
-    controller.channel.deliver(EmergencyStop())
-    ticks(controller, backend, 2)
-    assert controller.guards.reason == "following error on Bend while holding"
-    assert [name for name, _ in events(client)].count("estop") == 1
 
 
 def test_stop_at_limits_in_manual(rig) -> None:
