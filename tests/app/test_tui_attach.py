@@ -1,25 +1,24 @@
 """``servodesk --attach``: two TUIs on one ``servodesk controller``. One takes command (^K),
 the other's header says who holds it and its jog is refused with the reason; command is
-handed over with ^O and ^K. Both build a tab when it is first shown (the Jog tab alone
-here), as the tests' apps do."""
+handed over with ^O and ^K."""
 
 from __future__ import annotations
 
 import asyncio
 
 from app.tabs.jog import JogPad
+from app.tui import attached_app
 from app.widgets.dialogs import ConfirmScreen
 from app.widgets.live_text import LiveText
 from control.rt.layout import Mode
-from tests.app.conftest import PilotedApp
 
 SIZE = (160, 48)
 
 
 def test_two_attached_tuis_one_commands_the_other_observes(controller_service, tui) -> None:
     async def scenario() -> None:
-        first = PilotedApp.attached(controller_service.socket, build_behind=False)
-        second = PilotedApp.attached(controller_service.socket, build_behind=False)
+        first = attached_app(controller_service.socket)
+        second = attached_app(controller_service.socket)
         async with first.run_test(size=SIZE) as one, second.run_test(size=SIZE) as two:
             await tui.ready(first, one)
             await tui.ready(second, two)
