@@ -3,10 +3,16 @@
 Lockstep clients run the simulator as fast as it computes (moves take a
 fraction of their duration); real-time clients run the 1 kHz loop as the
 operator gets it. Every test ends with no servodesk segment left in /dev/shm.
+
+The tests that take ``lockstep`` or ``realtime`` share one controller of each kind for the
+module, put back before each test as a fresh one starts (``as_new``); a test that kills,
+closes or starts one, or that needs a session's state a later test could not undo (an
+identified model), starts its own.
 """
 
 from __future__ import annotations
 
+import itertools
 import json
 import os
 import signal
@@ -15,6 +21,7 @@ import sys
 import textwrap
 import threading
 import time
+from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
 
@@ -37,11 +44,76 @@ from tests.control.waiting import wait_until
 
 UNIMATE = load_machine("unimate2000b")
 STEPS = {"inout": 120.0, "rotate": 20.0, "updown": 8.0, "bend": 30.0, "yaw": 30.0, "swivel": 40.0}
-
+GOAL_TOLERANCE = np.array([j.goal_tolerance for j in UNIMATE.joints])
 
 
 def our_segments(pid: int) -> list[str]:
     return [n for n in shm.leftover_segments() if shm.owner_pid(n) == pid]
+
+
+def shared(tmp_path_factory: pytest.TempPathFactory, **options: object
+           ) -> Iterator[tuple[ControlClient, np.ndarray]]:
+    """A controller for the module and where it starts the arm; none of its segments is left
+    once it is closed."""
+    before = set(our_segments(os.getpid()))
+    client = ControlClient("unimate2000b", data_dir=tmp_path_factory.mktemp("runs"), **options)
+    yield client, np.array(client.status().position)
+    client.close()
+    assert sorted(set(our_segments(os.getpid())) - before) == []
+
+
+@pytest.fixture(scope="module")
+def shared_lockstep(tmp_path_factory: pytest.TempPathFactory
+                    ) -> Iterator[tuple[ControlClient, np.ndarray]]:
+    # not a heartbeat test (the real-time ones are): a flat-out simulator may starve ours
+    yield from shared(tmp_path_factory, lockstep=True, heartbeat_timeout_s=3.0)
+
+
+@pytest.fixture(scope="module")
+def shared_realtime(tmp_path_factory: pytest.TempPathFactory
+                    ) -> Iterator[tuple[ControlClient, np.ndarray]]:
+    yield from shared(tmp_path_factory)
+
+
+def as_new(client: ControlClient, start: np.ndarray | None) -> ControlClient:
+    """Put back what a test here may leave, as a fresh controller has it: the E-stop released
+    and its input too, no valve jammed, every joint holding (no manual duty, no move), the
+    machine's track set, and (``start`` given) the arm where it started (a lockstep go_to: a
+    fraction of a second); every event before this is taken off the queue (the controller
+    answers in order: the refusal of a feed hold with no move comes after them all)."""
+    client.inject("press_estop", False)
+    for joint in range(UNIMATE.n_joints):
+        client.inject("jam_valve", joint, 0.0)
+    if client.latched:
+        client.reset()
+        wait_until(lambda: not client.latched, 5.0, "the E-stop released")
+    client.hold()
+    if client.coefficients["track"] != UNIMATE.track:
+        client.set_coefficients("track", UNIMATE.track)
+    if start is not None and np.any(np.abs(client.status().position - start) > GOAL_TOLERANCE):
+        back = client.wait(client.go_to(start, speed=1.0), timeout=60)
+        assert back.complete, f"the arm did not go back where it started: {back.status}"
+    client.poll_events()
+    client.pause()
+    client.wait_event("refused", 10.0, lambda e: "no move is running" in e.message)
+    status = client.status()
+    assert status.mode == Mode.HOLD and not (status.moving or status.estop), status
+    assert client.coefficients == {"hold": UNIMATE.hold, "track": UNIMATE.track}
+    assert client.models == (None,) * UNIMATE.n_joints and client.poll_events() == []
+    return client
+
+
+@pytest.fixture
+def lockstep(shared_lockstep: tuple[ControlClient, np.ndarray]) -> ControlClient:
+    """The module's lockstep controller, as new, the arm where it started."""
+    return as_new(*shared_lockstep)
+
+
+@pytest.fixture
+def realtime(shared_realtime: tuple[ControlClient, np.ndarray]) -> ControlClient:
+    """The module's real-time controller, as new but for where the arm is (going back would
+    take real seconds; no test here needs more room than it has, asserted where it could)."""
+    return as_new(shared_realtime[0], None)
 
 
 @pytest.mark.parametrize("joint", list(STEPS))
@@ -59,15 +131,14 @@ def test_a_step_on_each_joint_settles_inside_its_tolerance(lockstep: ControlClie
     assert abs(run.actual[-1, j] - path[-1, j]) <= UNIMATE.joints[j].tolerance
 
 
-def test_follow_track_completes_and_the_run_is_saved(lockstep: ControlClient,
-                                                     tmp_path: Path) -> None:
+def test_follow_track_completes_and_the_run_is_saved(lockstep: ControlClient) -> None:
     start = np.array(lockstep.status().position)
     end = start.copy()
     end[1] += 30.0
     path = moves.sine(start, end, period=2.0, duration=3.0, machine=UNIMATE)
     result = lockstep.wait(lockstep.move(path, kind="sine", meta={"period_s": 2.0}), timeout=60)
     assert result.complete and result.files is not None
-    assert result.files.json.parent == tmp_path
+    assert result.files.json.parent == lockstep.data_dir
     saved = load_run(result.files.json)
     assert saved.kind == "sine" and saved.machine == "unimate2000b"
     assert path_rows(saved) == len(path) < len(saved.t)  # then the settle's rows
@@ -107,16 +178,18 @@ def test_a_path_that_starts_away_gets_an_approach_and_the_tuis_summary(
 def test_a_jump_is_refused_as_a_path_and_runs_as_a_step(lockstep: ControlClient,
                                                          new_segments) -> None:
     """The acceptance rules by kind (control/motion/acceptance.py): Up/Down jumping 5° in one
-    sample is refused as a smooth path, nothing sent, and accepted as a step."""
+    sample is refused as a smooth path, nothing sent (no move segment, no move started), and
+    accepted as a step."""
     start = np.array(lockstep.status().position)
+    moves_before = lockstep.status().move_id
     path = np.tile(start, (1500, 1))
     path[300:, 2] += 5.0
     with pytest.raises(ValueError, match=r"^Up/Down moves \+5 deg in 0.001 s at sample 300 "
                                          r"\(t = 0.300 s\): 5000 deg/s, 200 times its max_speed "
                                          r"25 deg/s .*send it as a step move \(kind 'step'\)"):
         lockstep.move(path)
-    assert new_segments() == [lockstep.segment_name]
-    assert lockstep.status().move_id == 0 and lockstep.status().mode == Mode.HOLD
+    assert new_segments() == []
+    assert lockstep.status().move_id == moves_before and lockstep.status().mode == Mode.HOLD
     result = lockstep.wait(lockstep.move(path, kind="step"), timeout=60)
     assert result.complete, result.status
     assert path_rows(result.run) == len(path) and result.plan.approach == 0
@@ -140,6 +213,284 @@ def test_a_smooth_move_that_starts_away_runs_behind_a_smooth_approach(
     assert np.abs(sent[0] - here).max() < 1e-9
     np.testing.assert_allclose(sent[result.plan.approach:], path, atol=1e-9)
     check_path(sent, "sine", UNIMATE, lockstep.dt)
+
+
+def test_coefficients_change_during_a_move(lockstep: ControlClient) -> None:
+    start = np.array(lockstep.status().position)
+    path = moves.multi_step(start, start + np.array([50, 10, 5, 10, 10, 10]), duration=20.0,
+                            machine=UNIMATE)
+    move = lockstep.move(path, kind="multi_step")
+    wait_until(lambda: lockstep.status().move_done > 100, 10.0, "the move to run")
+    gentle = UNIMATE.track.__class__(**{**UNIMATE.track.__dict__, "duty_limit": 5.0})
+    lockstep.set_coefficients("track", gentle)
+    wait_until(lambda: max(map(abs, lockstep.status().duty)) <= 5.0, 5.0, "the new set applied")
+    assert lockstep.status().moving
+    lockstep.hold()
+    assert lockstep.wait(move, timeout=10).status == "aborted by operator"
+
+
+def applied(client: ControlClient, which: str) -> object:
+    """The set the controller reads from shared memory."""
+    segment = shm.attach(client.segment_name)
+    reader = SeqlockReader(segment.buf, client.layout.coefficient_offset(which),
+                           client.layout.coefficients.struct)
+    try:
+        return client.layout.coefficients.decode(reader.read(), which)
+    finally:
+        reader.release()
+        shm.release(segment, unlink=False)
+
+
+def small_ramp(client: ControlClient) -> np.ndarray:
+    start = np.array(client.status().position)
+    return moves.ramp(start, start + np.array([0.0, 5.0, 0.0, 0.0, 0.0, 0.0]), 1.0, 1.5,
+                      machine=UNIMATE)
+
+
+@pytest.mark.parametrize("kp", [-20.0, 1e9])
+def test_gains_that_cannot_be_stable_are_refused_and_nothing_is_applied(
+        lockstep: ControlClient, kp: float) -> None:
+    """The set in use stays, and so does its check's record, which its runs carry (the start's
+    "applied at start" on a fresh controller; the module's has had the set applied again)."""
+    track = UNIMATE.track
+    wild = replace(track, name="wild", kp=((kp,),) * 6)
+    before = applied(lockstep, "track")
+    in_use = dict(lockstep.coefficient_checks["track"])
+    with pytest.raises(ValueError, match=r"^coefficient set 'wild' refused, nothing applied: "
+                                         r"In/Out: unstable on the nominal model: .*Swivel: "
+                                         r"unstable"):
+        lockstep.set_coefficients("track", wild)
+    assert lockstep.coefficients["track"] == track and applied(lockstep, "track") == before
+    result = lockstep.wait(lockstep.move(small_ramp(lockstep), kind="ramp"), timeout=60)
+    assert result.complete, result.status
+    saved = load_run(result.files.json).coefficients["track"]
+    assert saved["kp"] == [list(k) for k in track.kp]
+    assert (saved["check"]["passed"], saved["check"]["summary"]) == (in_use["passed"],
+                                                                      in_use["summary"])
+    assert [e for e in lockstep.poll_events() if e.kind in ("refused", "notice", "fault")] == []
+
+
+def test_an_override_applies_a_refused_set_and_every_run_says_so(lockstep: ControlClient,
+                                                                 tmp_path: Path) -> None:
+    """Bend at kp 105: Ms 10.4 on the nominal model (refused), 2.5 on the Bend identified on
+    the simulator; an expert overrides with that reason, and the run made with the set
+    carries the reason and the refusal in its saved JSON."""
+    bend = replace(UNIMATE.track, name="stiff bend",
+                   kp=tuple((105.0,) if j == 3 else k for j, k in enumerate(UNIMATE.track.kp)))
+    with pytest.raises(ValueError, match="Bend: too little margin on the nominal model"):
+        lockstep.set_coefficients("track", bend)
+    with pytest.raises(ValueError, match="override needs the reason"):
+        lockstep.set_coefficients("track", bend, override=" ")
+    reason = "Bend identified at 35 Hz: Ms 2.5 on that model"
+    check = lockstep.set_coefficients("track", bend, override=reason)
+    assert not check.ok and lockstep.coefficients["track"] is bend
+    assert applied(lockstep, "track").kp[3] == (105.0,)
+    notice = lockstep.wait_event("notice", 2.0)
+    assert reason in notice.message and "Bend: too little margin" in notice.message
+    result = lockstep.wait(lockstep.move(small_ramp(lockstep), kind="ramp"), timeout=60)
+    assert result.complete, result.status
+    saved = json.loads(result.files.json.read_text())["coefficients"]["track"]
+    assert saved["kp"][3] == [105.0] and saved["name"] == "stiff bend"
+    assert saved["check"]["passed"] is False and saved["check"]["overridden"] is True
+    assert saved["check"]["override_reason"] == reason
+    assert saved["check"]["summary"].startswith("Bend: too little margin on the nominal model")
+    lockstep.set_coefficients("track", UNIMATE.track)  # checked again: passes
+    result = lockstep.wait(lockstep.move(small_ramp(lockstep), kind="ramp"), timeout=60)
+    assert load_run(result.files.json).coefficients["track"]["check"]["passed"] is True
+
+
+def test_a_set_is_judged_on_the_identified_models_the_client_was_given(
+        tmp_path: Path, new_segments) -> None:
+    """The same stiff Bend passes on an identified Bend model (Ms 2.5 ≤ 6), and later sets
+    (a Tuning tab edit) are judged on that model too. A controller of its own: a session's
+    identified model stays for the session (no call puts the nominal one back)."""
+    identified = DeadbandModel("Bend", "deg", k_pos=1.211, d_pos=27.5, k_neg=1.19, d_neg=24.3,
+                               wn=2 * np.pi * 35.2, zeta=0.49)
+    bend = replace(UNIMATE.track, name="stiff bend",
+                   kp=tuple((105.0,) if j == 3 else k for j, k in enumerate(UNIMATE.track.kp)))
+    with ControlClient("unimate2000b", lockstep=True, data_dir=tmp_path,
+                       heartbeat_timeout_s=3.0) as client:
+        check = client.set_coefficients("track", bend, [None, None, None, identified, None, None])
+        assert check.ok and check.joints[3].model == "identified"
+        assert client.models[3] == identified and client.models[0] is None
+        edited = replace(bend, duty_limit=80.0)
+        assert client.set_coefficients("track", edited).joints[3].model == "identified"
+        assert applied(client, "track").duty_limit == 80.0
+    assert new_segments() == []
+
+
+def test_two_clients_in_one_process_have_their_own_segments(lockstep: ControlClient,
+                                                             tmp_path: Path, new_segments
+                                                             ) -> None:
+    """A rig's client beside the module's Unimate one (whose close unlinks its own segments:
+    the module's fixture checks it)."""
+    with ControlClient("rig", lockstep=True, data_dir=tmp_path, heartbeat_timeout_s=3.0) as one:
+        assert one.segment_name != lockstep.segment_name
+        assert len(one.status().position) == 1 and len(lockstep.status().position) == 6
+    assert new_segments() == []
+
+
+def test_a_closed_client_says_so_when_read(tmp_path: Path) -> None:
+    """Its status and histogram after close: a clear ControllerError, not the released
+    memory's ValueError (a servo thread begun as its client closed died of it, c7d6da4)."""
+    client = ControlClient("rig", lockstep=True, data_dir=tmp_path)
+    client.status()
+    client.close()
+    for read in (client.status, client.histogram):
+        with pytest.raises(ControllerError, match="this client is closed"):
+            read()
+
+
+def test_close_while_a_listener_is_busy_delivers_the_events_in_order_from_one_thread(
+        tmp_path: Path) -> None:
+    """A listener still busy with one event when the client closes (a loaded UI): the events
+    behind it are delivered after it, by the event thread. close() used to wait 0.2 s for that
+    thread and then read the channel itself, calling the listener from two threads at once
+    (and polling the channel from both: "concurrent poll() invocation" under load)."""
+    calls: list[tuple[bool, str, float, float]] = []
+    busy = threading.Event()
+
+    def listener(event: Event) -> None:
+        if not isinstance(event.record, EStop):
+            return
+        start = time.monotonic()
+        if event.record.latched:
+            busy.set()
+            time.sleep(0.5)  # the listener is busy when close() comes (asserted)
+        calls.append((event.record.latched, threading.current_thread().name, start,
+                      time.monotonic()))
+
+    client = ControlClient("rig", lockstep=True, data_dir=tmp_path)
+    client.on_event = listener
+    client.estop()
+    assert busy.wait(10.0), "no E-stop event reached the listener"
+    client.reset()
+    wait_until(lambda: not client.status().estop, 10.0, "the reset")
+    closing = time.monotonic()
+    client.close()
+    assert closing < calls[0][3], f"close() came after the listener was done: {calls}"
+    # latched (the E-stop word, then its message: the controller latches on each), released
+    assert [latched for latched, *_ in calls] == [True, True, False], calls
+    assert len({thread for _, thread, *_ in calls}) == 1, f"delivered from two threads: {calls}"
+    assert all(later[2] >= earlier[3] for earlier, later in itertools.pairwise(calls)), (
+        f"an event was delivered during the one before: {calls}")
+
+
+def test_bad_paths_are_refused_before_anything_starts(lockstep: ControlClient,
+                                                      new_segments) -> None:
+    start = np.array(lockstep.status().position)
+    path = np.tile(start, (100, 1))
+    path[40, 2] = 35.0
+    with pytest.raises(ValueError, match=r"Up/Down target 35° is outside -27…30° "
+                                         r"\(machine unimate2000b\) at sample 40"):
+        lockstep.move(path)
+    path[40, 2] = np.nan
+    with pytest.raises(ValueError, match="Up/Down target nan is not a number"):
+        lockstep.move(path)
+    with pytest.raises(ValueError, match=r"a path is \(N, 6\)"):
+        lockstep.move(path[:, :3])
+    assert new_segments() == []
+    assert lockstep.status().mode == Mode.HOLD
+
+
+def test_following_error_aborts_into_hold_naming_the_joint(lockstep: ControlClient) -> None:
+    start = np.array(lockstep.status().position)
+    lockstep.inject("jam_valve", 1, 0.7)  # Rotate's valve opens to 30 % of its duty
+    path = moves.step(start, 1, start[1] + 30.0, duration=3.0, machine=UNIMATE)
+    result = lockstep.wait(lockstep.move(path, kind="step"), timeout=60)
+    assert result.status.startswith("fault: following error: Rotate is "), result.status
+    fault = lockstep.wait_event("fault", 5.0, lambda e: e.payload["kind"] == "following_error")
+    assert fault.payload["joint"] == 1
+    assert lockstep.status().mode == Mode.HOLD
+
+
+def test_a_joint_driven_into_its_limit_stops_there(lockstep: ControlClient) -> None:
+    lockstep.jog_joint(2, 60.0)
+    fault = lockstep.wait_event("fault", 30.0, lambda e: e.payload["kind"] == "limit")
+    assert fault.payload["joint"] == 2 and fault.message.startswith("Up/Down at ")
+    wait_until(lambda: lockstep.status().valve[2] == 0.0, 2.0, "the joint's valve closed")
+    assert lockstep.status().position[2] <= UNIMATE.joints[2].upper + 0.5
+
+
+def test_killing_the_controller_is_reported(tmp_path: Path, new_segments) -> None:
+    """A real-time controller of its own: the test kills it."""
+    with ControlClient("unimate2000b", data_dir=tmp_path) as realtime:
+        start = realtime.status().position
+        move = realtime.move(moves.step(start, 1, start[1] + 30, duration=5.0, machine=UNIMATE),
+                             kind="step")
+        wait_until(lambda: realtime.status().move_done > 300, 3.0, "the move to run")
+        os.kill(realtime.pid, signal.SIGKILL)
+        died = realtime.wait_event("died", timeout=5.0)
+        assert "controller died" in died.message
+        result = realtime.wait(move, timeout=5)
+        assert result.status == "interrupted: controller died"
+        assert result.files is not None and len(result.run.t) > 300
+        with pytest.raises(ControllerError, match="controller died"):
+            realtime.jog([10.0] * 6)
+    assert new_segments() == []
+
+
+CLIENT_SCRIPT = textwrap.dedent("""
+    import sys, time
+    from control import ControlClient, Mode
+    client = ControlClient("unimate2000b", data_dir=sys.argv[1], orphan_timeout_s=0.5)
+    client.jog([30.0] * 6)
+    while client.status().mode != Mode.MANUAL_ACTUATE:
+        time.sleep(0.002)
+    print(client.pid, client.segment_name, flush=True)
+    time.sleep(60)
+""")
+
+
+def test_killing_the_client_makes_the_controller_hold_then_clean_up(tmp_path: Path) -> None:
+    """The client's script says where its controller is once it jogs; killed, the controller
+    holds, then exits after its orphan timeout (0.5 s: its length is test_client_loss's
+    subject, not this test's) and leaves none of the client's segments."""
+    script = subprocess.Popen([sys.executable, "-c", CLIENT_SCRIPT, str(tmp_path)],
+                              stdout=subprocess.PIPE, text=True)
+    try:
+        pid, name = script.stdout.readline().split()
+        controller_pid = int(pid)
+        segment = shm.attach(name)
+        layout = ControlLayout(6)
+        reader = SeqlockReader(segment.buf, layout.status_offset, layout.status.struct)
+        assert layout.status.decode(reader.read()).mode == Mode.MANUAL_ACTUATE
+        script.kill()
+        script.wait(5)
+
+        def holding() -> bool:
+            status = layout.status.decode(reader.read())
+            return status.mode == Mode.HOLD and bool(status.flags & Flag.UI_LOST)
+
+        wait_until(holding, 2.0, "the controller to hold after losing its client")
+        reader.release()
+        shm.release(segment, unlink=False)
+        wait_until(lambda: not shm.pid_alive(controller_pid), 10.0, "the orphan to exit")
+        assert our_segments(script.pid) == []
+    finally:
+        script.kill()
+        script.wait(5)
+
+
+def test_the_rig_refuses_moves_until_initialised_then_steps(tmp_path: Path, new_segments
+                                                            ) -> None:
+    rig = load_machine("rig")
+    with ControlClient(rig, lockstep=True, data_dir=tmp_path, heartbeat_timeout_s=3.0,
+                       sim_options={"initial": [400.0]}) as client:
+        assert not client.status().homed
+        path = moves.step(client.status().position, 0, 100.0, duration=2.0, machine=rig)
+        assert client.wait(client.move(path, kind="step"), 10).status.startswith(
+            "refused: not initialised")
+        client.initialise()
+        done = client.wait_event("initialised", 60.0)
+        assert done.payload["status"].startswith("complete: initialised")
+        status = client.status()
+        assert status.homed and abs(status.position[0]) < 1.0
+        result = client.wait(client.move(moves.step(status.position, 0, 400.0, duration=4.0,
+                                                     machine=rig), kind="step"), 30)
+        assert result.complete
+        assert abs(result.run.actual[-1, 0] - 400.0) < 5.0
+    assert new_segments() == []
 
 
 def test_jog_duty_reaches_the_backend(realtime: ControlClient) -> None:
@@ -194,265 +545,6 @@ def test_estop_during_a_move_ends_it_and_saves_what_ran(realtime: ControlClient)
     assert result.files is not None and 0 < len(result.run.t) < 5000
 
 
-def test_coefficients_change_during_a_move(lockstep: ControlClient) -> None:
-    start = np.array(lockstep.status().position)
-    path = moves.multi_step(start, start + np.array([50, 10, 5, 10, 10, 10]), duration=20.0,
-                            machine=UNIMATE)
-    move = lockstep.move(path, kind="multi_step")
-    wait_until(lambda: lockstep.status().move_done > 100, 10.0, "the move to run")
-    gentle = UNIMATE.track.__class__(**{**UNIMATE.track.__dict__, "duty_limit": 5.0})
-    lockstep.set_coefficients("track", gentle)
-    wait_until(lambda: max(map(abs, lockstep.status().duty)) <= 5.0, 5.0, "the new set applied")
-    assert lockstep.status().moving
-    lockstep.hold()
-    assert lockstep.wait(move, timeout=10).status == "aborted by operator"
-
-
-def applied(client: ControlClient, which: str) -> object:
-    """The set the controller reads from shared memory."""
-    segment = shm.attach(client.segment_name)
-    reader = SeqlockReader(segment.buf, client.layout.coefficient_offset(which),
-                           client.layout.coefficients.struct)
-    try:
-        return client.layout.coefficients.decode(reader.read(), which)
-    finally:
-        reader.release()
-        shm.release(segment, unlink=False)
-
-
-def small_ramp(client: ControlClient) -> np.ndarray:
-    start = np.array(client.status().position)
-    return moves.ramp(start, start + np.array([0.0, 5.0, 0.0, 0.0, 0.0, 0.0]), 1.0, 1.5,
-                      machine=UNIMATE)
-
-
-@pytest.mark.parametrize("kp", [-20.0, 1e9])
-def test_gains_that_cannot_be_stable_are_refused_and_nothing_is_applied(
-        lockstep: ControlClient, kp: float) -> None:
-    track = UNIMATE.track
-    wild = replace(track, name="wild", kp=((kp,),) * 6)
-    before = applied(lockstep, "track")
-    with pytest.raises(ValueError, match=r"^coefficient set 'wild' refused, nothing applied: "
-                                         r"In/Out: unstable on the nominal model: .*Swivel: "
-                                         r"unstable"):
-        lockstep.set_coefficients("track", wild)
-    assert lockstep.coefficients["track"] == track and applied(lockstep, "track") == before
-    result = lockstep.wait(lockstep.move(small_ramp(lockstep), kind="ramp"), timeout=60)
-    assert result.complete, result.status
-    saved = load_run(result.files.json).coefficients["track"]
-    assert saved["kp"] == [list(k) for k in track.kp] and saved["check"]["passed"] is None
-    assert [e for e in lockstep.poll_events() if e.kind in ("refused", "notice", "fault")] == []
-
-
-def test_an_override_applies_a_refused_set_and_every_run_says_so(lockstep: ControlClient,
-                                                                 tmp_path: Path) -> None:
-    """Bend at kp 105: Ms 10.4 on the nominal model (refused), 2.5 on the Bend identified on
-    the simulator; an expert overrides with that reason, and the run made with the set
-    carries the reason and the refusal in its saved JSON."""
-    bend = replace(UNIMATE.track, name="stiff bend",
-                   kp=tuple((105.0,) if j == 3 else k for j, k in enumerate(UNIMATE.track.kp)))
-    with pytest.raises(ValueError, match="Bend: too little margin on the nominal model"):
-        lockstep.set_coefficients("track", bend)
-    with pytest.raises(ValueError, match="override needs the reason"):
-        lockstep.set_coefficients("track", bend, override=" ")
-    reason = "Bend identified at 35 Hz: Ms 2.5 on that model"
-    check = lockstep.set_coefficients("track", bend, override=reason)
-    assert not check.ok and lockstep.coefficients["track"] is bend
-    assert applied(lockstep, "track").kp[3] == (105.0,)
-    notice = lockstep.wait_event("notice", 2.0)
-    assert reason in notice.message and "Bend: too little margin" in notice.message
-    result = lockstep.wait(lockstep.move(small_ramp(lockstep), kind="ramp"), timeout=60)
-    assert result.complete, result.status
-    saved = json.loads(result.files.json.read_text())["coefficients"]["track"]
-    assert saved["kp"][3] == [105.0] and saved["name"] == "stiff bend"
-    assert saved["check"]["passed"] is False and saved["check"]["overridden"] is True
-    assert saved["check"]["override_reason"] == reason
-    assert saved["check"]["summary"].startswith("Bend: too little margin on the nominal model")
-    lockstep.set_coefficients("track", UNIMATE.track)  # checked again: passes
-    result = lockstep.wait(lockstep.move(small_ramp(lockstep), kind="ramp"), timeout=60)
-    assert load_run(result.files.json).coefficients["track"]["check"]["passed"] is True
-
-
-def test_a_set_is_judged_on_the_identified_models_the_client_was_given(
-        lockstep: ControlClient) -> None:
-    """The same stiff Bend passes on an identified Bend model (Ms 2.5 ≤ 6), and later sets
-    (a Tuning tab edit) are judged on that model too."""
-    identified = DeadbandModel("Bend", "deg", k_pos=1.211, d_pos=27.5, k_neg=1.19, d_neg=24.3,
-                               wn=2 * np.pi * 35.2, zeta=0.49)
-    bend = replace(UNIMATE.track, name="stiff bend",
-                   kp=tuple((105.0,) if j == 3 else k for j, k in enumerate(UNIMATE.track.kp)))
-    check = lockstep.set_coefficients("track", bend, [None, None, None, identified, None, None])
-    assert check.ok and check.joints[3].model == "identified"
-    assert lockstep.models[3] == identified and lockstep.models[0] is None
-    edited = replace(bend, duty_limit=80.0)
-    assert lockstep.set_coefficients("track", edited).joints[3].model == "identified"
-    assert applied(lockstep, "track").duty_limit == 80.0
-
-
-def test_two_clients_in_one_process_have_their_own_segments(tmp_path: Path, new_segments
-                                                             ) -> None:
-    with ControlClient("rig", lockstep=True, data_dir=tmp_path, heartbeat_timeout_s=3.0) as one, \
-            ControlClient("unimate2000b", lockstep=True, data_dir=tmp_path,
-                          heartbeat_timeout_s=3.0) as two:
-        assert one.segment_name != two.segment_name
-        assert len(one.status().position) == 1 and len(two.status().position) == 6
-    assert new_segments() == []
-
-
-def test_a_closed_client_says_so_when_read(tmp_path: Path) -> None:
-    """Its status and histogram after close: a clear ControllerError, not the released
-    memory's ValueError (a servo thread begun as its client closed died of it, c7d6da4)."""
-    client = ControlClient("rig", lockstep=True, data_dir=tmp_path)
-    client.status()
-    client.close()
-    for read in (client.status, client.histogram):
-        with pytest.raises(ControllerError, match="this client is closed"):
-            read()
-
-
-def test_close_while_a_listener_is_busy_delivers_the_events_in_order_from_one_thread(
-        tmp_path: Path) -> None:
-    """A listener still busy with one event when the client closes (a loaded UI): the events
-    behind it are delivered after it, by the event thread. close() used to wait 0.2 s for that
-    thread and then read the channel itself, calling the listener from two threads at once
-    (and polling the channel from both: "concurrent poll() invocation" under load)."""
-    calls: list[tuple[bool, str, float, float]] = []
-    busy = threading.Event()
-
-    def listener(event: Event) -> None:
-        if not isinstance(event.record, EStop):
-            return
-        start = time.monotonic()
-        if event.record.latched:
-            busy.set()
-            time.sleep(1.0)  # the listener is busy when close() comes
-        calls.append((event.record.latched, threading.current_thread().name, start,
-                      time.monotonic()))
-
-    client = ControlClient("rig", lockstep=True, data_dir=tmp_path)
-    client.on_event = listener
-    client.estop()
-    assert busy.wait(10.0), "no E-stop event reached the listener"
-    client.reset()
-    wait_until(lambda: not client.status().estop, 10.0, "the reset")
-    client.close()
-    # latched (the E-stop word, then its message: the controller latches on each), released
-    assert [latched for latched, *_ in calls] == [True, True, False], calls
-    assert len({thread for _, thread, *_ in calls}) == 1, f"delivered from two threads: {calls}"
-    assert all(later[2] >= earlier[3] for earlier, later in zip(calls, calls[1:])), (
-        f"an event was delivered during the one before: {calls}")
-
-
-def test_bad_paths_are_refused_before_anything_starts(lockstep: ControlClient,
-                                                      new_segments) -> None:
-    start = np.array(lockstep.status().position)
-    path = np.tile(start, (100, 1))
-    path[40, 2] = 35.0
-    with pytest.raises(ValueError, match=r"Up/Down target 35° is outside -27…30° "
-                                         r"\(machine unimate2000b\) at sample 40"):
-        lockstep.move(path)
-    path[40, 2] = np.nan
-    with pytest.raises(ValueError, match="Up/Down target nan is not a number"):
-        lockstep.move(path)
-    with pytest.raises(ValueError, match=r"a path is \(N, 6\)"):
-        lockstep.move(path[:, :3])
-    assert new_segments() == [lockstep.segment_name]
-    assert lockstep.status().mode == Mode.HOLD
-
-
-def test_following_error_aborts_into_hold_naming_the_joint(lockstep: ControlClient) -> None:
-    start = np.array(lockstep.status().position)
-    lockstep.inject("jam_valve", 1, 0.7)  # Rotate's valve opens to 30 % of its duty
-    path = moves.step(start, 1, start[1] + 30.0, duration=3.0, machine=UNIMATE)
-    result = lockstep.wait(lockstep.move(path, kind="step"), timeout=60)
-    assert result.status.startswith("fault: following error: Rotate is "), result.status
-    fault = lockstep.wait_event("fault", 5.0, lambda e: e.payload["kind"] == "following_error")
-    assert fault.payload["joint"] == 1
-    assert lockstep.status().mode == Mode.HOLD
-
-
-def test_a_joint_driven_into_its_limit_stops_there(lockstep: ControlClient) -> None:
-    lockstep.jog_joint(2, 60.0)
-    fault = lockstep.wait_event("fault", 30.0, lambda e: e.payload["kind"] == "limit")
-    assert fault.payload["joint"] == 2 and fault.message.startswith("Up/Down at ")
-    wait_until(lambda: lockstep.status().valve[2] == 0.0, 2.0, "the joint's valve closed")
-    assert lockstep.status().position[2] <= UNIMATE.joints[2].upper + 0.5
-
-
-def test_killing_the_controller_is_reported(realtime: ControlClient) -> None:
-    start = realtime.status().position
-    move = realtime.move(moves.step(start, 1, start[1] + 30, duration=5.0, machine=UNIMATE),
-                         kind="step")
-    wait_until(lambda: realtime.status().move_done > 300, 3.0, "the move to run")
-    os.kill(realtime.pid, signal.SIGKILL)
-    died = realtime.wait_event("died", timeout=5.0)
-    assert "controller died" in died.message
-    result = realtime.wait(move, timeout=5)
-    assert result.status == "interrupted: controller died"
-    assert result.files is not None and len(result.run.t) > 300
-    with pytest.raises(ControllerError, match="controller died"):
-        realtime.jog([10.0] * 6)
-
-
-CLIENT_SCRIPT = textwrap.dedent("""
-    import sys, time
-    from control import ControlClient
-    client = ControlClient("unimate2000b", data_dir=sys.argv[1], orphan_timeout_s=1.5)
-    client.jog([30.0] * 6)
-    time.sleep(0.3)
-    print(client.pid, client.segment_name, flush=True)
-    time.sleep(60)
-""")
-
-
-def test_killing_the_client_makes_the_controller_hold_then_clean_up(tmp_path: Path) -> None:
-    script = subprocess.Popen([sys.executable, "-c", CLIENT_SCRIPT, str(tmp_path)],
-                              stdout=subprocess.PIPE, text=True)
-    try:
-        pid, name = script.stdout.readline().split()
-        controller_pid = int(pid)
-        segment = shm.attach(name)
-        layout = ControlLayout(6)
-        reader = SeqlockReader(segment.buf, layout.status_offset, layout.status.struct)
-        assert layout.status.decode(reader.read()).mode == Mode.MANUAL_ACTUATE
-        script.kill()
-        script.wait(5)
-
-        def holding() -> bool:
-            status = layout.status.decode(reader.read())
-            return status.mode == Mode.HOLD and bool(status.flags & Flag.UI_LOST)
-
-        wait_until(holding, 2.0, "the controller to hold after losing its client")
-        reader.release()
-        shm.release(segment, unlink=False)
-        wait_until(lambda: not shm.pid_alive(controller_pid), 10.0, "the orphan to exit")
-        assert our_segments(script.pid) == []
-    finally:
-        script.kill()
-        script.wait(5)
-
-
-def test_the_rig_refuses_moves_until_initialised_then_steps(tmp_path: Path, new_segments
-                                                            ) -> None:
-    rig = load_machine("rig")
-    with ControlClient(rig, lockstep=True, data_dir=tmp_path, heartbeat_timeout_s=3.0,
-                       sim_options={"initial": [400.0]}) as client:
-        assert not client.status().homed
-        path = moves.step(client.status().position, 0, 100.0, duration=2.0, machine=rig)
-        assert client.wait(client.move(path, kind="step"), 10).status.startswith(
-            "refused: not initialised")
-        client.initialise()
-        done = client.wait_event("initialised", 60.0)
-        assert done.payload["status"].startswith("complete: initialised")
-        status = client.status()
-        assert status.homed and abs(status.position[0]) < 1.0
-        result = client.wait(client.move(moves.step(status.position, 0, 400.0, duration=4.0,
-                                                     machine=rig), kind="step"), 30)
-        assert result.complete
-        assert abs(result.run.actual[-1, 0] - 400.0) < 5.0
-    assert new_segments() == []
-
-
 @pytest.mark.parametrize(("call", "args"), [
     ("jog_position", (-1, 10.0)),
     ("jog_position", (6, 1.0)),
@@ -497,6 +589,7 @@ def test_a_position_jog_past_the_following_error_travels_at_jog_speed_and_trips_
     start = realtime.status().desired[2]  # the jog moves the hold target, not the reading
     realtime.jog_position(2, JOG_DEG)
     goal = min(start + JOG_DEG, joint.upper)
+    assert goal - start > joint.following_error, f"no room above Up/Down at {start}°"
     seen = []  # (controller tick, hold target) while the target travels
     deadline = time.monotonic() + 60.0
     while abs((status := realtime.status()).desired[2] - goal) > 1e-9:
