@@ -1,14 +1,14 @@
 """The arm's view in the TUI (issue 28): on the Jog tab (p) and on its own screen (^A, with the
 Moves tab's previewed path), at 80×24 and 160×48, on the real controller; a near-limit joint
-coloured; an idle view draws nothing; the ghost and the previewed path shown; the full view
-in the browser (``servodesk serve``)."""
+coloured; an idle view draws nothing; the ghost and the previewed path shown. The full view in
+the browser (``servodesk serve``) is checked in tests/app/test_serve.py, on the commanding
+session's page, whose serve, controller and Chromium it shares."""
 
 from __future__ import annotations
 
 import asyncio
 import dataclasses
 from collections.abc import Callable
-from pathlib import Path
 
 import numpy as np
 from textual.app import App, ComposeResult
@@ -193,25 +193,3 @@ def test_the_rig_view_shows_the_ram_its_limits_and_the_supply(tui) -> None:
             assert "limit 0 mm" in text and "limit 1200 mm" in text and "target" in text
 
     asyncio.run(scenario())
-
-
-def test_the_full_view_works_in_the_browser(tmp_path: Path) -> None:
-    """``servodesk serve`` in headless Chromium: ^A shows the arm (braille received), q goes
-    back to the tabs."""
-    from tests.app.browser import Served, browser, wait_until  # selenium, aiohttp: 0.13 s
-
-    serve = Served(tmp_path / "serve.log", "--data-dir", str(tmp_path / "runs"))
-    try:
-        with browser() as page:
-            page.open(serve.url)
-            page.wait_for("mode HOLD", 90)
-            mark = page.mark()
-            page.press_ctrl("a")
-            page.wait_for("isometric", 30, after=mark)
-            wait_until(lambda: sum(ord(c) in BRAILLE for c in page.text()[mark:]) > 200, 30,
-                       "the arm drawn in the browser")
-            mark = page.mark()
-            page.press("q")
-            page.wait_for("F1 Jog", 30, after=mark)
-    finally:
-        serve.stop()

@@ -1,14 +1,19 @@
 """``servodesk serve`` in a real headless Chromium: the tabs render, live values change, an
 observe-only session's jog and take-command are refused (a script attached beside it sees
 the joints still held, no jog) while its E-stop latches, and with ``--command`` the session
-takes command at start and its E-stop latches; serve stops the controller it started, and
-ends the sessions still open when it stops.
+takes command at start, the arm's full view (^A, issue 28) is drawn and left, and its E-stop
+latches; serve stops the controller it started, and ends the sessions still open when it stops.
 
 Its gate (issue 22), with sessions a script opens as the page does: a page or session without
 serve's token, at a foreign Host or from another site's page is refused before any session's
-process starts; --max-sessions refuses one more until one closes; twenty sessions at once
-beside a CPU burner leave the controller running without a silent-client hold; a session's TUI
-never runs at a higher priority than the controller service.
+process starts (checked on the serve whose page then opens the observe-only session);
+--max-sessions refuses one more until one closes; twenty sessions at once beside a CPU burner
+leave the controller running without a silent-client hold; a session's TUI never runs at a
+higher priority than the controller service.
+
+Each browser test is one scenario on one serve, one controller and one Chromium: a serve, its
+controller, Chromium and a session's TUI take seconds to start (and a browser session's end 2 s
+more), so the claims of one serve are checked together, each with its own assert.
 
 What the browser shows is read from what it received (tests/app/browser.py): the terminal is
 drawn on a canvas."""
@@ -41,6 +46,7 @@ from tests.app.browser import ROOT, Browser, Served, Session, browser, scripted,
 START_S = 90.0  # serve, a controller, Chromium and a TUI on a loaded two-core machine
 STEP_S = 30.0
 TICK = re.compile(r"tick (\d+)")
+BRAILLE = range(0x2801, 0x2900)
 
 
 @pytest.fixture
@@ -95,13 +101,39 @@ def ticks(page: Browser, after: int) -> int:
     return int(TICK.findall(page.text()[after:])[-1])
 
 
-def test_an_observe_only_session_shows_live_tabs_and_refuses_commands_but_not_estop(
+def test_the_gate_refuses_strangers_and_an_observe_only_session_refuses_commands_not_estop(
         controller_service, served, page, tmp_path) -> None:
+    """The gate first (issue 22): nothing without serve's token, at a foreign Host or from
+    another site's page opens, and no session's process starts; then serve's own page opens
+    an observe-only session (the one session), which shows the live tabs, refuses a jog and
+    ^K with the reason and latches its E-stop."""
     serve = Served(tmp_path / "serve.log", "--socket", str(controller_service.socket),
                    runtime=controller_service.runtime)
     served.append(serve)
-    page.open(serve.url)
+    page_url = f"{serve.origin}/"
+    assert serve.url == f"{page_url}?token={serve.token}"  # printed at start, as Jupyter does
+    status, body = answer(page_url)
+    assert status == 403 and "needs servodesk serve's token" in body
+    status, body = answer(f"{page_url}?token={serve.token[:-1]}")
+    assert status == 403 and "wrong token" in body
+    # DNS rebinding: another site's name pointed at 127.0.0.1, with the right token even
+    status, body = answer(serve.url, host=f"rebound.example:{serve.port}")
+    assert status == 403 and "not a name of this server" in body
+    page.open(page_url)  # what a person sees
+    assert "needs servodesk serve's token" in page.driver.find_element(By.TAG_NAME, "body").text
+    with scripted(serve) as sessions:
+        assert sessions.open(origin="http://attacker.example") == [403]  # another site's page
+        assert sessions.open(origin=f"http://attacker.example:{serve.port}") == [403]
+        assert sessions.open(origin=None) == [403]  # no Origin
+        assert sessions.open(token="") == [403]
+        assert sessions.open(token=serve.token[::-1]) == [403]
+        assert session_pids(serve.socket) == []  # refused before a TUI started
+        assert "servodesk TUI" not in controller_service.log.read_text()  # and none attached
+
+    page.open(serve.url)  # serve's page, with its Origin and token: a session
     page.wait_for("observing: nobody holds command", START_S)
+    assert len(session_pids(serve.socket)) == 1
+    assert "servodesk TUI" in controller_service.log.read_text()  # where one attaching shows
     for title in ("F1 Jog", "F2 Moves", "F7 Latency", "F10 Log", "E-STOP", "take command"):
         page.wait_for(title, STEP_S)  # the tabs and the footer
     first = int(page.wait_for(TICK, STEP_S).group(1))
@@ -131,12 +163,15 @@ def test_an_observe_only_session_shows_live_tabs_and_refuses_commands_but_not_es
     finally:
         script.close()
     assert serve.stop() == 0
-    assert "stopped (1 open session ended)" in serve.log.read_text()  # not left to time out
+    log = serve.log.read_text()
+    assert "stopped (1 open session ended)" in log  # not left to time out
     assert controller_service.proc.poll() is None  # serve attached: the controller runs on
+    assert "refused GET /ws/…" in log
+    assert serve.token not in log.split(serve.url, 1)[1]  # not in its log
 
 
-def test_with_command_the_session_commands_and_its_estop_latches(served, page, tmp_path
-                                                                 ) -> None:
+def test_with_command_the_session_commands_shows_the_arm_and_its_estop_latches(
+        served, page, tmp_path) -> None:
     serve = Served(tmp_path / "serve.log", "--command", "--data-dir", str(tmp_path / "runs"))
     served.append(serve)
     page.open(serve.url)
@@ -144,6 +179,14 @@ def test_with_command_the_session_commands_and_its_estop_latches(served, page, t
     script = attach(serve.socket)
     try:
         assert script.holder.startswith("servodesk TUI")
+        mark = page.mark()
+        page.press_ctrl("a")  # the arm's full view
+        page.wait_for("isometric", STEP_S, after=mark)
+        wait_until(lambda: sum(ord(c) in BRAILLE for c in page.text()[mark:]) > 200, STEP_S,
+                   "the arm drawn in the browser")
+        mark = page.mark()
+        page.press("q")  # back to the tabs
+        page.wait_for("F1 Jog", STEP_S, after=mark)
         mark = page.mark()
         page.press(Keys.ESCAPE)
         wait_until(lambda: script.status().estop, STEP_S, "the session's E-stop latched")
@@ -187,38 +230,6 @@ def test_the_command_options_of_an_attached_tui_are_checked(options, capsys) -> 
 
 
 # -- the gate (issue 22) ---------------------------------------------------------------------
-
-def test_without_the_token_or_from_another_site_nothing_opens_and_no_session_starts(
-        served, page, tmp_path) -> None:
-    serve = Served(tmp_path / "serve.log", "--data-dir", str(tmp_path / "runs"))
-    served.append(serve)
-    page_url = f"{serve.origin}/"
-    assert serve.url == f"{page_url}?token={serve.token}"  # printed at start, as Jupyter does
-    status, body = answer(page_url)
-    assert status == 403 and "needs servodesk serve's token" in body
-    status, body = answer(f"{page_url}?token={serve.token[:-1]}")
-    assert status == 403 and "wrong token" in body
-    # DNS rebinding: another site's name pointed at 127.0.0.1, with the right token even
-    status, body = answer(serve.url, host=f"rebound.example:{serve.port}")
-    assert status == 403 and "not a name of this server" in body
-    page.open(page_url)  # what a person sees
-    assert "needs servodesk serve's token" in page.driver.find_element(By.TAG_NAME, "body").text
-
-    with scripted(serve) as sessions:
-        assert sessions.open(origin="http://attacker.example") == [403]  # another site's page
-        assert sessions.open(origin=f"http://attacker.example:{serve.port}") == [403]
-        assert sessions.open(origin=None) == [403]  # no Origin
-        assert sessions.open(token="") == [403]
-        assert sessions.open(token=serve.token[::-1]) == [403]
-        assert session_pids(serve.socket) == []  # refused before a TUI started
-        assert "servodesk TUI" not in serve.log.read_text()  # and none attached
-        (session,) = sessions.open()  # serve's page's Origin and token: a session
-        assert isinstance(session, Session)
-        session.wait_for("observing: nobody holds command", START_S)
-        assert len(session_pids(serve.socket)) == 1
-    assert "refused GET /ws/…" in serve.log.read_text()
-    assert serve.token not in serve.log.read_text().split(serve.url, 1)[1]  # not in its log
-
 
 def test_max_sessions_refuses_one_more_and_admits_again_after_one_closes(served, tmp_path
                                                                           ) -> None:
