@@ -102,16 +102,33 @@ def test_an_idle_view_draws_once_and_a_new_pose_draws_again() -> None:
     asyncio.run(scenario())
 
 
-def _jog_view_at(tui: Tui, size: tuple[int, int]) -> None:
+async def _full_view_shows(tui: Tui, app, pilot, size: tuple[int, int]) -> None:
+    """^A: the arm on the whole screen at ``size``, the near-limit joint coloured; q: back."""
+    await pilot.press("ctrl+a")
+    await tui.until(lambda: isinstance(app.screen, ArmScreen))
+    full = app.screen.query_one(ArmView)
+    await tui.until(lambda: has_braille(full) and full.size.width == size[0],
+                    what=lambda: drawn(full))
+    assert cells_styled(full, JOINT_LEVELS[2]) > 0, f"no near-limit joint at {size}"
+    await pilot.press("q")
+    await tui.until(lambda: not isinstance(app.screen, ArmScreen))
+
+
+def test_the_jog_tab_and_the_full_screen_show_the_arm_at_80x24_then_160x48(tui) -> None:
+    """One app at 80×24, its terminal then made 160×48 (as an operator's is resized): at each
+    size the Jog tab's view (p) draws the arm with a joint near its limit coloured and named,
+    and ^A's full screen does too. (Two apps, one started at each size, checked the same
+    things with a controller, an app and a go-to more.)"""
+
     async def scenario() -> None:
         app = tui.app()
-        async with app.run_test(size=size) as pilot:
+        async with app.run_test(size=SMALL) as pilot:
             start = await tui.ready(app, pilot)
             assert not app.query("#jog-arm"), "the Jog tab makes its view only when first shown"
             await pilot.press("p")
             view = app.query_one("#jog-arm", ArmView)
             await tui.until(lambda: has_braille(view), what=lambda: drawn(view))
-            assert view.size.height >= (9 if size == SMALL else 25)
+            assert view.size.height >= 9
             assert "isometric" in drawn(view).splitlines()[0]
             near = list(start.position)
             near[2] = MACHINE.joints[2].upper - 0.5  # Up/Down within 2 % of its limit
@@ -119,14 +136,19 @@ def _jog_view_at(tui: Tui, size: tuple[int, int]) -> None:
             await tui.until(lambda: cells_styled(view, JOINT_LEVELS[2]) > 0,
                             what=lambda: drawn(view))
             assert "Up/Down near its limit" in drawn(view).splitlines()[0]
-            await pilot.press("ctrl+a")
-            await tui.until(lambda: isinstance(app.screen, ArmScreen))
-            full = app.screen.query_one(ArmView)
-            await tui.until(lambda: has_braille(full) and full.size.width == size[0],
-                            what=lambda: drawn(full))
-            assert cells_styled(full, JOINT_LEVELS[2]) > 0
-            await pilot.press("q")
-            await tui.until(lambda: not isinstance(app.screen, ArmScreen))
+            await _full_view_shows(tui, app, pilot, SMALL)
+
+            draws = view.draws
+            await pilot.resize_terminal(*LARGE)
+            await tui.until(lambda: app.screen.size == LARGE and view.draws > draws
+                            and view.size.width > SMALL[0] and has_braille(view),
+                            what=lambda: f"the view drawn at {LARGE}: {drawn(view)}")
+            assert view.size.height >= 25
+            assert "isometric" in drawn(view).splitlines()[0]
+            assert "Up/Down near its limit" in drawn(view).splitlines()[0]
+            assert cells_styled(view, JOINT_LEVELS[2]) > 0
+            await _full_view_shows(tui, app, pilot, LARGE)
+
             await pilot.press("p")  # and back: the table and the help again
             await tui.until(lambda: not view.display and app.query_one("#jog-help").display)
             file = positions_file(app.data_dir, MACHINE)  # a position taught meanwhile
@@ -136,14 +158,6 @@ def _jog_view_at(tui: Tui, size: tuple[int, int]) -> None:
                             what=lambda: f"spot marked: {view.plan.markers}")
 
     asyncio.run(scenario())
-
-
-def test_the_jog_tab_and_the_full_screen_show_the_arm_at_80x24(tui) -> None:
-    _jog_view_at(tui, SMALL)
-
-
-def test_the_jog_tab_and_the_full_screen_show_the_arm_at_160x48(tui) -> None:
-    _jog_view_at(tui, LARGE)
 
 
 def test_the_moves_preview_path_is_on_the_full_screen_from_its_text_field(tui) -> None:
