@@ -412,6 +412,18 @@ def test_a_joint_driven_into_its_limit_stops_there(lockstep: ControlClient) -> N
     assert lockstep.status().position[2] <= UNIMATE.joints[2].upper + 0.5
 
 
+def test_go_to_plans_a_joint_space_move_at_the_speed_asked(lockstep: ControlClient) -> None:
+    here = np.array(lockstep.status().position)
+    goal = here + np.array([100.0, 20.0, 5.0, -20.0, 15.0, 30.0])
+    result = lockstep.wait(lockstep.go_to(goal, speed=0.5), timeout=60)
+    assert result.complete and result.run.kind == "go_to", result.status
+    assert np.abs(result.run.actual[-1] - goal).max() < 2.0
+    speed = np.abs(np.diff(result.run.desired, axis=0)).max(axis=0) / lockstep.dt
+    assert np.all(speed <= 0.5 * np.array([j.max_speed for j in UNIMATE.joints]) * 1.01)
+    with pytest.raises(ValueError, match="Up/Down target 99° is outside"):
+        lockstep.go_to([*goal[:2], 99.0, *goal[3:]])
+
+
 def test_killing_the_controller_is_reported(tmp_path: Path, new_segments) -> None:
     """A real-time controller of its own: the test kills it."""
     with ControlClient("unimate2000b", data_dir=tmp_path) as realtime:
@@ -605,16 +617,3 @@ def test_a_position_jog_past_the_following_error_travels_at_jog_speed_and_trips_
     status = realtime.status()
     assert not status.estop and status.fault == "", status.fault
     assert [e.message for e in realtime.poll_events() if e.kind == "fault"] == []
-
-
-def test_go_to_plans_a_joint_space_move_at_the_speed_asked(lockstep: ControlClient) -> None:
-    here = np.array(lockstep.status().position)
-    goal = here + np.array([100.0, 20.0, 5.0, -20.0, 15.0, 30.0])
-    result = lockstep.wait(lockstep.go_to(goal, speed=0.5), timeout=60)
-    assert result.complete and result.run.kind == "go_to", result.status
-    assert np.abs(result.run.actual[-1] - goal).max() < 2.0
-    speed = np.abs(np.diff(result.run.desired, axis=0)).max(axis=0) / lockstep.dt
-    assert np.all(speed <= 0.5 * np.array([j.max_speed for j in UNIMATE.joints]) * 1.01)
-    with pytest.raises(ValueError, match="Up/Down target 99° is outside"):
-        lockstep.go_to([*goal[:2], 99.0, *goal[3:]])
-
