@@ -3,19 +3,25 @@ the real-terminal typing test's (test_typing_tmux.py) and the typing benchmark's
 (benchmarks/typing.py).
 
 A field is chosen with a mouse click (an SGR mouse report written to the pane, as the
-terminal writes it), and typing starts once a probe key typed slowly after it shows in the
+terminal writes it), and typing starts once a probe typed slowly after it shows in the
 field. A try clears the field with backspaces and
 types a number, every key a ``tmux send-keys`` of its own ``gap_s`` after the one before,
-as an operator's keys come; the field is read back from the screen.
+as an operator's keys come; the field is read back from the screen. The test sends them and
+reads the screen through one tmux control-mode client (``ControlTerminal``), not a tmux
+process a command.
 """
 
 from __future__ import annotations
 
+import os
 import re
+import select
 import subprocess
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import partial
+from types import TracebackType
 
 from tests.app.terminal import TMUX, TMUX_S, WAIT_S, Terminal, TerminalError
 
@@ -67,8 +73,8 @@ TAB_FIELDS: tuple[tuple[str, tuple[tuple[str, str, tuple[float, float]], ...]], 
 CLICK_INTO = 8  # a value typed here has at most this many characters (with the probe)
 MENU_WIDTH = 24  # the Moves menu's column: a form's name left of it is the menu's
 CLICK_S = 5.0  # a click's probe on the screen: well under a second unloaded; else click again
-PROBE = "0"  # typed after a click, slowly: the field that shows it has the focus
 CLEAR = 10  # backspaces before each number: more than any number typed here has characters
+POLL_S = 0.005  # between screen reads while waiting: a read costs the tmux server ~0.1 ms
 
 
 @dataclass(frozen=True)
@@ -142,34 +148,45 @@ class Typist:
         self.term.wait(lambda s: help_starts in s, f"the {label} form")
 
     def focus(self, label: str, unit: str) -> Field:
-        """Click in the field's box and type a ``PROBE`` at its end, until the field shows it
-        (a click may miss when a banner that comes or goes moves the form)."""
+        """Click in the field's box and type a probe at its end, until the field shows it
+        (a click may miss when a banner that comes or goes moves the form). Each click's
+        probe is its own (``0``, ``1``, …), so a probe that shows late, after the next click
+        was sent, is never taken for the next one's. With one probe for every click, a first
+        probe that showed only after its 5 s had passed passed for the second click's; had a
+        banner gone meanwhile put that click in the next field, the keys typed next went
+        there: the likely cause of the rare loss at load 13-15 (Swivel's keys in duration)."""
         deadline = time.monotonic() + WAIT_S
+        attempt = 0
         while True:
             screen = self.term.wait(lambda s: find_field(s, label, unit) is not None,
                                     f"the {label} field")
             field = find_field(screen, label, unit)
             assert field is not None
             before = shown_text(screen, field)
+            probe = str(attempt)
             self.click(field.row, field.column)
-            self._send(PROBE)
+            self._send("-l", probe)
             try:
-                self.term.wait(partial(self.probed, field, before), f"{PROBE} in {label}",
-                               timeout=CLICK_S)
+                self.term.wait(partial(self.probed, field, before, probe),
+                               f"{probe} in {label}", timeout=CLICK_S)
             except TerminalError:
                 if time.monotonic() > deadline:
                     raise
+                attempt += 1
                 continue
             return field
 
     @staticmethod
-    def probed(field: Field, before: str | None, screen: str) -> bool:
-        """The probe typed into the field: alone (it was empty) or after its value. Not merely
-        a new text ending in it: an empty field's placeholder is live ("here -0.09" became
-        "here -0.10" as the rig settled), and was taken for the probe when no click had
-        reached the field (a failure beside two burners)."""
+    def probed(field: Field, before: str | None, probe: str, screen: str) -> bool:
+        """This click's probe typed into the field: alone (it was empty) or after its value
+        as the screen showed it before the click; an earlier click's probe that came in
+        between makes neither. Not merely a new text ending in it: an empty field's
+        placeholder is live ("here -0.09" became "here -0.10" as the rig settled), and was
+        taken for the probe when no click had reached the field (a failure beside two
+        burners). Nor a field that showed the probe already ("1" typed in a field of "1")."""
         text = shown_text(screen, field)
-        return text == PROBE or (before is not None and text == before + PROBE)
+        return text != before and (text == probe
+                                   or (before is not None and text == before + probe))
 
     def click(self, row: int, column: int) -> None:
         report = f"\x1b[<0;{column + 1};{row + 1}M\x1b[<0;{column + 1};{row + 1}m"
@@ -190,9 +207,7 @@ class Typist:
             self._send(key)
 
     def _send(self, *args: str) -> None:
-        assert TMUX is not None
-        subprocess.run([TMUX, "-L", self.term.socket, "send-keys", "-t", self.term.session,
-                        *args], check=True, capture_output=True, timeout=TMUX_S)
+        self.term.keys(*args)
 
 
 def number(k: int, low: float, high: float) -> str:
@@ -204,3 +219,98 @@ def number(k: int, low: float, high: float) -> str:
         return str(round(value))
     decimals = 2 if high - low < 5 else k % 3 % 2
     return f"{value:.{decimals}f}"
+
+
+class ControlTerminal(Terminal):
+    """``term``'s session, its keys sent and its screen read through one tmux control-mode
+    client (``tmux -C``) attached to it: a command costs the tmux server some 0.1 ms, where
+    ``Terminal`` starts a tmux process a command, 5-7 ms of a core each, for every key sent
+    and every screen read (thousands in the typing test), and reads the screen every 50 ms.
+    The client neither sizes the window (``ignore-size``) nor takes the pane's output
+    (``no-output``): the pane and what the app reads from it are as with no client."""
+
+    def __init__(self, term: Terminal) -> None:
+        super().__init__(term.socket, term.session, term.status_file)
+        assert TMUX is not None, "tmux is not installed"
+        self._client = subprocess.Popen(
+            [TMUX, "-L", term.socket, "-f", os.devnull, "-u", "-C", "attach-session", "-t",
+             term.session, "-f", "ignore-size,no-output"],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
+        self._read = b""
+        self._reply("attach-session")  # the client's first, empty, reply
+
+    def __enter__(self) -> ControlTerminal:
+        return self
+
+    def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
+                 traceback: TracebackType | None) -> None:
+        self.close()
+
+    def close(self) -> None:
+        assert self._client.stdin is not None
+        self._client.stdin.close()  # the client detaches and exits
+        try:
+            self._client.wait(TMUX_S)
+        except subprocess.TimeoutExpired:
+            self._client.kill()
+            self._client.wait()
+
+    def command(self, *args: str) -> list[str]:
+        """Run a tmux command; its output's lines."""
+        assert self._client.stdin is not None
+        quoted = ("'" + arg.replace("'", "'\"'\"'") + "'" for arg in args)  # taken literally
+        self._client.stdin.write((" ".join(quoted) + "\n").encode())
+        self._client.stdin.flush()
+        return self._reply(" ".join(args[:1]))
+
+    def _reply(self, what: str) -> list[str]:
+        """The lines between ``%begin`` and its ``%end`` (``%error``: raised); the client's
+        notifications outside them (``%session-changed`` …) are not ours."""
+        deadline = time.monotonic() + TMUX_S
+        while not (begin := self._line(deadline)).startswith("%begin "):
+            pass
+        number = begin.split()[2]
+        lines: list[str] = []
+        while True:
+            line = self._line(deadline)
+            end = line.split()
+            if len(end) == 4 and end[0] in ("%end", "%error") and end[2] == number:
+                if end[0] == "%error":
+                    raise RuntimeError(f"tmux {what}: {' '.join(lines)}")
+                return lines
+            lines.append(line)
+
+    def _line(self, deadline: float) -> str:
+        assert self._client.stdout is not None
+        while b"\n" not in self._read:
+            ready, _, _ = select.select([self._client.stdout], [], [],
+                                        max(0.0, deadline - time.monotonic()))
+            chunk = os.read(self._client.stdout.fileno(), 1 << 16) if ready else b""
+            if not chunk:
+                raise TerminalError("tmux's control client " + (
+                    "ended" if ready else f"gave no answer within {TMUX_S:g} s"))
+            self._read += chunk
+        line, self._read = self._read.split(b"\n", 1)
+        return line.decode("utf-8", errors="replace")
+
+    def screen(self) -> str:
+        return "".join(f"{line}\n" for line in
+                       self.command("capture-pane", "-p", "-t", self.session))
+
+    def keys(self, *keys: str) -> None:
+        self.command("send-keys", "-t", self.session, *keys)
+
+    def wait(self, shows: Callable[[str], bool], what: str, timeout: float = WAIT_S) -> str:
+        """As ``Terminal.wait``, reading the screen every ``POLL_S``."""
+        deadline = time.monotonic() + timeout
+        while True:
+            screen = self.screen()
+            if shows(screen):
+                return screen
+            if self.exit_status() is not None:
+                raise TerminalError(f"the app exited while waiting for {what}; the terminal "
+                                    f"shows:\n{screen}")
+            if time.monotonic() > deadline:
+                raise TerminalError(f"the terminal never showed {what} within {timeout:g} s; "
+                                    f"it shows:\n{screen}")
+            time.sleep(POLL_S)
