@@ -1,10 +1,11 @@
 """A client's own controller: ``EmbeddedLink`` starts the control subprocess and owns it.
 
 It saves the runs a dead process left (``control/recovery.py``) and clears orphans
-first, makes the control segment (the machine's coefficient sets written in), starts
-``python -m control.rt.process`` on one end of a socketpair and waits for it to say it is
-ready. It always commands; its heartbeat is a word in shared memory the controller reads
-every tick, so a full or frozen channel never delays it. Closing stops the controller
+first, makes the control segment (the machine's coefficient sets written in), starts the
+control process (a fork of a preloaded server, ``control/launcher.py``) on one end of a
+socketpair and waits for it to say it is ready. It always commands; its heartbeat is a word
+in shared memory the controller reads every tick, so a full or frozen channel never delays it.
+Closing stops the controller
 (valves closed), kills it if it does not stop, and unlinks the segment.
 """
 
@@ -15,7 +16,6 @@ import itertools
 import os
 import socket
 import subprocess
-import sys
 import tempfile
 import time
 from collections.abc import Callable, Sequence
@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import IO
 
 import control
+from control.launcher import ControllerProcess, launch
 from control.link import ControllerError, Link, Setting
 from control.off_core import come_back, controller_core, keep_off
 from control.recovery import recover_runs
@@ -70,11 +71,8 @@ class EmbeddedLink(Link):
         ours, theirs = socket.socketpair()
         stderr = tempfile.TemporaryFile()  # noqa: SIM115  # lives as long as the link
         try:
-            proc = subprocess.Popen(
-                [sys.executable, "-m", "control.rt.process", config.to_json(),
-                 str(theirs.fileno())],
-                pass_fds=[theirs.fileno()], stdin=subprocess.DEVNULL,
-                stdout=subprocess.DEVNULL, stderr=stderr, env=_child_env())
+            proc = launch(config.to_json(), theirs.fileno(), stderr.fileno(), _child_env(),
+                          start_timeout_s)
         except BaseException:
             stderr.close()
             ours.close()
@@ -97,7 +95,7 @@ class EmbeddedLink(Link):
         return link, notices
 
     def __init__(self, wire: Wire, segment: SharedMemory, setting: Setting,
-                 proc: subprocess.Popen[bytes], stderr: IO[bytes]) -> None:
+                 proc: ControllerProcess, stderr: IO[bytes]) -> None:
         super().__init__(wire, segment, setting)
         self.process = proc
         self._stderr = stderr
@@ -178,6 +176,7 @@ class EmbeddedLink(Link):
         super().release()
         shm.release(self.segment, unlink=True)
         self._stderr.close()
+        self.process.close()
         if self.kept_off is not None:
             come_back(self.kept_off)
             self.kept_off = None

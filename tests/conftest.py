@@ -74,6 +74,7 @@ SLOW_PATHS = (
     "tests/app/test_cli_program.py",   # servodesk run PROGRAM in subprocesses
     "tests/control/program/test_runner.py",  # programs run on the control subprocess
     "tests/control/test_client.py",    # the control subprocess, for real
+    "tests/control/test_launcher.py",  # control processes forked by their server
     "tests/control/test_timing.py",    # the thesis's timing on the control subprocess
     "tests/control/test_settle_and_rest.py",  # fast moves and rest on both machines
     "tests/control/test_two_khz.py",   # both machines at a 500 µs period
@@ -176,9 +177,10 @@ ONE_AT_A_TIME = (
     "tests/control/test_run_keeper.py",      # an E-stop's delivery timed while a run saves
 )
 # Audit events (PEP 578) of a process start. A multiprocessing "spawn" start raises none
-# (CPython 3.11): such a test must be listed above by hand, as test_seqlock's is.
+# (CPython 3.11): such a test must be listed above by hand, as test_seqlock's is. A controller
+# forked by the fork server (control/launcher.py) is said by the launcher's own event.
 PROCESS_EVENTS = frozenset({"subprocess.Popen", "os.fork", "os.forkpty", "os.posix_spawn",
-                            "os.spawn", "os.system", "os.exec"})
+                            "os.spawn", "os.system", "os.exec", "control.launch"})
 
 
 def _starts_processes(item: pytest.Item) -> bool:

@@ -1,8 +1,9 @@
 """Entry point of the control subprocess: owns the backend, runs the loop, cleans up.
 
-``ControlClient`` starts it as ``python -m control.rt.process CONFIG_JSON FD``: a
-fresh interpreter that shares nothing with the UI process but one end of a
-socketpair (the command channel, ``control/rt/wire.py`` frames) and the shared memory.
+``ControlClient`` starts it as a fork of the control processes' server
+(``control/rt/forkserver.py``), which has imported this module and nothing of the client's:
+it shares nothing with the UI process but one end of a socketpair (the command channel,
+``control/rt/wire.py`` frames) and the shared memory.
 """
 
 from __future__ import annotations
@@ -10,13 +11,11 @@ from __future__ import annotations
 import contextlib
 import os
 import signal
-import socket
 import subprocess
 import sys
 import traceback
 
 from control.rt import shm
-from control.rt.channel import controller_end
 from control.rt.events import Crash, Ready
 from control.rt.layout import ControlLayout
 from control.rt.loop import Controller, LoopConfig
@@ -96,8 +95,3 @@ def hand_over(segments: list[str]) -> None:
         subprocess.Popen([sys.executable, "-m", "control.recovery", "--after", str(os.getpid()),
                           *segments], stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                          start_new_session=True)
-
-
-if __name__ == "__main__":
-    main(ProcessConfig.from_json(sys.argv[1]),
-         controller_end(socket.socket(fileno=int(sys.argv[2]))))

@@ -23,8 +23,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 # every controller on the host sees the same claims; a test spreading its own controllers
-# claims apart from the others on the host (another test worker's, a benchmark's)
-CLAIMS = Path(os.environ.get("SERVODESK_CPU_CLAIMS", "/dev/shm"))
+# claims apart from the others on the host (another test worker's, a benchmark's). Read at
+# each claim: a controller is a fork of a server started with an older environment.
+CLAIMS_ENV = "SERVODESK_CPU_CLAIMS"
 
 
 @dataclass(frozen=True)
@@ -68,11 +69,12 @@ def enter_realtime(cpu: int | None = None, priority: int = 80, fifo: bool = True
                           notice="; ".join(notices), shared=shared)
 
 
-def claim_cpu(cpus: list[int], where: Path = CLAIMS) -> int | None:
+def claim_cpu(cpus: list[int], where: Path | None = None) -> int | None:
     """The highest-numbered of ``cpus`` no other process holds the claim of, claimed for
     this process's life (the lock goes with it, however it ends); None when every one is
     held or none can be claimed. A claim file is opened read-only and never read: one
     another user made is as good a lock as ours, and a symbolic link is refused."""
+    where = where or Path(os.environ.get(CLAIMS_ENV, "/dev/shm"))
     for cpu in reversed(cpus):
         try:
             fd = os.open(where / f"servodesk-rt-cpu{cpu}.lock",
