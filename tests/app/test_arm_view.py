@@ -114,11 +114,12 @@ async def _full_view_shows(tui: Tui, app, pilot, size: tuple[int, int]) -> None:
     await tui.until(lambda: not isinstance(app.screen, ArmScreen))
 
 
-def test_the_jog_tab_and_the_full_screen_show_the_arm_at_80x24_then_160x48(tui) -> None:
+def test_the_jog_tab_and_the_full_screen_show_the_arm_and_the_moves_preview(tui) -> None:
     """One app at 80×24, its terminal then made 160×48 (as an operator's is resized): at each
     size the Jog tab's view (p) draws the arm with a joint near its limit coloured and named,
-    and ^A's full screen does too. (Two apps, one started at each size, checked the same
-    things with a controller, an app and a go-to more.)"""
+    and ^A's full screen does too; then, at 160×48, the Moves tab's previewed path on ^A's
+    full screen. (Three apps, one started at each size and one for the preview, checked the
+    same things with two controllers, two apps and a go-to more.)"""
 
     async def scenario() -> None:
         app = tui.app()
@@ -156,41 +157,37 @@ def test_the_jog_tab_and_the_full_screen_show_the_arm_at_80x24_then_160x48(tui) 
             await pilot.press("p")  # shown again: marked
             await tui.until(lambda: "spot" in [m.name for m in view.plan.markers],
                             what=lambda: f"spot marked: {view.plan.markers}")
+            await _moves_preview_on_the_full_screen(tui, app, pilot, near)
 
     asyncio.run(scenario())
 
 
-def test_the_moves_preview_path_is_on_the_full_screen_from_its_text_field(tui) -> None:
-    async def scenario() -> None:
-        app = tui.app()
-        async with app.run_test(size=LARGE) as pilot:
-            start = await tui.ready(app, pilot)
-            await pilot.press("f2")
-            moves = app.tab("moves")
-            await tui.until(lambda: moves.visible_now)
-            target = np.array(start.position)
-            target[0] += 500.0  # the tool sweeps a wide arc
-            target[1] += 90.0
-            kinds = app.query_one("#move-kinds", OptionList)
-            kinds.highlighted = next(i for i in range(kinds.option_count)
-                                     if str(kinds.get_option_at_index(i).prompt) == "Via points")
-            await tui.until(lambda: moves.form.KIND == "via_points")
-            area = app.query_one("#via-points", TextArea)
-            area.focus()
-            area.text = " ".join(f"{v:.3f}" for v in target)
-            await tui.until(lambda: moves.previewed is not None, what="the preview")
-            await pilot.press("ctrl+a")  # typed in the field: the app's, not the field's
-            await tui.until(lambda: isinstance(app.screen, ArmScreen))
-            full = app.screen.query_one(ArmView)
-            await tui.until(lambda: cells_styled(full, JOINT_PATH) > 20,
-                            what=lambda: drawn(full))
-            await pilot.press("ctrl+a")  # and back
-            await tui.until(lambda: not isinstance(app.screen, ArmScreen))
-            await pilot.press("ctrl+a", "f1")  # a tab's key leaves the full view for the tab
-            await tui.until(lambda: not isinstance(app.screen, ArmScreen)
-                            and app.tab("jog").visible_now)
-
-    asyncio.run(scenario())
+async def _moves_preview_on_the_full_screen(tui: Tui, app, pilot, here: list[float]) -> None:
+    """The Moves tab's previewed path on ^A's full screen, ^A pressed in its via-points field
+    (the app's key, not the field's), ^A back, and a tab's key leaving the full view."""
+    await pilot.press("f2")
+    moves = app.tab("moves")
+    await tui.until(lambda: moves.visible_now)
+    target = np.array(here)
+    target[0] += 500.0  # the tool sweeps a wide arc
+    target[1] += 90.0
+    kinds = app.query_one("#move-kinds", OptionList)
+    kinds.highlighted = next(i for i in range(kinds.option_count)
+                             if str(kinds.get_option_at_index(i).prompt) == "Via points")
+    await tui.until(lambda: moves.form.KIND == "via_points")
+    area = app.query_one("#via-points", TextArea)
+    area.focus()
+    area.text = " ".join(f"{v:.3f}" for v in target)
+    await tui.until(lambda: moves.previewed is not None, what="the preview")
+    await pilot.press("ctrl+a")  # typed in the field: the app's, not the field's
+    await tui.until(lambda: isinstance(app.screen, ArmScreen))
+    full = app.screen.query_one(ArmView)
+    await tui.until(lambda: cells_styled(full, JOINT_PATH) > 20, what=lambda: drawn(full))
+    await pilot.press("ctrl+a")  # and back
+    await tui.until(lambda: not isinstance(app.screen, ArmScreen))
+    await pilot.press("ctrl+a", "f1")  # a tab's key leaves the full view for the tab
+    await tui.until(lambda: not isinstance(app.screen, ArmScreen)
+                    and app.tab("jog").visible_now)
 
 
 def test_the_rig_view_shows_the_ram_its_limits_and_the_supply(tui) -> None:
