@@ -3,11 +3,6 @@
 Lockstep clients run the simulator as fast as it computes (moves take a
 fraction of their duration); real-time clients run the 1 kHz loop as the
 operator gets it. Every test ends with no servodesk segment left in /dev/shm.
-
-The tests that take ``lockstep`` or ``realtime`` share one controller of each kind for the
-module, put back before each test as a fresh one starts (``as_new``); a test that kills,
-closes or starts one, or that needs a session's state a later test could not undo (an
-identified model), starts its own.
 """
 
 from __future__ import annotations
@@ -21,7 +16,6 @@ import sys
 import textwrap
 import threading
 import time
-from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
 
@@ -44,76 +38,11 @@ from tests.control.waiting import wait_until
 
 UNIMATE = load_machine("unimate2000b")
 STEPS = {"inout": 120.0, "rotate": 20.0, "updown": 8.0, "bend": 30.0, "yaw": 30.0, "swivel": 40.0}
-GOAL_TOLERANCE = np.array([j.goal_tolerance for j in UNIMATE.joints])
+
 
 
 def our_segments(pid: int) -> list[str]:
     return [n for n in shm.leftover_segments() if shm.owner_pid(n) == pid]
-
-
-def shared(tmp_path_factory: pytest.TempPathFactory, **options: object
-           ) -> Iterator[tuple[ControlClient, np.ndarray]]:
-    """A controller for the module and where it starts the arm; none of its segments is left
-    once it is closed."""
-    before = set(our_segments(os.getpid()))
-    client = ControlClient("unimate2000b", data_dir=tmp_path_factory.mktemp("runs"), **options)
-    yield client, np.array(client.status().position)
-    client.close()
-    assert sorted(set(our_segments(os.getpid())) - before) == []
-
-
-@pytest.fixture(scope="module")
-def shared_lockstep(tmp_path_factory: pytest.TempPathFactory
-                    ) -> Iterator[tuple[ControlClient, np.ndarray]]:
-    # not a heartbeat test (the real-time ones are): a flat-out simulator may starve ours
-    yield from shared(tmp_path_factory, lockstep=True, heartbeat_timeout_s=3.0)
-
-
-@pytest.fixture(scope="module")
-def shared_realtime(tmp_path_factory: pytest.TempPathFactory
-                    ) -> Iterator[tuple[ControlClient, np.ndarray]]:
-    yield from shared(tmp_path_factory)
-
-
-def as_new(client: ControlClient, start: np.ndarray | None) -> ControlClient:
-    """Put back what a test here may leave, as a fresh controller has it: the E-stop released
-    and its input too, no valve jammed, every joint holding (no manual duty, no move), the
-    machine's track set, and (``start`` given) the arm where it started (a lockstep go_to: a
-    fraction of a second); every event before this is taken off the queue (the controller
-    answers in order: the refusal of a feed hold with no move comes after them all)."""
-    client.inject("press_estop", False)
-    for joint in range(UNIMATE.n_joints):
-        client.inject("jam_valve", joint, 0.0)
-    if client.latched:
-        client.reset()
-        wait_until(lambda: not client.latched, 5.0, "the E-stop released")
-    client.hold()
-    if client.coefficients["track"] != UNIMATE.track:
-        client.set_coefficients("track", UNIMATE.track)
-    if start is not None and np.any(np.abs(client.status().position - start) > GOAL_TOLERANCE):
-        back = client.wait(client.go_to(start, speed=1.0), timeout=60)
-        assert back.complete, f"the arm did not go back where it started: {back.status}"
-    client.poll_events()
-    client.pause()
-    client.wait_event("refused", 10.0, lambda e: "no move is running" in e.message)
-    status = client.status()
-    assert status.mode == Mode.HOLD and not (status.moving or status.estop), status
-    assert client.coefficients == {"hold": UNIMATE.hold, "track": UNIMATE.track}
-    assert client.models == (None,) * UNIMATE.n_joints and client.poll_events() == []
-    return client
-
-
-@pytest.fixture
-def lockstep(shared_lockstep: tuple[ControlClient, np.ndarray]) -> ControlClient:
-    """The module's lockstep controller, as new, the arm where it started."""
-    return as_new(*shared_lockstep)
-
-
-@pytest.fixture
-def realtime(shared_realtime: tuple[ControlClient, np.ndarray]) -> ControlClient:
-    """The module's real-time controller, as new but for where the arm is (going back would
-    take real seconds; no test here needs more room than it has, asserted where it could)."""
-    return as_new(shared_realtime[0], None)
 
 
 @pytest.mark.parametrize("joint", list(STEPS))
@@ -131,14 +60,15 @@ def test_a_step_on_each_joint_settles_inside_its_tolerance(lockstep: ControlClie
     assert abs(run.actual[-1, j] - path[-1, j]) <= UNIMATE.joints[j].tolerance
 
 
-def test_follow_track_completes_and_the_run_is_saved(lockstep: ControlClient) -> None:
+def test_follow_track_completes_and_the_run_is_saved(lockstep: ControlClient,
+                                                     tmp_path: Path) -> None:
     start = np.array(lockstep.status().position)
     end = start.copy()
     end[1] += 30.0
     path = moves.sine(start, end, period=2.0, duration=3.0, machine=UNIMATE)
     result = lockstep.wait(lockstep.move(path, kind="sine", meta={"period_s": 2.0}), timeout=60)
     assert result.complete and result.files is not None
-    assert result.files.json.parent == lockstep.data_dir
+    assert result.files.json.parent == tmp_path
     saved = load_run(result.files.json)
     assert saved.kind == "sine" and saved.machine == "unimate2000b"
     assert path_rows(saved) == len(path) < len(saved.t)  # then the settle's rows
@@ -178,18 +108,16 @@ def test_a_path_that_starts_away_gets_an_approach_and_the_tuis_summary(
 def test_a_jump_is_refused_as_a_path_and_runs_as_a_step(lockstep: ControlClient,
                                                          new_segments) -> None:
     """The acceptance rules by kind (control/motion/acceptance.py): Up/Down jumping 5° in one
-    sample is refused as a smooth path, nothing sent (no move segment, no move started), and
-    accepted as a step."""
+    sample is refused as a smooth path, nothing sent, and accepted as a step."""
     start = np.array(lockstep.status().position)
-    moves_before = lockstep.status().move_id
     path = np.tile(start, (1500, 1))
     path[300:, 2] += 5.0
     with pytest.raises(ValueError, match=r"^Up/Down moves \+5 deg in 0.001 s at sample 300 "
                                          r"\(t = 0.300 s\): 5000 deg/s, 200 times its max_speed "
                                          r"25 deg/s .*send it as a step move \(kind 'step'\)"):
         lockstep.move(path)
-    assert new_segments() == []
-    assert lockstep.status().move_id == moves_before and lockstep.status().mode == Mode.HOLD
+    assert new_segments() == [lockstep.segment_name]
+    assert lockstep.status().move_id == 0 and lockstep.status().mode == Mode.HOLD
     result = lockstep.wait(lockstep.move(path, kind="step"), timeout=60)
     assert result.complete, result.status
     assert path_rows(result.run) == len(path) and result.plan.approach == 0
@@ -215,13 +143,71 @@ def test_a_smooth_move_that_starts_away_runs_behind_a_smooth_approach(
     check_path(sent, "sine", UNIMATE, lockstep.dt)
 
 
+def test_jog_duty_reaches_the_backend(realtime: ControlClient) -> None:
+    # Swivel, slowly: seconds from any limit, so a loaded machine's late look still sees it
+    realtime.jog_joint(5, 25.0)
+    polarity = UNIMATE.joints[5].polarity
+    wait_until(lambda: realtime.status().valve[5] == polarity * 25.0, 3.0, "jog duty at the valve")
+    status = realtime.status()
+    assert status.mode == Mode.MANUAL_ACTUATE and status.duty[5] == 25.0
+    realtime.jog([0.0] * 6)
+    wait_until(lambda: realtime.status().valve == (0.0,) * 6, 3.0, "zero duty")
+
+
+def test_estop_closes_every_valve_on_the_tick_it_arrives(realtime: ControlClient) -> None:
+    realtime.jog([40.0] * 6)
+    wait_until(lambda: all(realtime.status().valve), 1.0, "valves open")
+    realtime.estop()
+    event = realtime.wait_event("estop", timeout=2.0)
+    assert event.payload["latched"] and event.payload["reason"] == "operator E-stop"
+    status = realtime.status()
+    assert status.estop and status.valve == (0.0,) * 6 and status.duty == (0.0,) * 6
+    realtime.jog([40.0] * 6)
+    assert "refused: E-stop latched" in realtime.wait_event("refused", 2.0).message
+    assert realtime.status().valve == (0.0,) * 6
+    realtime.reset()
+    wait_until(lambda: not realtime.status().estop, 1.0, "E-stop released")
+    assert realtime.status().mode == Mode.HOLD
+
+
+def test_estop_input_latches_and_blocks_reset_while_pressed(realtime: ControlClient) -> None:
+    realtime.jog([30.0] * 6)
+    realtime.inject("press_estop", True)
+    event = realtime.wait_event("estop", timeout=2.0)
+    assert event.payload["reason"] == "E-stop input pressed"
+    assert realtime.status().valve == (0.0,) * 6
+    realtime.reset()
+    assert "still pressed" in realtime.wait_event("refused", 2.0).message
+    assert realtime.status().estop
+    realtime.inject("press_estop", False)
+    realtime.reset()
+    wait_until(lambda: not realtime.status().estop, 1.0, "E-stop released")
+
+
+def test_estop_during_a_move_ends_it_and_saves_what_ran(realtime: ControlClient) -> None:
+    start = realtime.status().position
+    move = realtime.move(moves.step(start, 0, start[0] + 200, duration=5.0, machine=UNIMATE),
+                         kind="step")
+    wait_until(lambda: realtime.status().move_done > 200, 3.0, "the move to run")
+    realtime.estop()
+    result = realtime.wait(move, timeout=5)
+    assert result.status == "estop: operator E-stop"
+    assert result.files is not None and 0 < len(result.run.t) < 5000
+
+
 def test_coefficients_change_during_a_move(lockstep: ControlClient) -> None:
+    """A set applied while a move runs takes effect at once. The gain check's first call in a
+    process imports scipy.signal (seconds under load, while the lockstep move runs on flat
+    out: beside a CPU burner it ended before the set was applied); made before the move."""
+    from control.identify import gains
+
+    gentle = UNIMATE.track.__class__(**{**UNIMATE.track.__dict__, "duty_limit": 5.0})
+    assert gains.check(gentle, UNIMATE, lockstep.models, lockstep.dt).ok
     start = np.array(lockstep.status().position)
     path = moves.multi_step(start, start + np.array([50, 10, 5, 10, 10, 10]), duration=20.0,
                             machine=UNIMATE)
     move = lockstep.move(path, kind="multi_step")
     wait_until(lambda: lockstep.status().move_done > 100, 10.0, "the move to run")
-    gentle = UNIMATE.track.__class__(**{**UNIMATE.track.__dict__, "duty_limit": 5.0})
     lockstep.set_coefficients("track", gentle)
     wait_until(lambda: max(map(abs, lockstep.status().duty)) <= 5.0, 5.0, "the new set applied")
     assert lockstep.status().moving
@@ -250,12 +236,9 @@ def small_ramp(client: ControlClient) -> np.ndarray:
 @pytest.mark.parametrize("kp", [-20.0, 1e9])
 def test_gains_that_cannot_be_stable_are_refused_and_nothing_is_applied(
         lockstep: ControlClient, kp: float) -> None:
-    """The set in use stays, and so does its check's record, which its runs carry (the start's
-    "applied at start" on a fresh controller; the module's has had the set applied again)."""
     track = UNIMATE.track
     wild = replace(track, name="wild", kp=((kp,),) * 6)
     before = applied(lockstep, "track")
-    in_use = dict(lockstep.coefficient_checks["track"])
     with pytest.raises(ValueError, match=r"^coefficient set 'wild' refused, nothing applied: "
                                          r"In/Out: unstable on the nominal model: .*Swivel: "
                                          r"unstable"):
@@ -264,9 +247,7 @@ def test_gains_that_cannot_be_stable_are_refused_and_nothing_is_applied(
     result = lockstep.wait(lockstep.move(small_ramp(lockstep), kind="ramp"), timeout=60)
     assert result.complete, result.status
     saved = load_run(result.files.json).coefficients["track"]
-    assert saved["kp"] == [list(k) for k in track.kp]
-    assert (saved["check"]["passed"], saved["check"]["summary"]) == (in_use["passed"],
-                                                                      in_use["summary"])
+    assert saved["kp"] == [list(k) for k in track.kp] and saved["check"]["passed"] is None
     assert [e for e in lockstep.poll_events() if e.kind in ("refused", "notice", "fault")] == []
 
 
@@ -300,33 +281,28 @@ def test_an_override_applies_a_refused_set_and_every_run_says_so(lockstep: Contr
 
 
 def test_a_set_is_judged_on_the_identified_models_the_client_was_given(
-        tmp_path: Path, new_segments) -> None:
+        lockstep: ControlClient) -> None:
     """The same stiff Bend passes on an identified Bend model (Ms 2.5 ≤ 6), and later sets
-    (a Tuning tab edit) are judged on that model too. A controller of its own: a session's
-    identified model stays for the session (no call puts the nominal one back)."""
+    (a Tuning tab edit) are judged on that model too."""
     identified = DeadbandModel("Bend", "deg", k_pos=1.211, d_pos=27.5, k_neg=1.19, d_neg=24.3,
                                wn=2 * np.pi * 35.2, zeta=0.49)
     bend = replace(UNIMATE.track, name="stiff bend",
                    kp=tuple((105.0,) if j == 3 else k for j, k in enumerate(UNIMATE.track.kp)))
-    with ControlClient("unimate2000b", lockstep=True, data_dir=tmp_path,
-                       heartbeat_timeout_s=3.0) as client:
-        check = client.set_coefficients("track", bend, [None, None, None, identified, None, None])
-        assert check.ok and check.joints[3].model == "identified"
-        assert client.models[3] == identified and client.models[0] is None
-        edited = replace(bend, duty_limit=80.0)
-        assert client.set_coefficients("track", edited).joints[3].model == "identified"
-        assert applied(client, "track").duty_limit == 80.0
-    assert new_segments() == []
+    check = lockstep.set_coefficients("track", bend, [None, None, None, identified, None, None])
+    assert check.ok and check.joints[3].model == "identified"
+    assert lockstep.models[3] == identified and lockstep.models[0] is None
+    edited = replace(bend, duty_limit=80.0)
+    assert lockstep.set_coefficients("track", edited).joints[3].model == "identified"
+    assert applied(lockstep, "track").duty_limit == 80.0
 
 
-def test_two_clients_in_one_process_have_their_own_segments(lockstep: ControlClient,
-                                                             tmp_path: Path, new_segments
+def test_two_clients_in_one_process_have_their_own_segments(tmp_path: Path, new_segments
                                                              ) -> None:
-    """A rig's client beside the module's Unimate one (whose close unlinks its own segments:
-    the module's fixture checks it)."""
-    with ControlClient("rig", lockstep=True, data_dir=tmp_path, heartbeat_timeout_s=3.0) as one:
-        assert one.segment_name != lockstep.segment_name
-        assert len(one.status().position) == 1 and len(lockstep.status().position) == 6
+    with ControlClient("rig", lockstep=True, data_dir=tmp_path, heartbeat_timeout_s=3.0) as one, \
+            ControlClient("unimate2000b", lockstep=True, data_dir=tmp_path,
+                          heartbeat_timeout_s=3.0) as two:
+        assert one.segment_name != two.segment_name
+        assert len(one.status().position) == 1 and len(two.status().position) == 6
     assert new_segments() == []
 
 
@@ -389,7 +365,7 @@ def test_bad_paths_are_refused_before_anything_starts(lockstep: ControlClient,
         lockstep.move(path)
     with pytest.raises(ValueError, match=r"a path is \(N, 6\)"):
         lockstep.move(path[:, :3])
-    assert new_segments() == []
+    assert new_segments() == [lockstep.segment_name]
     assert lockstep.status().mode == Mode.HOLD
 
 
@@ -412,34 +388,19 @@ def test_a_joint_driven_into_its_limit_stops_there(lockstep: ControlClient) -> N
     assert lockstep.status().position[2] <= UNIMATE.joints[2].upper + 0.5
 
 
-def test_go_to_plans_a_joint_space_move_at_the_speed_asked(lockstep: ControlClient) -> None:
-    here = np.array(lockstep.status().position)
-    goal = here + np.array([100.0, 20.0, 5.0, -20.0, 15.0, 30.0])
-    result = lockstep.wait(lockstep.go_to(goal, speed=0.5), timeout=60)
-    assert result.complete and result.run.kind == "go_to", result.status
-    assert np.abs(result.run.actual[-1] - goal).max() < 2.0
-    speed = np.abs(np.diff(result.run.desired, axis=0)).max(axis=0) / lockstep.dt
-    assert np.all(speed <= 0.5 * np.array([j.max_speed for j in UNIMATE.joints]) * 1.01)
-    with pytest.raises(ValueError, match="Up/Down target 99° is outside"):
-        lockstep.go_to([*goal[:2], 99.0, *goal[3:]])
-
-
-def test_killing_the_controller_is_reported(tmp_path: Path, new_segments) -> None:
-    """A real-time controller of its own: the test kills it."""
-    with ControlClient("unimate2000b", data_dir=tmp_path) as realtime:
-        start = realtime.status().position
-        move = realtime.move(moves.step(start, 1, start[1] + 30, duration=5.0, machine=UNIMATE),
-                             kind="step")
-        wait_until(lambda: realtime.status().move_done > 300, 3.0, "the move to run")
-        os.kill(realtime.pid, signal.SIGKILL)
-        died = realtime.wait_event("died", timeout=5.0)
-        assert "controller died" in died.message
-        result = realtime.wait(move, timeout=5)
-        assert result.status == "interrupted: controller died"
-        assert result.files is not None and len(result.run.t) > 300
-        with pytest.raises(ControllerError, match="controller died"):
-            realtime.jog([10.0] * 6)
-    assert new_segments() == []
+def test_killing_the_controller_is_reported(realtime: ControlClient) -> None:
+    start = realtime.status().position
+    move = realtime.move(moves.step(start, 1, start[1] + 30, duration=5.0, machine=UNIMATE),
+                         kind="step")
+    wait_until(lambda: realtime.status().move_done > 300, 3.0, "the move to run")
+    os.kill(realtime.pid, signal.SIGKILL)
+    died = realtime.wait_event("died", timeout=5.0)
+    assert "controller died" in died.message
+    result = realtime.wait(move, timeout=5)
+    assert result.status == "interrupted: controller died"
+    assert result.files is not None and len(result.run.t) > 300
+    with pytest.raises(ControllerError, match="controller died"):
+        realtime.jog([10.0] * 6)
 
 
 CLIENT_SCRIPT = textwrap.dedent("""
@@ -505,58 +466,6 @@ def test_the_rig_refuses_moves_until_initialised_then_steps(tmp_path: Path, new_
     assert new_segments() == []
 
 
-def test_jog_duty_reaches_the_backend(realtime: ControlClient) -> None:
-    # Swivel, slowly: seconds from any limit, so a loaded machine's late look still sees it
-    realtime.jog_joint(5, 25.0)
-    polarity = UNIMATE.joints[5].polarity
-    wait_until(lambda: realtime.status().valve[5] == polarity * 25.0, 3.0, "jog duty at the valve")
-    status = realtime.status()
-    assert status.mode == Mode.MANUAL_ACTUATE and status.duty[5] == 25.0
-    realtime.jog([0.0] * 6)
-    wait_until(lambda: realtime.status().valve == (0.0,) * 6, 3.0, "zero duty")
-
-
-def test_estop_closes_every_valve_on_the_tick_it_arrives(realtime: ControlClient) -> None:
-    realtime.jog([40.0] * 6)
-    wait_until(lambda: all(realtime.status().valve), 1.0, "valves open")
-    realtime.estop()
-    event = realtime.wait_event("estop", timeout=2.0)
-    assert event.payload["latched"] and event.payload["reason"] == "operator E-stop"
-    status = realtime.status()
-    assert status.estop and status.valve == (0.0,) * 6 and status.duty == (0.0,) * 6
-    realtime.jog([40.0] * 6)
-    assert "refused: E-stop latched" in realtime.wait_event("refused", 2.0).message
-    assert realtime.status().valve == (0.0,) * 6
-    realtime.reset()
-    wait_until(lambda: not realtime.status().estop, 1.0, "E-stop released")
-    assert realtime.status().mode == Mode.HOLD
-
-
-def test_estop_input_latches_and_blocks_reset_while_pressed(realtime: ControlClient) -> None:
-    realtime.jog([30.0] * 6)
-    realtime.inject("press_estop", True)
-    event = realtime.wait_event("estop", timeout=2.0)
-    assert event.payload["reason"] == "E-stop input pressed"
-    assert realtime.status().valve == (0.0,) * 6
-    realtime.reset()
-    assert "still pressed" in realtime.wait_event("refused", 2.0).message
-    assert realtime.status().estop
-    realtime.inject("press_estop", False)
-    realtime.reset()
-    wait_until(lambda: not realtime.status().estop, 1.0, "E-stop released")
-
-
-def test_estop_during_a_move_ends_it_and_saves_what_ran(realtime: ControlClient) -> None:
-    start = realtime.status().position
-    move = realtime.move(moves.step(start, 0, start[0] + 200, duration=5.0, machine=UNIMATE),
-                         kind="step")
-    wait_until(lambda: realtime.status().move_done > 200, 3.0, "the move to run")
-    realtime.estop()
-    result = realtime.wait(move, timeout=5)
-    assert result.status == "estop: operator E-stop"
-    assert result.files is not None and 0 < len(result.run.t) < 5000
-
-
 @pytest.mark.parametrize(("call", "args"), [
     ("jog_position", (-1, 10.0)),
     ("jog_position", (6, 1.0)),
@@ -601,7 +510,6 @@ def test_a_position_jog_past_the_following_error_travels_at_jog_speed_and_trips_
     start = realtime.status().desired[2]  # the jog moves the hold target, not the reading
     realtime.jog_position(2, JOG_DEG)
     goal = min(start + JOG_DEG, joint.upper)
-    assert goal - start > joint.following_error, f"no room above Up/Down at {start}°"
     seen = []  # (controller tick, hold target) while the target travels
     deadline = time.monotonic() + 60.0
     while abs((status := realtime.status()).desired[2] - goal) > 1e-9:
@@ -617,3 +525,16 @@ def test_a_position_jog_past_the_following_error_travels_at_jog_speed_and_trips_
     status = realtime.status()
     assert not status.estop and status.fault == "", status.fault
     assert [e.message for e in realtime.poll_events() if e.kind == "fault"] == []
+
+
+def test_go_to_plans_a_joint_space_move_at_the_speed_asked(lockstep: ControlClient) -> None:
+    here = np.array(lockstep.status().position)
+    goal = here + np.array([100.0, 20.0, 5.0, -20.0, 15.0, 30.0])
+    result = lockstep.wait(lockstep.go_to(goal, speed=0.5), timeout=60)
+    assert result.complete and result.run.kind == "go_to", result.status
+    assert np.abs(result.run.actual[-1] - goal).max() < 2.0
+    speed = np.abs(np.diff(result.run.desired, axis=0)).max(axis=0) / lockstep.dt
+    assert np.all(speed <= 0.5 * np.array([j.max_speed for j in UNIMATE.joints]) * 1.01)
+    with pytest.raises(ValueError, match="Up/Down target 99° is outside"):
+        lockstep.go_to([*goal[:2], 99.0, *goal[3:]])
+
