@@ -121,7 +121,7 @@ def test_keys_typed_after_tab_go_to_the_next_field(term: ControlTerminal) -> Non
         target = target or find_field(term.screen(), "target", "mm")
         assert target is not None
         first, second = number(k, *IN_OUT), number(k + 1, *IN_OUT)
-        typist.press(["BSpace"] * CLEAR + list(first) + ["Tab"] + ["BSpace"] * CLEAR
+        typist.press(typist.clearing() + list(first) + ["Tab"] + ["BSpace"] * CLEAR
                      + list(second))
         shown = partial(shows_both, start, first, target, second)
         term.wait(shown, f"{first} in start and {second} in target (try {k + 1})")

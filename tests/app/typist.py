@@ -122,6 +122,7 @@ class Typist:
     def __init__(self, term: Terminal, gap_s: float) -> None:
         self.term = term
         self.gap_s = gap_s
+        self.held = 0  # characters in the focused field, as far as the typist knows
 
     def open_moves(self) -> None:
         self.term.keys("F2")
@@ -167,13 +168,14 @@ class Typist:
             self.click(field.row, field.column)
             self._send("-l", probe)
             try:
-                self.term.wait(partial(self.probed, field, before, probe),
-                               f"{probe} in {label}", timeout=CLICK_S)
+                screen = self.term.wait(partial(self.probed, field, before, probe),
+                                        f"{probe} in {label}", timeout=CLICK_S)
             except TerminalError:
                 if time.monotonic() > deadline:
                     raise
                 attempt += 1
                 continue
+            self.held = len(shown_text(screen, field) or "")  # with every probe that came
             return field
 
     @staticmethod
@@ -194,7 +196,13 @@ class Typist:
 
     def type(self, text: str, clear: int = CLEAR, gap_s: float | None = None) -> None:
         """``clear`` backspaces then ``text``, a key every ``gap_s`` (the typist's)."""
-        self.press(["BSpace"] * clear + list(text), gap_s)
+        self.press(self.clearing(clear) + list(text), gap_s)
+        self.held = len(text)
+
+    def clearing(self, clear: int = CLEAR) -> list[str]:
+        """``clear`` backspaces, or as many as the field holds characters if more (a value
+        and the probes of three clicks that each took over 5 s to show)."""
+        return ["BSpace"] * max(clear, self.held)
 
     def press(self, keys: list[str], gap_s: float | None = None) -> None:
         """tmux's key names, a key every ``gap_s`` (the typist's)."""
