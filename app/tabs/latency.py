@@ -102,8 +102,10 @@ class StallWatch:
     maximum past it is one such stall, measured; so is a rise of the longest tick's compute
     past it (``compute_max_us``: the loop stopped or starved mid-tick, its next deadlines
     skipped as overruns, so no wake-up was late); more than ``threshold_us`` of missed
-    ticks between two looks, with ticks in the last (≥ 2 ms) bin, is at least one stall
-    shorter than the maximum so far, known only that well."""
+    ticks between two looks is at least one stall shorter than the maximum so far, or one
+    in the part of a tick neither figure times (its publishing: no wake-up late, no long
+    compute), known only that well. ``late_us``: the last stall's length, as well as known
+    (a burst's: its missed ticks' time)."""
 
     threshold_us: float
     period_us: float
@@ -111,6 +113,7 @@ class StallWatch:
     compute_max_us: float = 0.0
     overruns: int = 0
     over: int = 0
+    late_us: float = 0.0
 
     def sample(self, h: LatencyHistogram, compute_max_us: float = 0.0) -> str:
         """What the loop did since the last sample, if it stalled; else ""."""
@@ -121,12 +124,15 @@ class StallWatch:
             h.counts[-1])
         self.compute_max_us = max(self.compute_max_us, compute_max_us)
         if rose:
+            self.late_us = h.max_us
             return (f"controller loop stalled: a tick woke {h.max_us / 1e3:,.1f} ms late, the "
                     "longest since it started")
         if held:
+            self.late_us = compute_max_us
             return (f"controller loop stalled: a tick ended {compute_max_us / 1e3:,.1f} ms late "
                     f"(held up mid-tick, {missed} ticks skipped), the longest since it started")
-        if over and missed * self.period_us > self.threshold_us:
+        if missed * self.period_us > self.threshold_us:
+            self.late_us = missed * self.period_us
             return (f"controller loop stalled: {missed} ticks missed since the last look, "
                     f"{over} woke ≥ 2 ms late (none later than the longest so far, "
                     f"{self.max_us / 1e3:,.1f} ms)")
@@ -197,7 +203,7 @@ class LatencyTab(TabPage):
             return
         what = self.stalls.sample(histogram, status.compute_max_us)
         if what:
-            self.post_message(self.Stalled(what, max(histogram.max_us, status.compute_max_us)))
+            self.post_message(self.Stalled(what, self.stalls.late_us))
 
     def compose(self) -> ComposeResult:
         with Horizontal(id="latency-controls"):
