@@ -171,7 +171,6 @@ ONE_AT_A_TIME = (
     "tests/faults/test_serial_link.py::test_losing_a_tcp_link_does_not_stall_the_loop",
     "tests/app/test_tui_heartbeat.py",       # every tab opened beside a burner, 250 ms heartbeat
     "tests/app/test_serve.py",               # headless Chromium, twenty sessions beside a burner
-    "tests/app/test_arm_view.py::test_the_full_view_works_in_the_browser",  # headless Chromium
     "tests/app/test_smoke_tmux.py",          # the app in tmux
     "tests/app/test_typing_tmux.py",         # the app in tmux, keys 5 ms apart
     "tests/control/test_run_keeper.py",      # an E-stop's delivery timed while a run saves
