@@ -235,7 +235,9 @@ def test_a_client_killed_10_s_into_a_20_s_move_leaves_a_holding_controller_that_
         script = ClientScript(runs, orphan_timeout_s=orphan_s, seconds=20.0)
         watch = StatusWatch(script.segment)
         try:
-            until(lambda: watch.status().move_done >= 10_000, 120.0, "10 s of the move")
+            until(lambda: watch.status().move_done >= 10_000, 120.0, lambda: "10 s of the move "
+                  f"({watch.status().mode.name}, flags {watch.status().flags!r}, "
+                  f"{watch.status().move_done} samples)")
             rows_before = watch.status().move_done
             h0, s0 = watch.histogram(), watch.status()
             killed = time.monotonic()
