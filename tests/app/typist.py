@@ -153,9 +153,10 @@ class Typist:
         (a click may miss when a banner that comes or goes moves the form). Each click's
         probe is its own (``0``, ``1``, …), so a probe that shows late, after the next click
         was sent, is never taken for the next one's. With one probe for every click, a first
-        probe that showed only after its 5 s had passed passed for the second click's; had a
-        banner gone meanwhile put that click in the next field, the keys typed next went
-        there: the likely cause of the rare loss at load 13-15 (Swivel's keys in duration)."""
+        probe that showed only after its 5 s had passed passed for the second click's, and had
+        the form moved meanwhile (a banner, an error line) and put that click in the next
+        field, the keys typed next went there: a possible cause of the rare loss at load
+        13-15 (Swivel's keys in duration), not reproduced."""
         deadline = time.monotonic() + WAIT_S
         attempt = 0
         while True:
