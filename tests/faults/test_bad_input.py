@@ -428,16 +428,11 @@ COEFFICIENT_VALUES = {
 }
 
 
-# a valid dump of the machine's sets, made once (it was made again for every example: more
-# than half of the property's time)
-COEFFICIENT_LINES = tuple(dump_coefficients({"hold": UNIMATE.hold, "track": UNIMATE.track},
-                                            UNIMATE).splitlines())
-
-
 @st.composite
 def coefficient_files(draw: st.DrawFn) -> str:
     """Text of a coefficient file: a valid dump with some keys replaced, dropped or added."""
-    lines = list(COEFFICIENT_LINES)
+    text = dump_coefficients({"hold": UNIMATE.hold, "track": UNIMATE.track}, UNIMATE)
+    lines = text.splitlines()
     for _ in range(draw(st.integers(1, 4))):
         key = draw(st.sampled_from(sorted(COEFFICIENT_VALUES)))
         value = toml_value(draw(COEFFICIENT_VALUES[key]))
