@@ -11,10 +11,15 @@ from __future__ import annotations
 
 import asyncio
 import time
+import unicodedata
 from pathlib import Path
 
 import numpy as np
 import pytest
+from textual import events
+from textual.app import App
+from textual.keys import REPLACED_KEYS, _character_to_key, _get_unicode_name_from_key
+from textual.dom import DOMNode
 from textual.widgets import DataTable, Input
 
 from app.run_groups import grouped, program_cell
@@ -25,12 +30,66 @@ from control.motion import form_plans
 from control.program import RunnerState, parse_program, read_program
 from control.program.model import GoTo
 from control.recorder import RunFiles, RunInfo
-from tests.app.conftest import PilotedApp
+from tests.app.conftest import PilotedApp, TabPilot, Tui
 
 SIZE = (120, 36)
 RUN_S = 60.0  # a program of a few go-tos on a loaded two-core machine
 EXAMPLES = Path(__file__).resolve().parents[2] / "programs"
 REPEAT_S = 0.03  # a terminal's auto-repeat
+
+
+class DriverPilot(TabPilot):
+    """Keys as the terminal's driver delivers them, each taken before the next: by the app,
+    the widget with the focus and each container a key it leaves bubbles through (a callback
+    sent after the key, then one on each of them in turn), the tab it chose built, the screen
+    refreshed (a tab shown is focused then) and every widget of the screen. Pilot's press
+    waited besides for an idle process twice a key (20 ms to a second each: the app's sampler
+    and client threads keep it busy), which said nothing a test reads: what a key does is
+    waited for by a condition."""
+
+    async def press(self, *keys: str) -> None:
+        for key in keys:
+            self.app._driver.send_message(key_event(key))
+            await taken(self.app)
+            await Tui.built(self.app, self)
+            await refreshed(self.app)  # a tab shown focuses its keys after its refresh
+            await self._wait_for_screen()  # and that focus is a callback of the app's
+
+
+def key_event(key: str) -> events.Key:
+    """The event a terminal's key gives (as Pilot's press makes it)."""
+    if len(key) == 1 and not key.isalnum():
+        key = _character_to_key(key)
+    try:
+        char = unicodedata.lookup(_get_unicode_name_from_key(REPLACED_KEYS.get(key, key)))
+    except KeyError:
+        char = key if len(key) == 1 else None
+    return events.Key(key, char)
+
+
+async def taken(app: App) -> None:
+    """Until the keys sent so far have been taken by the app, the focused widget and each of
+    its containers up to the app."""
+    done: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+
+    def then(pumps: list[DOMNode]) -> None:
+        while pumps and not pumps[0].call_later(then, pumps[1:]):
+            pumps = pumps[1:]  # closed meanwhile
+        if not pumps and not done.done():
+            done.set_result(None)
+
+    def start() -> None:
+        then([app.focused, *app.focused.ancestors] if app.focused else [])
+
+    app._driver.send_message(events.Callback(callback=start))
+    await asyncio.wait_for(done, 30)
+
+
+async def refreshed(app: App) -> None:
+    """Until the callbacks asked for after the screen's next refresh have run."""
+    done: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+    app.call_after_refresh(lambda: done.done() or done.set_result(None))
+    await asyncio.wait_for(done, 30)
 
 
 async def program_tab(tui, app, pilot) -> ProgramTab:
@@ -118,6 +177,7 @@ def test_a_program_is_taught_saved_opened_stepped_and_run(tui, data_dir: Path) -
         path.parent.mkdir(parents=True)
         (path.parent / "bad.toml").write_text(BAD)
         async with app.run_test(size=SIZE) as pilot:
+            pilot = DriverPilot(app)
             start = np.array((await tui.ready(app, pilot)).position)
             tab = await program_tab(tui, app, pilot)
             await open_path(tui, tab, pilot, path)  # no such file: a new program, after asking
@@ -132,7 +192,7 @@ def test_a_program_is_taught_saved_opened_stepped_and_run(tui, data_dir: Path) -
             table = positions.query_one("#positions-table", DataTable)
             await tui.until(lambda: positions.visible_now and table.row_count == 2)
             await pilot.press("t")
-            assert isinstance(app.screen, EditValueScreen)
+            await tui.until(lambda: isinstance(app.screen, EditValueScreen), what="the name asked")
             app.screen.query_one(Input).value = "spot"
             await pilot.press("enter")
             await tui.until(lambda: table.row_count == 3, what="spot taught")
@@ -233,6 +293,7 @@ def test_hold_resume_stop_start_from_a_step_t1s_enabling_key_and_the_refusals(
         (folder / "wait.toml").write_text('machine = "unimate2000b"\n\n[[step]]\n'
                                           'wait = "operator"\n')
         async with app.run_test(size=SIZE) as pilot:
+            pilot = DriverPilot(app)
             await tui.ready(app, pilot)
             client = app.client
             tab = await program_tab(tui, app, pilot)
@@ -370,6 +431,7 @@ def test_the_rig_example_runs_from_the_tab_and_an_unzeroed_rig_is_refused(tui) -
     async def scenario() -> None:
         app = tui.app("rig")
         async with app.run_test(size=SIZE) as pilot:
+            pilot = DriverPilot(app)
             await tui.ready(app, pilot)
             tab = await program_tab(tui, app, pilot)
             field = tab.query_one("#program-path", Input)
@@ -406,6 +468,7 @@ def test_an_observer_opens_only_the_data_directorys_programs_and_cannot_run_or_s
         # observes: nobody took command; builds the tabs it shows alone, as tui.app's do
         app = PilotedApp.attached(controller_service.socket, build_behind=False)
         async with app.run_test(size=SIZE) as pilot:
+            pilot = DriverPilot(app)
             await tui.ready(app, pilot)
             tab = await program_tab(tui, app, pilot)
             field = tab.query_one("#program-path", Input)
