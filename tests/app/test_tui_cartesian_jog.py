@@ -17,6 +17,7 @@ from control.motion.robot_model import unimate_model
 from control.recorder import list_runs
 from control.rt.layout import Mode
 from hw.machine import load_machine
+from tests.app.test_tui_program import DriverPilot
 
 SIZE = (160, 48)
 MODEL = unimate_model(load_machine("unimate2000b"))
@@ -28,6 +29,7 @@ def test_world_frame_keys_step_the_tool_along_x_and_the_pose_is_shown(tui) -> No
     async def scenario() -> None:
         app = tui.app()
         async with app.run_test(size=SIZE) as pilot:
+            pilot = DriverPilot(app)
             before = await tui.ready(app, pilot)
             client = app.client
             start = MODEL.pose(np.array(before.desired))
@@ -72,6 +74,7 @@ def test_steps_pressed_while_a_step_runs_are_added_and_run_after_it(tui) -> None
     async def scenario() -> None:
         app = tui.app(lockstep=False)
         async with app.run_test(size=SIZE) as pilot:
+            pilot = DriverPilot(app)
             before = await tui.ready(app, pilot)
             client = app.client
             start = MODEL.pose(np.array(before.desired))
@@ -120,6 +123,7 @@ def test_steps_pressed_while_a_step_runs_are_queued_as_far_as_they_fit(tui) -> N
     async def scenario() -> None:
         app = tui.app(lockstep=False, sim_options={"initial": near_limit})
         async with app.run_test(size=SIZE) as pilot:
+            pilot = DriverPilot(app)
             before = await tui.ready(app, pilot)
             client = app.client
             seen = tui.notifications(app)
@@ -156,6 +160,7 @@ def test_near_the_wrist_singularity_the_pose_line_warns_and_a_step_into_it_is_re
     async def scenario() -> None:
         app = tui.app()
         async with app.run_test(size=SIZE) as pilot:
+            pilot = DriverPilot(app)
             before = await tui.ready(app, pilot)
             client = app.client
             assert 0.0 < before.position[4] < 5.0  # the simulator starts with Yaw near 0°
@@ -225,6 +230,7 @@ def test_holding_a_key_moves_the_tool_along_its_axis_in_one_continuous_motion(tu
     async def scenario() -> None:
         app = tui.app(lockstep=False)
         async with app.run_test(size=SIZE) as pilot:
+            pilot = DriverPilot(app)
             await held_in_world_at_start(tui, app, pilot)
             client = app.client
             start = MODEL.pose(START)
@@ -272,6 +278,7 @@ def test_the_rig_has_no_cartesian_mode_and_says_so(tui) -> None:
     async def scenario() -> None:
         app = tui.app("rig")
         async with app.run_test(size=SIZE) as pilot:
+            pilot = DriverPilot(app)
             await tui.ready(app, pilot)
             seen = tui.notifications(app)
             await pilot.press("w")
@@ -291,6 +298,7 @@ def test_a_step_pressed_while_another_move_runs_waits_and_the_keys_still_work(tu
     async def scenario() -> None:
         app = tui.app(lockstep=False)
         async with app.run_test(size=SIZE) as pilot:
+            pilot = DriverPilot(app)
             before = await tui.ready(app, pilot)
             client = app.client
             target = list(before.desired)

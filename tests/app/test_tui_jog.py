@@ -10,6 +10,7 @@ import time
 from app.tabs.jog import HOLD_DUTY_MAX, JogPad, KeyRepeat
 from control.rt.commands import Manual
 from control.rt.layout import Mode
+from tests.app.test_tui_program import DriverPilot
 
 SIZE = (160, 48)
 
@@ -18,6 +19,7 @@ def test_duty_keys_set_the_duty_the_controller_receives(tui) -> None:
     async def scenario() -> None:
         app = tui.app()
         async with app.run_test(size=SIZE) as pilot:
+            pilot = DriverPilot(app)
             await tui.ready(app, pilot)
             client = app.client
             await pilot.press("5", "a", "a")
@@ -40,6 +42,7 @@ def test_leaving_the_jog_tab_stops_the_joints(tui) -> None:
     async def scenario() -> None:
         app = tui.app()
         async with app.run_test(size=SIZE) as pilot:
+            pilot = DriverPilot(app)
             await tui.ready(app, pilot)
             client = app.client
             await pilot.press("9", "d")
@@ -57,6 +60,7 @@ def test_hold_to_move_stops_within_150_ms_of_release(tui) -> None:
     async def scenario() -> None:
         app = tui.app(lockstep=False)
         async with app.run_test(size=SIZE) as pilot:
+            pilot = DriverPilot(app)
             await tui.ready(app, pilot)
             client = app.client
             await pilot.press("m", "2")  # hold-to-move at 20 %
@@ -89,6 +93,7 @@ def test_hold_to_move_is_capped_and_holds_where_it_stopped(tui) -> None:
     async def scenario() -> None:
         app = tui.app(lockstep=False)  # real time: Up/Down is far from its limit on release
         async with app.run_test(size=SIZE) as pilot:
+            pilot = DriverPilot(app)
             await tui.ready(app, pilot)
             client = app.client
             await pilot.press("9", "m")
@@ -114,6 +119,7 @@ def test_position_jog_moves_the_hold_target(tui) -> None:
     async def scenario() -> None:
         app = tui.app()
         async with app.run_test(size=SIZE) as pilot:
+            pilot = DriverPilot(app)
             before = await tui.ready(app, pilot)
             client = app.client
             await pilot.press("m", "m", "5")  # position mode, 1 mm or 0.2° a press
@@ -140,6 +146,7 @@ def test_position_jog_up_to_the_limit_with_keys_rests_inside_it_with_no_estop(tu
     async def scenario() -> None:
         app = tui.app()
         async with app.run_test(size=SIZE) as pilot:
+            pilot = DriverPilot(app)
             await tui.ready(app, pilot)
             client = app.client
             updown = client.machine.joints[2]
@@ -171,6 +178,7 @@ def test_rig_arrows_step_the_duty_by_ten_percent(tui) -> None:
     async def scenario() -> None:
         app = tui.app("rig")
         async with app.run_test(size=SIZE) as pilot:
+            pilot = DriverPilot(app)
             await tui.ready(app, pilot)
             client = app.client
             await pilot.press("up", "up")
@@ -208,6 +216,7 @@ def test_the_jog_table_shows_each_joints_minimum_pwm_and_marks_a_duty_below_it(t
     async def scenario() -> None:
         app = tui.app()
         async with app.run_test(size=SIZE) as pilot:
+            pilot = DriverPilot(app)
             await tui.ready(app, pilot)
             table, note = app.query_one("#jog-table"), app.query_one("#jog-dead-band")
             assert "min PWM +/−" in tui.text(table)

@@ -22,6 +22,7 @@ from app.widgets.live_text import LiveText
 from control.motion.robot_model import builtin_unimate
 from control.rt.layout import Mode
 from control.run_mcap import read_mcap
+from tests.app.test_tui_program import DriverPilot
 
 SIZE = (160, 48)
 MODEL = builtin_unimate()  # the built-in Unimate's kinematics
@@ -54,6 +55,7 @@ def test_step_runs_on_the_simulator_and_appears_in_runs(tui, data_dir: Path) -> 
     async def scenario() -> None:
         app = tui.app()
         async with app.run_test(size=SIZE) as pilot:
+            pilot = DriverPilot(app)
             start = await tui.ready(app, pilot)
             await pilot.press("f2")
             await choose(app, pilot, "Step")
@@ -104,6 +106,7 @@ def test_abort_holds_and_an_unsaved_run_is_kept_and_saved_elsewhere(tui, tmp_pat
     async def scenario() -> None:
         app = tui.app(lockstep=False)  # real time: the move is still under way at Abort
         async with app.run_test(size=SIZE) as pilot:
+            pilot = DriverPilot(app)
             start = await tui.ready(app, pilot)
             await pilot.press("f2")
             await choose(app, pilot, "Step")
@@ -152,6 +155,7 @@ def test_invalid_fields_run_nothing_and_a_late_menu_choice_keeps_the_focus(tui, 
     async def scenario() -> None:
         app = tui.app()
         async with app.run_test(size=SIZE) as pilot:
+            pilot = DriverPilot(app)
             await tui.ready(app, pilot)
             await an_invalid_field_shows_its_error_and_runs_nothing(app, pilot, data_dir)
             await a_menu_choice_selected_late_leaves_the_field_the_operator_chose(tui, app, pilot)
@@ -224,6 +228,7 @@ def test_a_path_file_then_via_points_play(tui, tmp_path: Path) -> None:
     async def scenario() -> None:
         app = tui.app()
         async with app.run_test(size=SIZE) as pilot:
+            pilot = DriverPilot(app)
             await tui.ready(app, pilot)
             await path_file_plays_and_a_bad_line_is_reported(tui, app, pilot, tmp_path)
             await via_points_preview_and_run_in_joint_space_and_cartesian(tui, app, pilot)
@@ -310,6 +315,7 @@ def test_end_point_lists_every_solution_and_runs_the_one_picked(tui) -> None:
     async def scenario() -> None:
         app = tui.app()
         async with app.run_test(size=SIZE) as pilot:
+            pilot = DriverPilot(app)
             status = await tui.ready(app, pilot)
             await pilot.press("f2")
             await choose(app, pilot, "End point")
@@ -344,6 +350,7 @@ def test_rig_initialises_then_runs_its_sequence(tui, data_dir: Path) -> None:
     async def scenario() -> None:
         app = tui.app("rig")
         async with app.run_test(size=SIZE) as pilot:
+            pilot = DriverPilot(app)
             await tui.ready(app, pilot)
             assert not app.client.status().homed
             await pilot.press("f2")
@@ -375,6 +382,7 @@ def test_after_a_jog_the_forms_show_the_new_pose_and_run_from_it(tui) -> None:
     async def scenario() -> None:
         app = tui.app()
         async with app.run_test(size=SIZE) as pilot:
+            pilot = DriverPilot(app)
             before = await tui.ready(app, pilot)
             client = app.client
             await pilot.press("f2")
@@ -456,6 +464,7 @@ def test_a_field_chosen_while_the_tabs_build_keeps_the_focus(tui, monkeypatch) -
         app = tui.app(build_behind=True)  # the operator's, whose build this holds back
         try:
             async with app.run_test(size=SIZE) as pilot:
+                pilot = DriverPilot(app)
                 tui.post_key(app, "f2")
                 await tui.until(lambda: app.query("#form-step #start")
                                 and field(app, "step", "start").region.area > 0,
