@@ -106,7 +106,6 @@ SLOW_FIXTURES = {
 # Single tests that start one in their body, or that take seconds without one.
 SLOW_TESTS = (
     # the app in a fresh interpreter, and servodesk in tmux
-    "tests/app/test_ui_cost.py::test_no_tab_module_but_jogs_is_imported_before_the_first_frame",
     "tests/app/test_ui_cost.py::test_servodesk_starts_its_controller_before_it_imports_the_screen",
     "tests/app/test_arm_view.py::test_an_idle_view_draws_once_and_a_new_pose_draws_again",  # Pilot
     "tests/app/test_arm_view.py::test_the_full_view_works_in_the_browser",  # serve, Chromium
