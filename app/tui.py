@@ -358,6 +358,8 @@ class ServodeskApp(App[None]):
         were told while it was not built: the client, its death, a latched E-stop."""
         if self.tabs.made_tab(name) is None:  # its module imported off the event loop: the
             await asyncio.to_thread(dict(TABS)[name].load)  # keys are served meanwhile
+            if self._quitting:  # ^Q came meanwhile and did not wait: no pane to mount into
+                return self.tab(name)
         tab = self.tab(name)
         if name in self._building:  # chosen while the background mounts it: once it is
             await self._building[name].wait()
