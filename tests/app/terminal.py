@@ -45,6 +45,8 @@ def kill_server(socket: str) -> None:
 
 
 class Terminal:
+    poll_s = 0.05  # between screen reads while waiting: each a tmux process
+
     def __init__(self, socket: str, session: str, status_file: Path) -> None:
         self.socket = socket
         self.session = session
@@ -80,7 +82,7 @@ class Terminal:
             if time.monotonic() > deadline:
                 raise TerminalError(f"the terminal never showed {what} within {timeout:g} s; "
                                     f"it shows:\n{screen}")
-            time.sleep(0.05)
+            time.sleep(self.poll_s)
 
     def quit_latched(self) -> None:
         """Quit with the E-stop latched: the app asks first, then exits with status 0."""

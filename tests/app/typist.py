@@ -18,7 +18,6 @@ import re
 import select
 import subprocess
 import time
-from collections.abc import Callable
 from dataclasses import dataclass
 from functools import partial
 from types import TracebackType
@@ -74,7 +73,6 @@ CLICK_INTO = 8  # a value typed here has at most this many characters (with the 
 MENU_WIDTH = 24  # the Moves menu's column: a form's name left of it is the menu's
 CLICK_S = 5.0  # a click's probe on the screen: well under a second unloaded; else click again
 CLEAR = 10  # backspaces before each number: more than any number typed here has characters
-POLL_S = 0.005  # between screen reads while waiting: a read costs the tmux server ~0.1 ms
 
 
 @dataclass(frozen=True)
@@ -238,6 +236,8 @@ class ControlTerminal(Terminal):
     The client neither sizes the window (``ignore-size``) nor takes the pane's output
     (``no-output``): the pane and what the app reads from it are as with no client."""
 
+    poll_s = 0.005  # between screen reads while waiting: a read costs the tmux server ~0.1 ms
+
     def __init__(self, term: Terminal) -> None:
         super().__init__(term.socket, term.session, term.status_file)
         assert TMUX is not None, "tmux is not installed"
@@ -308,18 +308,3 @@ class ControlTerminal(Terminal):
 
     def keys(self, *keys: str) -> None:
         self.command("send-keys", "-t", self.session, *keys)
-
-    def wait(self, shows: Callable[[str], bool], what: str, timeout: float = WAIT_S) -> str:
-        """As ``Terminal.wait``, reading the screen every ``POLL_S``."""
-        deadline = time.monotonic() + timeout
-        while True:
-            screen = self.screen()
-            if shows(screen):
-                return screen
-            if self.exit_status() is not None:
-                raise TerminalError(f"the app exited while waiting for {what}; the terminal "
-                                    f"shows:\n{screen}")
-            if time.monotonic() > deadline:
-                raise TerminalError(f"the terminal never showed {what} within {timeout:g} s; "
-                                    f"it shows:\n{screen}")
-            time.sleep(POLL_S)
