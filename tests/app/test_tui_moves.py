@@ -81,13 +81,16 @@ def test_step_runs_on_the_simulator_and_appears_in_runs(tui, data_dir: Path) -> 
             await tui.until(lambda: runs.run is not None, what="the run opened")
             assert runs.run.kind == "step" and runs.run.samples == result.run.samples
             await pilot.press("v")  # plotsix 4-6
+            seen = tui.notifications(app)  # an export says so once its file is written
             await pilot.press("x")
-            await tui.until(lambda: list((data_dir / "plots").glob("*.svg")), what="export")
+            await tui.until(lambda: any(m.startswith("exported") and ".svg" in m for m in seen),
+                            what=lambda: f"export: {seen}")
             (svg,) = (data_dir / "plots").glob("*.svg")  # the plot on screen, from its data
             lines = ET.parse(svg).getroot().findall(".//{http://www.w3.org/2000/svg}polyline")
             assert len(lines) == len(runs.figure().panels) // 2 * 3  # desired, actual; duty
             await pilot.press("m")
-            await tui.until(lambda: list((data_dir / "exports").glob("*.mcap")), what="MCAP")
+            await tui.until(lambda: any(m.startswith("exported") and m.endswith(".mcap")
+                                        for m in seen), what=lambda: f"MCAP: {seen}")
             (mcap,) = (data_dir / "exports").glob("*.mcap")
             record, topics = read_mcap(mcap)
             assert record["kind"] == "step"
