@@ -72,9 +72,20 @@ def test_a_limit_fault_says_what_happened_and_what_to_do(tui) -> None:
         app = tui.app()
         async with app.run_test(size=SIZE) as pilot:
             await tui.ready(app, pilot)
+            sent: list[object] = []
+            send = app.client._send
+            app.client._send = lambda command: (sent.append(command), send(command))[1]
             app.client.jog_joint(2, 100.0)  # Up/Down flat out towards its 30° limit
             banner = app.query_one(FaultBanner)
-            await tui.until(lambda: "limit" in banner.message, timeout=20, what="limit fault")
+
+            def state() -> str:
+                status = app.client.status()
+                return (f"the limit fault; banner {banner.message!r}, mode {status.mode!r}, "
+                        f"Up/Down at {status.position[2]:.2f} duty {status.duty[2]}, "
+                        f"estop {status.estop}, sent {sent}, log "
+                        f"{[e.what for e in app.desk.events.entries]}")
+
+            await tui.until(lambda: "limit" in banner.message, timeout=20, what=state)
             assert "Up/Down" in banner.message and "opposite jog key" in banner.message
             assert app.client.status().duty[2] == 0.0
             await pilot.press("ctrl+l")
