@@ -189,8 +189,9 @@ def test_the_rigs_observer_preset_is_refused_with_the_reason(tui) -> None:
             app.query_one("#tuning-preset").value = "thesis_track"
             await pilot.click("#tuning-apply-preset")
             thesis = app.machine.coefficients["thesis_track"]
-            await tui.until(lambda: app.client.coefficients["track"] == thesis,
-                            what="the preset applied")
+            await tui.until(lambda: app.client.coefficients["track"] == thesis, what=lambda: (
+                f"the preset applied; the track set is {app.client.coefficients['track'].name!r}"
+                f", the tab says {app.query_one('#tuning-outcome').render()!s:.300}, told {seen}"))
 
     asyncio.run(scenario())
 

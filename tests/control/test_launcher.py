@@ -115,7 +115,7 @@ def test_the_server_ends_with_the_client_that_started_it(tmp_path: Path) -> None
     controller's own watch stops the controller, as before)."""
     script = f"""
 from control import ControlClient, launcher
-client = ControlClient("rig", lockstep=True, data_dir={str(tmp_path)!r})
+client = ControlClient("rig", lockstep=True, data_dir={str(tmp_path)!r}, orphan_timeout_s=0.5)
 print(launcher._server.process.pid, client.pid, flush=True)
 input()
 """
