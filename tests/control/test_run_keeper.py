@@ -97,6 +97,9 @@ def test_an_estop_reaches_the_client_while_its_keeper_saves_a_600_s_run(
     client.on_event = lambda event: (isinstance(event.record, EStop) and event.record.latched
                                      and estops.append(time.monotonic()))
     here = np.array(client.status().position)
+    # the feed at 0 until the hold below: the move cannot end (and its own record be saved)
+    # before its record is replaced, which a lockstep move beside a burner did
+    client.feed_override(0.0)
     handle = client.move(moves.ramp(here, here + np.array([0, 0, 5.0, 0, 0, 0]), 20.0,
                                     machine=client.machine), kind="ramp")
     # the move's record replaced by a 600 s one before the move ends: saving it is the work
