@@ -159,15 +159,6 @@ class TuningTab(TabPage):
         self.query_one("#tuning-path", Input).value = str(
             self.desk.data_dir.parent / f"{self.machine.name}-coefficients.toml")
         self._fill()
-        self.load_gain_check()
-
-    @work(thread=True, group="gain-check")
-    def load_gain_check(self) -> None:
-        """The gain check's scipy, loaded beside the UI: the first apply ran it on the UI's
-        thread, which then took no key (the E-stop's either) for 1-3 s on a loaded machine."""
-        from control.identify import gains  # scipy: not before the tab is there
-
-        gains.load()
 
     def focus_main(self) -> None:
         self.query_one("#tuning-joints", DataTable).focus()

@@ -57,12 +57,6 @@ MAX_MS_IDENTIFIED = 6.0
 MS_ROUNDING = 1e-6  # a design at exactly the bound passes
 
 
-def load() -> None:
-    """Import what the first check runs (scipy.signal: 1-3 s of CPU on a loaded machine), so
-    that a UI can do it in the background before the operator's first apply, not in it."""
-    import scipy.signal  # noqa: F401
-
-
 class GainError(ValueError):
     """A coefficient set the gain check refuses; the message names each joint and why (and
     the API's ways out); ``problems``, each joint's ``"Joint: what is wrong"``, let a caller

@@ -5,10 +5,6 @@ before the last apply; a set the gain check refuses is shown with its reason in 
 from __future__ import annotations
 
 import asyncio
-import json
-import os
-import subprocess
-import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -17,7 +13,6 @@ from textual.widgets import DataTable, Input, Static
 from app.coefficient_files import coefficient_changes, load_coefficients, save_coefficients
 from app.widgets.dialogs import ConfirmScreen, ReviewScreen
 from hw.machine import load_machine
-from tests.app.terminal import REPO
 
 SIZE = (160, 48)
 UNIMATE = load_machine("unimate2000b")
@@ -118,36 +113,3 @@ def test_save_asks_load_applies_only_on_confirm_then_undo_and_a_refused_file_app
             assert client.coefficients == {"hold": hold, "track": track}
 
     asyncio.run(scenario())
-
-
-def test_the_gain_checks_scipy_is_loaded_beside_the_ui_before_any_apply(tui) -> None:
-    """A fresh interpreter (this one has scipy.signal already): the operator's app, left alone
-    once live, loads the gain check's scipy.signal in the background, so the first apply does
-    not (it did, on the UI's thread: 1-3 s with no key taken, Esc's E-stop included)."""
-    script = f"""
-import asyncio, json, sys, time
-from pathlib import Path
-import app.tui
-from app.tui import ServodeskApp
-
-class Live(ServodeskApp):
-    CSS_PATH = [str(Path(app.tui.__file__).parent / path) for path in ServodeskApp.CSS_PATH]
-
-async def main():
-    app = Live("unimate2000b", "sim", None, {str(tui.data_dir)!r},
-               client_options={{"heartbeat_timeout_s": 2.0}})
-    async with app.run_test(size=(160, 48)):
-        deadline = time.monotonic() + 60
-        while "scipy.signal" not in sys.modules and time.monotonic() < deadline:
-            await asyncio.sleep(0.05)
-        print(json.dumps({{"loaded": "scipy.signal" in sys.modules}}))
-        app._quitting = True  # no tab left half built (tests/app/conftest.py's Tui)
-        while app._building:
-            await next(iter(app._building.values())).wait()
-
-asyncio.run(main())
-"""
-    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
-                          timeout=120, cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO)})
-    assert done.returncode == 0, done.stderr[-2000:]
-    assert json.loads(done.stdout.strip().splitlines()[-1])["loaded"]
