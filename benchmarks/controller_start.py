@@ -1,7 +1,8 @@
 """How long a client takes to start its controller and to close it (issue 23: the test suite
 starts about 600): a lockstep ``ControlClient`` made and closed ``--count`` times in one
 process, as a test worker does. The first start includes whatever the process does once (the
-fork server's own start, control/launcher.py). Compare trees with ``PYTHONPATH=<tree>``."""
+fork server's own start, control/launcher.py). Run from a tree as ``PYTHONPATH=. python -m
+benchmarks.controller_start`` (as a script, benchmarks/hw.py would hide the hw package)."""
 
 from __future__ import annotations
 
