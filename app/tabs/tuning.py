@@ -5,8 +5,10 @@ move (section 6.3), so an edit here changes the loop within a millisecond.
 Presets are the machine file's extra sets (the P.I. gains of section 5.4.2,
 the rig's observer controller of section 3.6.2) and any loaded from a file.
 
-With care: every apply goes through the client's gain check, and a set it
-refuses is shown with the reason in the tab, nothing applied; Load shows what
+With care: every apply goes through the client's gain check, run off the UI's
+thread (its first run imports scipy.signal: 1-3 s under load, during which the
+UI, Esc's E-stop included, keeps taking keys), and a set it refuses is shown
+with the reason in the tab, nothing applied; Load shows what
 the file's sets would change in the live ones and applies them only when
 confirmed (all or none); Save asks before replacing a file; ctrl+z puts back
 the set in use before the last apply. A TUI that does not command changes nothing here
@@ -120,6 +122,15 @@ class TuningTab(TabPage):
         sets: dict[str, Coefficients]
 
     @dataclass
+    class Checked(Message, bubble=False):
+        """The gain check of ``sets`` ended (from the check worker): ``refusal`` its error,
+        None if every set passed."""
+
+        sets: dict[str, Coefficients]
+        what: str
+        refusal: Exception | None
+
+    @dataclass
     class OverwriteAsked(Message, bubble=False):
         """Saving would replace the file at ``path`` (from the file worker)."""
 
@@ -130,6 +141,7 @@ class TuningTab(TabPage):
         self.which = "track"
         self.presets: dict[str, Coefficients] = {}
         self.undo_stack: list[Applied] = []
+        self.checking: str | None = None  # what the check worker checks now
 
     def compose(self) -> ComposeResult:
         self.presets = {name: c for name, c in self.machine.coefficients.items()}
@@ -243,20 +255,55 @@ class TuningTab(TabPage):
 
     # -- applying, and undoing ----------------------------------------------------------------
 
-    def apply(self, sets: dict[str, Coefficients], what: str) -> bool:
-        """Apply ``sets`` (hold and/or track) through the client's gain check: all of them,
-        or, if the check refuses one, none, with the reason shown in the tab."""
+    def apply(self, sets: dict[str, Coefficients], what: str) -> None:
+        """Check ``sets`` (hold and/or track) off the UI's thread, then apply them: all of
+        them, or, if the check refuses one, none, with the reason shown in the tab. One apply
+        at a time: another asked for while a check runs is refused, saying so."""
         if self._refused(f"apply {what}"):
-            return False
+            return
         client = self.client
         if client is None:
             self.notify(f"apply {what}: the controller is not running — "
                         + (self.client_problem or "wait for it to start"), severity="error")
-            return False
+            return
+        if self.checking is not None:
+            said = f"{what}: not applied — the gains of {self.checking} are being checked"
+            self._outcome(Text(said, "bold red"))
+            self.notify(said, severity="warning", timeout=8)
+            return
+        self.checking = what
+        self._outcome(Text(f"{what}: checking the gains…", "yellow"))
+        self.check(client, sets, what)
+
+    @work(thread=True, group="tuning-check")
+    def check(self, client: ControlClient, sets: dict[str, Coefficients], what: str) -> None:
+        """The client's gain check of every set before any is applied (``set_coefficients``
+        checks each again as it applies it, by then in milliseconds)."""
+        from control.identify import gains  # scipy: loaded on first use
+
+        try:
+            for c in sets.values():
+                gains.check(c, self.machine, client.models, client.dt)
+        except ValueError as exc:
+            self.post_message(self.Checked(sets, what, exc))
+            return
+        self.post_message(self.Checked(sets, what, None))
+
+    def on_tuning_tab_checked(self, message: Checked) -> None:
+        """Apply the sets the check passed, one after the other, each through
+        ``set_coefficients``; or say why not, nothing applied."""
+        self.checking = None
+        sets, what = message.sets, message.what
+        client = self.client
+        if message.refusal is not None:
+            self._not_applied(what, message.refusal)
+            return
+        if client is None:
+            self._not_applied(what, ControllerError(
+                self.client_problem or "the controller is not running"))
+            return
         applied: list[Applied] = []
         try:
-            if len(sets) > 1:
-                self._check_all(client, sets)
             for which, c in sets.items():
                 before = Applied(which, client.coefficients[which],
                                  client.coefficient_checks[which], c, what)
@@ -264,27 +311,21 @@ class TuningTab(TabPage):
                 applied.append(before)
         except (ControllerError, ValueError, OSError) as exc:
             self.undo_stack.extend(applied)  # only a dying controller stops after the first
-            reason = in_tui_words(exc)
-            self.desk.log_refusal(f"apply {what}", reason)
-            self._outcome(Text.assemble((f"{what}: ", "bold"), (reason, "bold red")))
-            self.notify(f"apply {what}: {reason}", severity="error", timeout=10)
-            self._fill()
-            return False
+            self._not_applied(what, exc)
+            return
         self.undo_stack.extend(applied)
         names = " and ".join(sets) + (" sets" if len(sets) > 1 else " set")
         self._outcome(Text(f"{what} applied to the {names}; ^Z puts back the one before",
                            "green"))
         self.notify(f"{what} applied to the {names}")
         self._fill()
-        return True
 
-    def _check_all(self, client: ControlClient, sets: dict[str, Coefficients]) -> None:
-        """The client's gain check of every set before any is applied (GainError if one
-        fails): ``set_coefficients`` checks each again as it applies it."""
-        from control.identify import gains  # scipy: loaded on first use
-
-        for c in sets.values():
-            gains.check(c, self.machine, client.models, client.dt)
+    def _not_applied(self, what: str, exc: Exception) -> None:
+        reason = in_tui_words(exc)
+        self.desk.log_refusal(f"apply {what}", reason)
+        self._outcome(Text.assemble((f"{what}: ", "bold"), (reason, "bold red")))
+        self.notify(f"apply {what}: {reason}", severity="error", timeout=10)
+        self._fill()
 
     def action_undo(self) -> None:
         """Put back the set in use before the last apply made here."""

@@ -125,8 +125,9 @@ def test_banners_and_the_log_tell_the_story_of_a_session(controller_service, tui
             await pilot.press("f5")
             tuning = app.query_one(TuningTab)
             unstable = replace(app.machine.hold, kp=((-20.0,), *app.machine.hold.kp[1:]))
-            assert not tuning.apply({"hold": unstable}, "a negative gain")
-            assert logged(app, "refused", "apply a negative gain refused")
+            tuning.apply({"hold": unstable}, "a negative gain")
+            await tui.until(lambda: logged(app, "refused", "apply a negative gain refused"),
+                            what="the refusal logged")
 
             # the Log: at the newest row, follows it, stays where the operator scrolled back
             for k in range(30):  # more than a screen, one wider than it

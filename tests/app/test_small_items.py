@@ -108,7 +108,10 @@ def test_the_tuning_tab_says_what_to_do_and_its_preset_list_shows_the_set_chosen
             tab = app.query_one(TuningTab)
             before = app.client.coefficients
             refused = replace(app.machine.hold, kp=((-20.0,), *app.machine.hold.kp[1:]))
-            assert not tab.apply({"hold": refused}, "a test")
+            tab.apply({"hold": refused}, "a test")
+            await tui.until(lambda: "refused" in str(app.query_one("#tuning-outcome",
+                                                                     Static).render()),
+                            what="the refusal in the tab")
             outcome = str(app.query_one("#tuning-outcome", Static).render())
             logged = [e.what for e in app.desk.events.entries if e.kind == "refused"]
             for text in (outcome, said[-1], logged[-1]):

@@ -5,6 +5,10 @@ before the last apply; a set the gain check refuses is shown with its reason in 
 from __future__ import annotations
 
 import asyncio
+import json
+import os
+import subprocess
+import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -13,6 +17,7 @@ from textual.widgets import DataTable, Input, Static
 from app.coefficient_files import coefficient_changes, load_coefficients, save_coefficients
 from app.widgets.dialogs import ConfirmScreen, ReviewScreen
 from hw.machine import load_machine
+from tests.app.terminal import REPO
 
 SIZE = (160, 48)
 UNIMATE = load_machine("unimate2000b")
@@ -113,3 +118,51 @@ def test_save_asks_load_applies_only_on_confirm_then_undo_and_a_refused_file_app
             assert client.coefficients == {"hold": hold, "track": track}
 
     asyncio.run(scenario())
+
+
+def test_the_first_gain_check_leaves_the_ui_taking_keys_esc_included(tui) -> None:
+    """A fresh interpreter, so that the first apply imports scipy.signal for its gain check
+    (about 1 s, 3 under load; this one has it loaded). Apply preset, and Esc straight after
+    it: the E-stop is taken while the check still runs, and the preset applies after. The old
+    tab checked on the UI's thread, so Esc waited for the import and the apply."""
+    script = f"""
+import asyncio, json, sys
+from pathlib import Path
+from textual import events
+from textual.widgets import Button
+import app.tui
+from app.tui import ServodeskApp
+
+class Live(ServodeskApp):
+    CSS_PATH = [str(Path(app.tui.__file__).parent / path) for path in ServodeskApp.CSS_PATH]
+
+async def main():
+    app = Live("unimate2000b", "sim", None, {str(tui.data_dir)!r},
+               client_options={{"heartbeat_timeout_s": 2.0}})
+    async with app.run_test(size=(160, 48)) as pilot:
+        while app.client is None or app.client.status() is None:
+            await asyncio.sleep(0.01)
+        await pilot.press("f5")
+        while not app.query("#tuning-apply-preset") or not app.query("#tuning-outcome"):
+            await asyncio.sleep(0.01)
+        outcome = app.query_one("#tuning-outcome")
+        loaded_before = "scipy.signal" in sys.modules
+        app.query_one("#tuning-apply-preset", Button).press()
+        app._driver.send_message(events.Key("escape", None))
+        while not app.estop_latched:
+            await asyncio.sleep(0.002)
+        at_estop = str(outcome.render())
+        while "applied" not in str(outcome.render()) or not app.client.status().estop:
+            await asyncio.sleep(0.01)
+        print(json.dumps({{"loaded_before": loaded_before, "at_estop": at_estop,
+                          "after": str(outcome.render())}}))
+
+asyncio.run(main())
+"""
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=120, cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO)})
+    assert done.returncode == 0, done.stderr
+    seen = json.loads(done.stdout.strip().splitlines()[-1])
+    assert not seen["loaded_before"], "scipy.signal loaded before the first apply"
+    assert "checking" in seen["at_estop"], f"Esc taken only after the check: {seen}"
+    assert "preset track applied to the track set" in seen["after"], seen
