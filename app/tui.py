@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, ClassVar, Self, cast
 
 from textual.app import App, ComposeResult
 from textual.binding import Binding
+from textual.driver import Driver
 from textual.screen import ModalScreen
 from textual.widgets import Select, TabbedContent, TabPane
 
@@ -199,6 +200,14 @@ class ServodeskApp(App[None]):
         Binding("tab", "focus_next", "next field", show=False, priority=True),
         Binding("shift+tab", "focus_previous", "previous field", show=False, priority=True),
     ]
+
+    def get_driver_class(self) -> type[Driver]:
+        """Textual's driver, but on a Linux terminal one that resumes only from its own
+        suspend (``app/terminal_driver.py``)."""
+        from app.terminal_driver import TerminalDriver
+
+        driver = super().get_driver_class()
+        return TerminalDriver if issubclass(TerminalDriver, driver) else driver
 
     def __init__(self, machine: str | Path | Machine = "unimate2000b", backend: str = "sim",
                  port: str | None = None, data_dir: str | Path | None = None,

@@ -64,9 +64,12 @@ class Terminal:
     def keys(self, *keys: str) -> None:
         tmux(self.socket, "send-keys", "-t", self.session, *keys)
 
+    def tmux_format(self, text: str) -> str:
+        """``text`` with tmux's formats (``#{pane_pid}``, …) filled in for this session."""
+        return tmux(self.socket, "display", "-p", "-t", self.session, text).strip()
+
     def size(self) -> str:
-        return tmux(self.socket, "display", "-p", "-t", self.session,
-                    "#{window_width}x#{window_height}").strip()
+        return self.tmux_format("#{window_width}x#{window_height}")
 
     def wait(self, shows: Callable[[str], bool], what: str, timeout: float = WAIT_S) -> str:
         """Poll the screen until ``shows(screen)``; fail with the last screen after

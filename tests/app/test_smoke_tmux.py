@@ -14,12 +14,13 @@ a CPU burner drives the same app in the same terminal (tests/app/soak.py), as a 
 from __future__ import annotations
 
 import os
+import signal
 import time
 from pathlib import Path
 
 import pytest
 
-from tests.app.terminal import HEIGHT, START_S, TMUX, WIDTH, kill_server, launch
+from tests.app.terminal import HEIGHT, START_S, TMUX, WAIT_S, WIDTH, kill_server, launch
 
 SOCKET = f"servodesk-smoke-{os.getpid()}"  # a tmux server of our own: no one else's settings
 
@@ -72,3 +73,42 @@ def test_servodesk_runs_in_a_real_terminal(tmp_path: Path) -> None:
     finally:
         kill_server(SOCKET)
     print(f"live screen {live_after:.2f} s after the session started")
+
+
+def threads(pid: int) -> int:
+    """How many threads process ``pid`` has now."""
+    status = Path(f"/proc/{pid}/status").read_text()
+    return int(next(line.split()[1] for line in status.splitlines()
+                    if line.startswith("Threads:")))
+
+
+def test_a_stop_and_continue_from_outside_leaves_one_reader_of_the_terminal(
+        tmp_path: Path) -> None:
+    """SIGSTOP and SIGCONT from outside (a debugger, ``kill -STOP``): the app goes on with
+    the threads it had, and keys work. Textual's own driver started a second input reader and
+    a second writer at every SIGCONT (two threads more that never end), and the two readers
+    then split the terminal's bytes between them. The thread count is waited for, not timed:
+    a worker of the app may come and go meanwhile."""
+    term = launch(SOCKET, "stopped", tmp_path)
+    try:
+        term.wait(lambda s: " RUN" in s and "mode HOLD" in s, "a live screen", START_S)
+        shell = int(term.tmux_format("#{pane_pid}"))
+        pid = int(Path(f"/proc/{shell}/task/{shell}/children").read_text().split()[0])
+        before = min(threads(pid) for _ in range(20))
+        os.kill(pid, signal.SIGSTOP)
+        os.kill(pid, signal.SIGCONT)
+        term.keys("C-y")
+        term.wait(lambda s: "automatic (full speed)" in s, "the question before automatic")
+        term.keys("y")
+        term.wait(lambda s: "AUTO" in s and "T1 250 mm/s" not in s, "automatic in the header")
+        term.keys("a", "a")
+        term.wait(lambda s: jog_duty(s, "+10"), "In/Out commanded +10 %")
+        deadline = time.monotonic() + WAIT_S
+        while threads(pid) > before and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert threads(pid) <= before, f"{threads(pid)} threads after the SIGCONT, {before} before"
+        term.keys("Escape")
+        term.wait(lambda s: "E-STOP LATCHED" in s, "the E-stop from Escape")
+        term.quit_latched()
+    finally:
+        kill_server(SOCKET)
