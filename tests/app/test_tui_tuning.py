@@ -122,9 +122,10 @@ def test_save_asks_load_applies_only_on_confirm_then_undo_and_a_refused_file_app
 
 def test_the_first_gain_check_leaves_the_ui_taking_keys_esc_included(tui) -> None:
     """A fresh interpreter, so that the first apply imports scipy.signal for its gain check
-    (about 1 s, 3 under load; this one has it loaded). Apply preset, and Esc straight after
-    it: the E-stop is taken while the check still runs, and the preset applies after. The old
-    tab checked on the UI's thread, so Esc waited for the import and the apply."""
+    (about 1 s, 3 under load; this one has it loaded). Apply preset twice, and Esc straight
+    after: the second apply is refused while the first is checked, the E-stop is taken while
+    the check still runs, and the preset applies once, after. The old tab checked on the UI's
+    thread, so Esc waited for the import and both applies."""
     script = f"""
 import asyncio, json, sys
 from pathlib import Path
@@ -148,14 +149,16 @@ async def main():
         outcome = app.query_one("#tuning-outcome")
         loaded_before = "scipy.signal" in sys.modules
         app.query_one("#tuning-apply-preset", Button).press()
+        app.query_one("#tuning-apply-preset", Button).press()
         app._driver.send_message(events.Key("escape", None))
         while not app.estop_latched:
             await asyncio.sleep(0.002)
         at_estop = str(outcome.render())
-        while "applied" not in str(outcome.render()) or not app.client.status().estop:
+        while "applied to the" not in str(outcome.render()) or not app.client.status().estop:
             await asyncio.sleep(0.01)
         print(json.dumps({{"loaded_before": loaded_before, "at_estop": at_estop,
-                          "after": str(outcome.render())}}))
+                          "after": str(outcome.render()),
+                          "applies": len(app.query_one("#tab-tuning").undo_stack)}}))
 
 asyncio.run(main())
 """
@@ -164,5 +167,7 @@ asyncio.run(main())
     assert done.returncode == 0, done.stderr
     seen = json.loads(done.stdout.strip().splitlines()[-1])
     assert not seen["loaded_before"], "scipy.signal loaded before the first apply"
-    assert "checking" in seen["at_estop"], f"Esc taken only after the check: {seen}"
+    assert "preset track: not applied — the gains of preset track are being checked" in seen[
+        "at_estop"], f"Esc taken only after the check: {seen}"
     assert "preset track applied to the track set" in seen["after"], seen
+    assert seen["applies"] == 1, seen
