@@ -19,6 +19,7 @@ directory (``Desk.typed_path``) and offers their sets as presets.
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass, replace
 from functools import partial
 from pathlib import Path
@@ -142,6 +143,7 @@ class TuningTab(TabPage):
         self.presets: dict[str, Coefficients] = {}
         self.undo_stack: list[Applied] = []
         self.checking: str | None = None  # what the check worker checks now
+        self.waiting: deque[tuple[dict[str, Coefficients], str]] = deque()  # applies behind it
 
     def compose(self) -> ComposeResult:
         self.presets = {name: c for name, c in self.machine.coefficients.items()}
@@ -257,19 +259,26 @@ class TuningTab(TabPage):
 
     def apply(self, sets: dict[str, Coefficients], what: str) -> None:
         """Check ``sets`` (hold and/or track) off the UI's thread, then apply them: all of
-        them, or, if the check refuses one, none, with the reason shown in the tab. One apply
-        at a time: another asked for while a check runs is refused, saying so."""
+        them, or, if the check refuses one, none, with the reason shown in the tab. Applies
+        asked for while a check runs wait behind it, in order."""
         if self._refused(f"apply {what}"):
             return
-        client = self.client
-        if client is None:
+        if self.client is None:
             self.notify(f"apply {what}: the controller is not running — "
                         + (self.client_problem or "wait for it to start"), severity="error")
             return
-        if self.checking is not None:
-            said = f"{what}: not applied — the gains of {self.checking} are being checked"
-            self._outcome(Text(said, "bold red"))
-            self.notify(said, severity="warning", timeout=8)
+        self.waiting.append((sets, what))
+        if self.checking is None:
+            self._check_next()
+        else:
+            self._outcome(Text(f"{what}: waits for the check of {self.checking}", "yellow"))
+
+    def _check_next(self) -> None:
+        sets, what = self.waiting.popleft()
+        client = self.client
+        if client is None:
+            self._not_applied(what, ControllerError(
+                self.client_problem or "the controller is not running"))
             return
         self.checking = what
         self._outcome(Text(f"{what}: checking the gains…", "yellow"))
@@ -290,13 +299,19 @@ class TuningTab(TabPage):
         self.post_message(self.Checked(sets, what, None))
 
     def on_tuning_tab_checked(self, message: Checked) -> None:
-        """Apply the sets the check passed, one after the other, each through
-        ``set_coefficients``; or say why not, nothing applied."""
+        """Apply what was checked, then check the next apply waiting, if any."""
+        self._apply_checked(message.sets, message.what, message.refusal)
         self.checking = None
-        sets, what = message.sets, message.what
+        while self.waiting and self.checking is None:
+            self._check_next()
+
+    def _apply_checked(self, sets: dict[str, Coefficients], what: str,
+                       refusal: Exception | None) -> None:
+        """Apply the sets the check passed, one after the other, each through
+        ``set_coefficients``; or say why not (``refusal``), nothing applied."""
         client = self.client
-        if message.refusal is not None:
-            self._not_applied(what, message.refusal)
+        if refusal is not None:
+            self._not_applied(what, refusal)
             return
         if client is None:
             self._not_applied(what, ControllerError(
