@@ -19,6 +19,7 @@ from __future__ import annotations
 import fcntl
 import gc
 import os
+import stat
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -73,18 +74,26 @@ def claim_cpu(cpus: list[int], where: Path | None = None) -> int | None:
     """The highest-numbered of ``cpus`` no other process holds the claim of, claimed for
     this process's life (the lock goes with it, however it ends); None when every one is
     held or none can be claimed. A claim file is opened read-only and never read: one
-    another user made is as good a lock as ours, and a symbolic link is refused."""
+    another user made is as good a lock as ours, and a symbolic link is refused, as is
+    anything but a regular file (a FIFO another user put in its place blocked the controller
+    in ``open`` until someone opened it to write: it never started)."""
     where = where or Path(os.environ.get(CLAIMS_ENV, "/dev/shm"))
     for cpu in reversed(cpus):
         try:
             fd = os.open(where / f"servodesk-rt-cpu{cpu}.lock",
-                         os.O_RDONLY | os.O_CREAT | os.O_NOFOLLOW, 0o444)
+                         os.O_RDONLY | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK, 0o444)
         except OSError:
             continue
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            os.close(fd)
-            continue
-        return cpu  # the descriptor stays open (and the lock held) until the process ends
+        if stat.S_ISREG(os.fstat(fd).st_mode) and _locked(fd):
+            return cpu  # the descriptor stays open (and the lock held) until the process ends
+        os.close(fd)
     return None
+
+
+def _locked(fd: int) -> bool:
+    """Whether this process now holds ``fd``'s exclusive lock (False: another one does)."""
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        return False
+    return True

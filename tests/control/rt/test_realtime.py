@@ -7,6 +7,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 import pytest
@@ -25,6 +26,22 @@ def test_a_symbolic_link_or_a_file_we_cannot_open_is_no_claim_of_ours(tmp_path: 
     (tmp_path / "servodesk-rt-cpu1.lock").symlink_to(tmp_path / "elsewhere")
     assert claim_cpu([0, 1], tmp_path) == 0
     assert not (tmp_path / "elsewhere").exists()
+
+
+def test_a_fifo_in_a_claims_place_is_no_claim_and_holds_nothing_up(tmp_path: Path) -> None:
+    """Another user's FIFO where a claim file goes: opening it waited for a writer, so the
+    controller claiming cores never started (it hung in ``open``)."""
+    fifo = tmp_path / "servodesk-rt-cpu1.lock"
+    os.mkfifo(fifo)
+    claimed: list[int | None] = []
+    claiming = threading.Thread(target=lambda: claimed.append(claim_cpu([0, 1], tmp_path)),
+                                daemon=True)
+    claiming.start()
+    claiming.join(10)
+    if claiming.is_alive():
+        os.close(os.open(fifo, os.O_WRONLY | os.O_NONBLOCK))  # a writer lets the open return
+        pytest.fail("claiming a core waits on the FIFO")
+    assert claimed == [0]
 
 
 def test_a_claim_ends_with_its_process(tmp_path: Path) -> None:
