@@ -35,6 +35,7 @@ HANDSHAKE_S = 5.0  # both challenges answered, and the client's join sent, withi
 REQUEST_LIMIT = 64 * 1024  # bytes of one message to the service: a command, a join
 EVENT_LIMIT = 1 << 20  # bytes of one message from it: an event with a 600 s move's timeline
 NAME_TEXT = 80  # characters of a client's name
+KEY_BYTES = 32  # of the key beside the socket
 R = TypeVar("R")
 
 
@@ -65,21 +66,40 @@ def socket_dir(path: Path) -> None:
     info = path.lstat()
     if not stat.S_ISDIR(info.st_mode):
         raise PermissionError(f"{path} is not a directory: give the socket another place")
+    if info.st_uid not in (os.getuid(), 0):  # its owner may replace anything in it
+        raise PermissionError(f"{path} belongs to another user (uid {info.st_uid}): give the "
+                              "socket a directory of your own")
     if (info.st_uid != os.getuid() and not info.st_mode & stat.S_ISVTX
             and info.st_mode & (stat.S_IWGRP | stat.S_IWOTH)):
-        raise PermissionError(f"{path} is another user's directory that others may write in: "
-                              "give the socket a private directory")
+        raise PermissionError(f"{path} is a directory others may write in: give the socket "
+                              "a private directory")
 
 
 def new_key(socket_path: Path) -> bytes:
     """A fresh key, written owner-only beside the socket."""
-    key = secrets.token_bytes(32)
+    key = secrets.token_bytes(KEY_BYTES)
     path = key_path(socket_path)
     path.unlink(missing_ok=True)
     fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o600)
     with os.fdopen(fd, "wb") as file:
         file.write(key)
     return key
+
+
+def read_key(socket_path: Path) -> bytes:
+    """The key of the service on ``socket_path``: a regular file of this user's, read to its
+    bound (``PermissionError`` otherwise). One another user wrote proves nothing: who made
+    ``/tmp/servodesk-<uid>`` before this user did chose the key, answered the handshake with
+    it and was sent the client's commands; a link to ``/dev/zero`` there was read until
+    memory ran out."""
+    fd = os.open(key_path(socket_path), os.O_RDONLY | os.O_NONBLOCK)  # a FIFO: no wait
+    try:
+        info = os.fstat(fd)
+        if not stat.S_ISREG(info.st_mode) or info.st_uid != os.getuid():
+            raise PermissionError(f"{key_path(socket_path)} is not a key file of this user's")
+        return os.read(fd, KEY_BYTES)
+    finally:
+        os.close(fd)
 
 
 def connect(socket_path: str | Path | None = None, timeout_s: float = HANDSHAKE_S) -> Wire:
@@ -90,7 +110,7 @@ def connect(socket_path: str | Path | None = None, timeout_s: float = HANDSHAKE_
     deadline = time.monotonic() + timeout_s
     sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
     try:
-        key = key_path(path).read_bytes()
+        key = read_key(path)
         sock.settimeout(timeout_s)
         sock.connect(str(path))
         sock.settimeout(None)  # sends wait for a slow service; reads are bounded by the wire

@@ -126,9 +126,11 @@ def is_move_segment(name: str) -> bool:
 
 
 def ours(name: str) -> bool:
-    """Whether this user owns segment ``name`` (gone: False)."""
+    """Whether this user owns segment ``name`` (gone: False). The entry itself is judged, never
+    what it links to: another user's symbolic link to a file of ours (``/proc/self/status``
+    is everyone's own) is theirs, and unlinking it in the sticky /dev/shm fails."""
     try:
-        return (SHM_DIR / name).stat().st_uid == os.getuid()
+        return (SHM_DIR / name).lstat().st_uid == os.getuid()
     except OSError:
         return False
 
