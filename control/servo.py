@@ -150,6 +150,10 @@ class CartesianServo:
             self.report = ServoReport(0.0, 0.0, 0.0, 0.0, f"stopped: {exc}")
             self.done.set()
             return
+        if gone := self._gone(status):  # no line to start from (manual actuation: no target)
+            self.report = ServoReport(0.0, 0.0, 0.0, 0.0, gone)
+            self.done.set()
+            return
         q = np.array(status.desired)
         line = line_of(self.model.forward(q), self.velocity, self.frame == "tool")
         twist = np.concatenate([line.d, np.degrees(line.r0 @ line.omega if line.tool
@@ -188,7 +192,9 @@ class CartesianServo:
             self._stopped = self._stopped or f"stopped: {exc}"
         finally:
             with contextlib.suppress(Exception):  # closed meanwhile: the last reading stands
-                q = np.array(self.client.status().desired)
+                last_q = np.array(self.client.status().desired)
+                if np.isfinite(last_q).all():  # none once manual actuation took over
+                    q = last_q
             distance = self._along(line, q)
             braked = distance - released if released is not None else 0.0
             self.report = ServoReport(distance, drift, braked, time.monotonic() - began,

@@ -455,7 +455,13 @@ class JogPad(Widget, can_focus=True):
             self.action_jog(0, sign)
 
     def action_stop_all(self) -> None:
+        """Space: every duty to 0 in duty mode (option.c); in the other modes a stop that
+        holds where the joints are, as a release does (a held Cartesian jog brakes along its
+        line first): zero duty there would drop the closed-loop hold."""
         if self.refused_while_latched():
+            return
+        if self.mode != "duty":
+            self.stop(hold=True)
             return
         self.repeat.forget()
         self.duty = [0.0] * self.n
@@ -623,6 +629,12 @@ class JogTab(TabPage):
         # A duty the pad has moved on from (a later key, or let go since: the tab was left,
         # the E-stop) is not sent: a later message carries the pad's duties, or none should.
         if not self.visible_now or self.pad.latched or message.duty != tuple(self.pad.duty):
+            return
+        status = self.status()
+        if not any(message.duty) and status is not None and status.mode != Mode.MANUAL_ACTUATE:
+            # no duty to zero: manual actuation at 0 % would let go of the held joints (and
+            # abort a move into it), so space holds instead, as in the other modes
+            self.command("hold", ControlClient.hold)
             return
         self.command("jog", lambda client: client.jog(list(message.duty)))
         self.refresh_live()

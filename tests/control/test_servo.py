@@ -125,6 +125,27 @@ def test_an_estop_ends_the_servo_at_once(controller: ControlClient) -> None:
     assert report.stopped == "E-stop", report
 
 
+def test_manual_actuation_ends_the_servo_with_its_report(controller: ControlClient) -> None:
+    """Manual actuation has no hold target (desired is NaN): a servo it takes over from ends
+    with how far it went, and one begun in it ends at once; each read the NaN as joints and
+    died in its thread, so its ``wait`` never returned (the Jog tab's space did this)."""
+    robot = at(controller, START)
+    servo = CartesianServo(robot, [0, 25.0, 0, 0, 0, 0], "world")
+    servo.start()
+    wait_until(lambda: np.any(np.abs(np.array(robot.status().desired) - START) > 0.5), 5,
+               "the tool moving")
+    robot.jog([0.0] * UNIMATE.n_joints)  # manual actuation takes over
+    report = servo.wait(5.0)
+    assert report.stopped == "the controller left hold (manual_actuate)", report
+    assert 0.5 < report.distance < 25.0, report
+    wait_until(lambda: robot.status().mode == Mode.MANUAL_ACTUATE, 5, "manual actuation")
+    begun = CartesianServo(robot, [0, 25.0, 0, 0, 0, 0], "world")
+    begun.start()
+    report = begun.wait(5.0)
+    assert report.stopped == "the controller left hold (manual_actuate)", report
+    assert report.distance == 0.0
+
+
 def test_the_servo_halts_before_the_wrist_singularity_naming_the_joint(
         controller: ControlClient) -> None:
     """Turning the tool about its y axis from Yaw 10° takes Yaw towards 0°, where Bend and

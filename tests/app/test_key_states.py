@@ -1,0 +1,122 @@
+"""What a key does in each state an operator meets (the E-stop latched, a move running or in
+feed hold, reduced speed (T1), the controller dead, an observer): the states where an audit
+found a key moving the robot unasked, or saying nothing where the operator needed a reason.
+
+Space on the Jog tab zeroes manual duties (option.c); anywhere else it must keep the joints in
+closed-loop hold: it sent a 0 % manual duty, which let go of the held arm (desired NaN, every
+valve at 0) in T1 too, aborted a running move into open loop, and took a held Cartesian jog's
+servo out of hold, whose thread then died on the NaN target."""
+
+from __future__ import annotations
+
+import asyncio
+import math
+
+import numpy as np
+
+from app.tabs.jog import QUIET_STOPS
+from control.client import ControlClient
+from control.motion import moves
+from control.rt.commands import Hold, Manual
+from control.rt.layout import Mode
+from hw.machine import load_machine
+from tests.app.conftest import PilotedApp
+from tests.app.test_tui_program import DriverPilot
+
+SIZE = (160, 48)
+UNIMATE = load_machine("unimate2000b")
+
+
+def spy(client: ControlClient) -> list[object]:
+    """Every command ``client`` sends from now on (it still sends them)."""
+    sent: list[object] = []
+    send = client._send
+    client._send = lambda command, *fds: (sent.append(command), send(command, *fds))[1]
+    return sent
+
+
+def long_ramp(client: ControlClient):
+    """A 20 s ramp of Rotate from where it is: a move another tab (Program, Positions) or
+    client has running."""
+    start = np.array(client.status().position)
+    end = start.copy()
+    end[1] += 20.0
+    return client.move(moves.ramp(start, end, ramp_time=20.0, machine=UNIMATE), kind="ramp")
+
+
+def test_space_in_t1_holds_the_arm_and_never_lets_go_of_it(tui, data_dir) -> None:
+    """As the operator starts it: T1, the Jog tab in position mode. Space held the arm before
+    only by luck of the valves: it put the controller in manual actuation at 0 %."""
+    async def scenario() -> None:
+        app = PilotedApp("unimate2000b", "sim", None, data_dir, lockstep=True,
+                         client_options={"heartbeat_timeout_s": 2.0}, build_behind=False)
+        async with app.run_test(size=SIZE) as pilot:
+            pilot = DriverPilot(app)
+            status = await tui.ready(app, pilot)
+            assert status.speed_mode == "reduced"
+            client = app.client
+            pad = app.query_one("#jog-pad")
+            await tui.until(lambda: pad.mode == "position", what="the pad in position mode")
+            sent = spy(client)
+            await pilot.press("space")
+            await tui.until(lambda: sent, what="space to send a command")
+            assert not any(isinstance(c, Manual) for c in sent), sent
+            assert isinstance(sent[0], Hold), sent
+            await tui.until(lambda: client.status().mode == Mode.HOLD, what="holding")
+            assert all(math.isfinite(d) for d in client.status().desired)
+
+    asyncio.run(scenario())
+
+
+def test_space_in_duty_mode_holds_a_running_move_rather_than_drop_it_into_open_loop(
+        tui) -> None:
+    """Automatic, duty mode, no duty set, a move of another tab running: space stops it and
+    holds (as ^G), where it ended the move 'aborted: manual actuation' at 0 % duty. In manual
+    actuation it still zeroes every duty (option.c)."""
+    async def scenario() -> None:
+        app = tui.app(lockstep=False)  # real time: the ramp is still under way at space
+        async with app.run_test(size=SIZE) as pilot:
+            pilot = DriverPilot(app)
+            await tui.ready(app, pilot)
+            client = app.client
+            assert app.query_one("#jog-pad").mode == "duty"
+            handle = long_ramp(client)
+            await tui.until(lambda: client.status().move_done > 100, what="the ramp under way")
+            await pilot.press("space")
+            result = await asyncio.to_thread(client.wait, handle, 10)
+            assert result.status == "aborted by operator", result.status
+            await tui.until(lambda: client.status().mode == Mode.HOLD, what="holding")
+            assert all(math.isfinite(d) for d in client.status().desired)
+
+            await pilot.press("5", "s")  # manual actuation: space zeroes its duties
+            await tui.until(lambda: client.status().duty[1] == 5.0, what="Rotate at 5 %")
+            await pilot.press("space")
+            await tui.until(lambda: not any(client.status().duty), what="every duty 0")
+            assert client.status().mode == Mode.MANUAL_ACTUATE
+
+    asyncio.run(scenario())
+
+
+def test_space_brakes_a_held_cartesian_jog_along_its_line_and_holds(tui) -> None:
+    async def scenario() -> None:
+        app = tui.app(lockstep=False)
+        async with app.run_test(size=SIZE) as pilot:
+            pilot = DriverPilot(app)
+            await tui.ready(app, pilot)
+            client = app.client
+            tab = app.tab("jog")
+            await pilot.press("w", "m", "9")  # world frame, hold-to-move, full jog speed
+            await pilot.press("a")  # x +: the servo starts
+            await tui.until(lambda: tab._servo is not None and tab._servo.running,
+                            what="the held jog's servo running")
+            servo, sent = tab._servo, spy(client)
+            await pilot.press("space")
+            report = await asyncio.to_thread(servo.wait, 5.0)
+            assert report.stopped in QUIET_STOPS, report  # braked, not thrown out of hold
+            assert not any(isinstance(c, Manual) for c in sent), sent
+            await tui.until(lambda: client.status().mode == Mode.HOLD, what="holding")
+            assert all(math.isfinite(d) for d in client.status().desired)
+            await tui.until(lambda: any(e.kind == "jog" for e in app.desk.events.entries),
+                            what="the held jog in the event log")
+
+    asyncio.run(scenario())
