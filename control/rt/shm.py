@@ -20,6 +20,7 @@ import _posixshmem
 import contextlib
 import errno
 import os
+import secrets
 import threading
 from collections.abc import Iterator
 from multiprocessing import resource_tracker, shared_memory
@@ -45,13 +46,16 @@ class NoRoom(OSError):
 
 def create(tag: str, size: int, what: str = "this") -> shared_memory.SharedMemory:
     """Create a zero-filled segment named for this process and ``tag``, its pages reserved;
-    ``NoRoom`` if /dev/shm has no room for it (``what`` names it in the message)."""
+    ``NoRoom`` if /dev/shm has no room for it (``what`` names it in the message). The name
+    ends in a random part: another user who made ``sd_<pid>_ctl1`` as this process started
+    (its pid is public, its names were not) made its every start fail (FileExistsError)."""
     size = max(size, 8)
     free = free_bytes()
     if size > free:
         raise _no_room(what, size, free)
     with _untracked():
-        segment = shared_memory.SharedMemory(segment_name(tag), create=True, size=size)
+        segment = shared_memory.SharedMemory(segment_name(f"{tag}_{secrets.token_hex(8)}"),
+                                             create=True, size=size)
     try:
         os.posix_fallocate(segment._fd, 0, size)  # type: ignore[attr-defined]
     except OSError as exc:
