@@ -5,7 +5,10 @@ found a key moving the robot unasked, or saying nothing where the operator neede
 Space on the Jog tab zeroes manual duties (option.c); anywhere else it must keep the joints in
 closed-loop hold: it sent a 0 % manual duty, which let go of the held arm (desired NaN, every
 valve at 0) in T1 too, aborted a running move into open loop, and took a held Cartesian jog's
-servo out of hold, whose thread then died on the NaN target."""
+servo out of hold, whose thread then died on the NaN target.
+
+^S on the Moves tab looked only at its own move: another tab's, running or in feed hold, was
+superseded by the form's."""
 
 from __future__ import annotations
 
@@ -15,12 +18,14 @@ import math
 import numpy as np
 
 from app.tabs.jog import QUIET_STOPS
+from app.tabs.moves import MovesTab
 from control.client import ControlClient
 from control.motion import moves
 from control.rt.commands import Hold, Manual
 from control.rt.layout import Mode
 from hw.machine import load_machine
 from tests.app.conftest import PilotedApp
+from tests.app.test_tui_moves import choose, field
 from tests.app.test_tui_program import DriverPilot
 
 SIZE = (160, 48)
@@ -118,5 +123,51 @@ def test_space_brakes_a_held_cartesian_jog_along_its_line_and_holds(tui) -> None
             assert all(math.isfinite(d) for d in client.status().desired)
             await tui.until(lambda: any(e.kind == "jog" for e in app.desk.events.entries),
                             what="the held jog in the event log")
+
+    asyncio.run(scenario())
+
+
+def test_run_move_refuses_while_another_tabs_move_runs_or_stands_in_feed_hold(tui) -> None:
+    """^S on the Moves tab checked only for its own move: with a move of the Program or the
+    Positions tab (here the client's) held by ^F, it superseded that move, and the arm moved
+    off from a feed hold; running, it changed the arm's path mid-move. Now it is refused with
+    the reason, as the Positions tab's go-to and the Program tab's run are; once that move is
+    held (^G) ^S runs the form's move."""
+    async def scenario() -> None:
+        app = tui.app(lockstep=False)  # real time: the ramp is still under way at ^S
+        async with app.run_test(size=SIZE) as pilot:
+            pilot = DriverPilot(app)
+            status = await tui.ready(app, pilot)
+            client = app.client
+            await pilot.press("f2")
+            await choose(app, pilot, "Step")
+            app.query_one("#form-step JointField Select").value = 2  # Up/Down
+            field(app, "step", "target").text = f"{status.position[2] + 5.0:.1f}"
+            tab, error = app.query_one(MovesTab), app.query_one("#move-error")
+            handle = long_ramp(client)
+            await tui.until(lambda: client.status().move_done > 100, what="the ramp under way")
+            await pilot.press("ctrl+f")
+            await tui.until(lambda: client.status().paused, what="the feed hold")
+            await pilot.press("ctrl+s")
+            await tui.until(lambda: "feed hold" in str(error.render()),
+                            what=lambda: f"the refusal in feed hold: {error.render()!s}")
+            assert client.status().move_id == handle.move_id and client.status().paused
+            assert tab.handle is None and not handle.done.is_set()
+
+            await pilot.press("ctrl+f")  # resumed: running, still refused
+            await tui.until(lambda: not client.status().paused, what="the resume")
+            await pilot.press("ctrl+s")
+            await tui.until(lambda: "a move is running" in str(error.render()),
+                            what=lambda: f"the refusal while it runs: {error.render()!s}")
+            assert client.status().move_id == handle.move_id and not handle.done.is_set()
+
+            await pilot.press("ctrl+g")
+            assert (await asyncio.to_thread(client.wait, handle, 10)).status == \
+                "aborted by operator"
+            await pilot.press("ctrl+s")  # nothing runs now: the form's step runs
+            await tui.until(lambda: tab.handle is not None, what="the step started")
+            await tui.until(lambda: tab.handle is None, timeout=30, what="the step's end")
+            assert tab.last_result is not None and tab.last_result.complete, \
+                tab.last_result and tab.last_result.status
 
     asyncio.run(scenario())
