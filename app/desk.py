@@ -38,11 +38,11 @@ class StatusStory:
         for entry in self.events.since(self.read):
             joint = entry.data.get("joint")
             if entry.kind == "limit" and isinstance(joint, int):
-                self.limits.reported(joint)
+                self.limits.reported(joint, entry.wall)
         self.read = self.events.count
         wall = time.time() - (time.monotonic() - status.wall_ns / 1e9)
         self._feed(status, wall)
-        left = self.limits.cleared(status.position)
+        left = self.limits.cleared(status.position, wall)
         for j in left:
             joint = self.machine.joints[j]
             self.events.add(LogEntry(wall, "limit clear", f"{joint.name} back inside its limits "

@@ -71,23 +71,31 @@ class LimitBar:
 
 
 class LimitWatch:
-    """The joints reported at a limit (``reported``), each until it is back inside by
-    ``CLEAR_FRACTION`` of its range (``cleared``)."""
+    """The joints reported at a limit (``reported``), each until a status published after
+    the report shows it back inside by ``CLEAR_FRACTION`` of its range (``cleared``): one
+    published before it (the UI's sampler behind the event, or a lockstep simulator far
+    ahead of real time) shows where the joint was on its way to the limit."""
 
     def __init__(self, lower: Sequence[float], upper: Sequence[float]) -> None:
         self.lower = tuple(lower)
         self.upper = tuple(upper)
-        self.at: set[int] = set()
+        self.reports: dict[int, float] = {}  # joint → when its report arrived (Unix time, s)
 
-    def reported(self, joint: int) -> None:
-        self.at.add(joint)
+    @property
+    def at(self) -> set[int]:
+        return set(self.reports)
 
-    def cleared(self, position: Sequence[float]) -> list[int]:
-        """The joints reported at a limit that are clear of both now; forgotten."""
+    def reported(self, joint: int, wall: float) -> None:
+        self.reports[joint] = wall
+
+    def cleared(self, position: Sequence[float], wall: float) -> list[int]:
+        """The joints reported at a limit that ``position``, published at ``wall`` (Unix
+        time, s), shows clear of both; forgotten."""
         out = []
-        for j in sorted(self.at):
+        for j, since in sorted(self.reports.items()):
             margin = CLEAR_FRACTION * (self.upper[j] - self.lower[j])
-            if self.lower[j] + margin < position[j] < self.upper[j] - margin:
+            if wall > since and self.lower[j] + margin < position[j] < self.upper[j] - margin:
                 out.append(j)
-        self.at.difference_update(out)
+        for j in out:
+            del self.reports[j]
         return out

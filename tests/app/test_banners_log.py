@@ -48,17 +48,22 @@ def test_a_moves_start_is_logged_after_the_end_of_the_move_before() -> None:
 
 
 def test_a_limit_clears_once_the_joint_is_clear_of_it_by_its_hysteresis() -> None:
+    """Only a status published after the report clears it: one from before (the UI's sampler
+    behind the event; a lockstep simulator runs far ahead of real time) shows the joint on
+    its way to the limit. The old watch cleared on it, and the limit's banner went at once."""
     machine = load_machine("unimate2000b")
     j = machine.joint_index("updown")
     watch = LimitWatch(machine.lower, machine.upper)
-    watch.reported(j)
+    watch.reported(j, 100.0)
     q = list(machine.home)
     margin = 0.01 * (machine.upper[j] - machine.lower[j])
+    q[j] = machine.lower[j] + 20 * margin
+    assert watch.cleared(q, 99.9) == [] and watch.at == {j}, "cleared by a status from before"
     for near in (machine.lower[j] - 0.1, machine.lower[j] + 0.5 * margin):  # on it, or close
         q[j] = near
-        assert watch.cleared(q) == [] and watch.at == {j}
+        assert watch.cleared(q, 100.1) == [] and watch.at == {j}
     q[j] = machine.lower[j] + 1.5 * margin
-    assert watch.cleared(q) == [j] and not watch.at
+    assert watch.cleared(q, 100.2) == [j] and not watch.at
 
 
 def logged(app, kind: str, text: str = "") -> list[LogEntry]:
