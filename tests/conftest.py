@@ -119,6 +119,8 @@ SLOW_TESTS = (
     "tests/control/rt/test_shm.py::test_orphan_of_a_killed_process_is_cleaned_up",
     "tests/control/test_boundaries_host.py::test_a_link_another_user_left_in_dev_shm_stops_no_"
     "start",  # a start's clean-up as another user (setpriv)
+    "tests/control/test_boundaries_host.py::test_segment_names_another_user_made_first_stop_no_"
+    "start",  # a controller started beside names made first
     "tests/control/test_recorder.py::test_a_read_only_directory_raises_and_leaves_nothing",
     "tests/app/test_priority.py::"
     "test_without_the_privilege_the_ui_says_so_and_runs_at_its_own_priority",  # under setpriv

@@ -4,7 +4,7 @@ Python 3.11's resource tracker unlinks a segment when *any* process that
 attached to it exits, and cleans up nothing after ``kill -9`` of the creator.
 So no segment is ever registered with it (3.13's ``track=False``, done by
 hand) and servodesk owns its cleanup: names carry the creating process's
-pid (``sd_<pid>_<tag>``), the creator unlinks on every exit path, and
+pid (``sd_<pid>_<tag>_<random>``), the creator unlinks on every exit path, and
 ``cleanup_orphans`` removes segments whose creator is dead at the next start:
 the user's own only, and never a move segment (its run may be unsaved:
 ``control/recovery.py`` saves it first and unlinks it itself).

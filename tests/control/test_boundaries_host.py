@@ -114,3 +114,37 @@ def test_a_link_another_user_left_in_dev_shm_stops_no_start() -> None:
         assert link.is_symlink()
     finally:
         link.unlink(missing_ok=True)
+
+
+def test_segment_names_another_user_made_first_stop_no_start(tmp_path: Path) -> None:
+    """They see a servodesk process start (its pid is public) and make the names its segments
+    had, ``sd_<pid>_ctl1`` and ``sd_<pid>_mv1``, before it does: its controller's start failed
+    (FileExistsError). Now each name has a random part they cannot make first; the controller
+    starts and moves."""
+    script = f"""
+from control import ControlClient
+from control.motion import moves
+from hw.machine import load_machine
+arm = load_machine("unimate2000b")
+input()
+with ControlClient(arm, lockstep=True, data_dir={str(tmp_path)!r}) as client:
+    print(client.segment_name, flush=True)
+    start = client.status().position
+    path = moves.step(start, 1, start[1] + 5.0, duration=1.0, machine=arm)
+    print(client.wait(client.move(path, kind="step"), timeout=60).status, flush=True)
+"""
+    with subprocess.Popen([sys.executable, "-c", script], cwd=ROOT, stdin=subprocess.PIPE,
+                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as victim:
+        assert victim.stdin is not None
+        planted = [shm.SHM_DIR / shm.segment_name(tag, victim.pid) for tag in ("ctl1", "mv1")]
+        try:
+            for path in planted:
+                path.touch(mode=0o600)
+                os.chown(path, ATTACKER, ATTACKER)
+            out, err = victim.communicate("\n", timeout=120)
+        finally:
+            for path in planted:
+                path.unlink(missing_ok=True)
+    assert victim.returncode == 0, err
+    segment, status = out.split(maxsplit=1)
+    assert segment.startswith(f"sd_{victim.pid}_ctl1_") and status.strip() == "complete", out
