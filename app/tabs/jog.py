@@ -109,6 +109,8 @@ SYMBOLS = {"mm": " mm", "deg": "°"}  # after a number
 RELEASE_CHECK_S = 0.01
 JOINT_RELEASE = (0.11, 2.5)  # KeyRepeat's most (s) and factor in the joint frame
 TOOL_RELEASE = (0.15, 4.0)  # and in a Cartesian frame: 4 repeats of 33 ms missed is a release
+STEP_WAIT_S = 0.01  # how often a step waiting for another's move looks at it
+STEP_WAITS = "the step waits: "
 STALL_S = 0.03  # a release check this late follows a stall of the UI: its silence is excused
 LATCHED_NOTICE_S = 3.0  # while latched, a jog key says why at most this often
 LATCHED = ("E-stop latched: the jog keys do nothing until you release it (^R); the joints "
@@ -561,6 +563,7 @@ class JogTab(TabPage):
     _sending: tuple[JogPad.CartesianJogged, ...] | None = None  # while a step is being sent
     # (it waits for a move in progress, in a worker), the steps pressed meanwhile
     _steps: StepQueue | None = None  # steps pressed while it ran (made with the client)
+    _dropping: list[str] | None = None  # the step waiting for another's move: why to drop it
     _refused = 0  # queued steps refused since the queue began: the reason is told once
     _servo: CartesianServo | None = None  # the held Cartesian jog, while it runs or brakes
     _unlogged: tuple[tuple[CartesianServo, JogPad.CartesianHeld], ...] = ()  # held jogs whose
@@ -599,12 +602,15 @@ class JogTab(TabPage):
         self.pad.armed = False
         self.pad.let_go()  # leaving the tab must not leave a joint moving: decided now
         self._forget_steps()
+        self._drop_waiting("the Jog tab was left")
         self._release_servo("the Jog tab was left")
         self._leave_manual(hold=False)
 
     def estop(self, latched: bool) -> None:
         self.pad.estop(latched)
         self._forget_steps()
+        if latched:
+            self._drop_waiting("the E-stop latched")
         self._release_servo("E-stop")
         self.refresh_live()
 
@@ -754,19 +760,39 @@ class JogTab(TabPage):
 
     def _send_jog(self, message: JogPad.CartesianJogged) -> None:
         """Send the step from a worker: it waits for a move in progress (another tab's, the
-        API's) to end and settle, seconds in which the keys must still work."""
+        API's) to end and settle, seconds in which the keys must still work; the note says
+        so, and leaving the tab or the E-stop drops it: no step starts unseen, or late."""
         self.cartesian_note = Text("")
         client = self.client
         if client is None:
             self.command("Cartesian jog", lambda client: None)  # says why it cannot
             return
         self._sending = ()
-        self.run_worker(lambda: self._jog_tool(client, message), thread=True,
+        status = self.status()
+        if status is not None and status.moving and not status.paused:
+            self.cartesian_note = Text.assemble(
+                (STEP_WAITS, "bold yellow"), f"move {status.move_id} is in progress; "
+                "the step runs once it ends and settles (leaving the tab or Esc drops it)")
+        dropping = self._dropping = []
+        self.run_worker(lambda: self._jog_tool(client, message, dropping), thread=True,
                         group="cartesian-step")
 
-    def _jog_tool(self, client: ControlClient, message: JogPad.CartesianJogged) -> None:
-        """The worker: send the jog, and hand its handle or why it was refused to the tab."""
+    def _drop_waiting(self, why: str) -> None:
+        if self._dropping is not None:
+            self._dropping.append(why)
+
+    def _jog_tool(self, client: ControlClient, message: JogPad.CartesianJogged,
+                  dropping: list[str]) -> None:
+        """The worker: wait for a move in progress (not one in a feed hold, which the step
+        supersedes) unless the step is dropped meanwhile, then send the jog; hand its handle,
+        or why it was refused or dropped, to the tab."""
         try:
+            while not dropping and (status := client.status()).moving and not status.paused:
+                client.check()
+                time.sleep(STEP_WAIT_S)
+            if dropping:
+                raise ValueError(f"the Cartesian step was dropped: {dropping[0]} before the "
+                                 "move in progress ended")
             handle = client.jog_cartesian(message.displacement, message.frame, message.speed)
         except (ValueError, ControllerError, OSError) as exc:
             self._from_worker(self._step_refused, exc)
@@ -779,6 +805,8 @@ class JogTab(TabPage):
 
     def _step_sent(self, handle: MoveHandle) -> None:
         self._jog = handle
+        if self.cartesian_note.plain.startswith(STEP_WAITS):  # it waits no more
+            self.cartesian_note = Text("")
         pressed, self._sending = self._sending or (), None
         for message in pressed:
             self._queue(message)

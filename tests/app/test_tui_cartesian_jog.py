@@ -291,32 +291,53 @@ def test_the_rig_has_no_cartesian_mode_and_says_so(tui) -> None:
 
 def test_a_step_pressed_while_another_move_runs_waits_and_the_keys_still_work(tui) -> None:
     """A Cartesian step waits for a move in progress (here the API's go_to) to end and settle,
-    then runs from where it ended; meanwhile the keys work: F3 shows the Scope while the
-    go_to still runs. The step waited in the UI's thread before: F3 came only after. The
-    go_to runs at 5 % feed override until the Scope is shown, however long that takes on a
-    loaded machine, and at full feed after (it was a 0.1 speed go_to of 6 s before)."""
+    saying so under the pad, then runs from where it ended; meanwhile the keys work: F3 shows
+    the Scope while a second go_to still runs (the step waited in the UI's thread before: F3
+    came only after), and leaving the tab drops the step waiting, saying so: it ran before,
+    after the go_to, while the Scope was shown, a jog the operator could no longer see. Each
+    go_to runs at 5 % feed override until what the test waits for is seen, however long that
+    takes on a loaded machine, and at full feed after."""
     async def scenario() -> None:
         app = tui.app(lockstep=False)
         async with app.run_test(size=SIZE) as pilot:
             pilot = DriverPilot(app)
             before = await tui.ready(app, pilot)
             client = app.client
+            jog, note = app.tab("jog"), app.query_one("#jog-cartesian-note", LiveText)
+            seen = tui.notifications(app)
             target = list(before.desired)
             target[1] += 20.0  # Rotate: 0.6 s at full feed, 12.5 s at 5 %
             client.feed_override(0.05)
             going = client.go_to(target, speed=1.0)
             await tui.until(lambda: client.status().moving, timeout=10, what="the go_to")
             await pilot.press("w", "9", "s")  # world frame, y +20 mm: waits for the go_to
-            await pilot.press("f3")
-            scope = app.tab("scope")
-            await tui.until(lambda: scope.visible_now, timeout=30, what="the Scope shown")
-            assert not going.done.is_set(), "F3 was taken only once the go_to had ended"
+            await tui.until(lambda: "the step waits: move" in note.text, what="the note")
+            assert jog._jog is None, "the step ran during the go_to"
             client.feed_override(1.0)
             assert client.wait(going, timeout=60).complete
-            jog = app.tab("jog")
             await tui.until(lambda: jog._jog is not None and jog._jog.done.is_set(),
                             timeout=30, what="the step run after the go_to")
             moved = MODEL.pose(np.array(client.status().desired)) - MODEL.pose(np.array(target))
             assert moved[1] == pytest.approx(20.0, abs=0.5) and abs(moved[0]) < 0.5, moved
+            assert "the step waits" not in note.text
+
+            stepped, back = jog._jog, list(client.status().desired)
+            back[1] -= 20.0
+            client.feed_override(0.05)
+            going = client.go_to(back, speed=1.0)
+            await tui.until(lambda: client.status().moving, timeout=10, what="the second go_to")
+            await pilot.press("s")  # waits for it
+            await tui.until(lambda: "the step waits: move" in note.text, what="the note")
+            await pilot.press("f3")
+            scope = app.tab("scope")
+            await tui.until(lambda: scope.visible_now, timeout=30, what="the Scope shown")
+            assert not going.done.is_set(), "F3 was taken only once the go_to had ended"
+            await tui.until(lambda: any("dropped: the Jog tab was left" in m for m in seen),
+                            what=lambda: f"the step dropped, said: {seen}")
+            client.feed_override(1.0)
+            assert client.wait(going, timeout=60).complete
+            assert jog._jog is stepped, "the step ran with the Jog tab left"
+            assert client.status().desired == pytest.approx(back, abs=1e-6)
 
     asyncio.run(scenario())
+
