@@ -4,7 +4,8 @@ first: the records a client and ``servodesk controller`` exchange besides comman
 The socket lives in the user's runtime directory (``$XDG_RUNTIME_DIR/servodesk``, else
 ``/tmp/servodesk-<uid>``), a directory only its owner may enter (0700, when servodesk makes
 it; a directory given with ``--socket`` keeps its own mode), the socket and the key beside it
-(``<socket>.key``, one per socket) readable by the owner alone (0600). Each side of a
+(``<socket>.key``, one per socket) readable by the owner alone (0600); a client uses a key
+only from a regular file of its own user's (``read_key``). Each side of a
 connection must also answer the other's challenge with that key (HMAC-SHA256), within
 ``HANDSHAKE_S``, so a process that can reach the socket but cannot read the key is refused,
 and one that never answers is dropped. Every message is a typed record in a bounded frame
