@@ -64,6 +64,24 @@ def test_two_controllers_at_once_are_two_processes_of_the_same_server(tmp_path: 
         assert parent_of(one.pid) == parent_of(two.pid) == launcher._server.process.pid
 
 
+def test_a_controller_holds_its_own_descriptors_alone_and_blocks_no_signal(
+        tmp_path: Path) -> None:
+    """A fork of the server inherits what the server holds: each of two controllers at once
+    holds /dev/null, its stderr, its channel and its own segment, and neither the server's
+    socket (a controller could ask it for processes) nor the server's pidfd of the other."""
+    with client(tmp_path, "a") as one, client(tmp_path, "b") as two:
+        for each in (one, two):
+            held = {fd: os.readlink(f"/proc/{each.pid}/fd/{fd}")
+                    for fd in os.listdir(f"/proc/{each.pid}/fd")}
+            assert {held["0"], held["1"]} == {os.devnull}, held
+            assert held["2"].endswith("(deleted)"), held  # its log: an unnamed temporary file
+            sockets = [what for what in held.values() if what.startswith("socket:")]
+            others = set(held.values()) - {os.devnull, held["2"], *sockets}
+            assert len(sockets) == 1 and others == {f"/dev/shm/{each.segment_name}"}, held
+            status = Path(f"/proc/{each.pid}/status").read_text()
+            assert "SigBlk:\t0000000000000000" in status
+
+
 def test_a_controllers_end_is_told_with_its_code_and_a_closed_one_ends_with_0(
         tmp_path: Path) -> None:
     with client(tmp_path, "killed") as killed:
