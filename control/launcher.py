@@ -15,6 +15,7 @@ its pidfd, so a pid reused after the controller's end is never signalled.
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import os
 import select
@@ -65,6 +66,10 @@ class ForkServer:
             try:
                 socket.send_fds(self.sock, [request], fds)
             except OSError as exc:
+                if exc.errno == errno.EMSGSIZE:  # the server is fine: the request is too long
+                    raise ControllerError(f"control process not started: its request of "
+                                          f"{len(request)} bytes is more than the fork server's "
+                                          "socket carries (a very large environment?)") from None
                 self.ended = True
                 raise ControllerError(f"the control processes' fork server has gone "
                                       f"({exc.strerror}): {self.last_words()}") from exc

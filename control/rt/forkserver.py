@@ -32,6 +32,7 @@ from control.rt.process_config import ProcessConfig
 
 REQUEST_LIMIT = 1 << 20  # bytes of one request: a configuration and an environment
 REQUEST_KEYS = frozenset({"config", "env", "cwd"})
+REASON_TEXT = 500  # characters of a refusal's reason: its answer fits the client's 4096 bytes
 
 
 def serve(sock: socket.socket) -> None:
@@ -74,8 +75,8 @@ def start(data: bytes, fds: list[int], sock: socket.socket,
                            for k, v in request["env"].items())):
             raise ValueError("a request is {config, env, cwd} with two descriptors")
         config = ProcessConfig.from_json(request["config"])
-    except (ValueError, TypeError) as exc:
-        reply(sock, {"error": f"refused request: {exc}"})
+    except (ValueError, TypeError) as exc:  # its text may quote the request: kept to a bound
+        reply(sock, {"error": f"refused request: {str(exc)[:REASON_TEXT]}"})
         return None
     try:
         pid = os.fork()

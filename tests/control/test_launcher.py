@@ -128,6 +128,30 @@ def test_a_malformed_request_is_refused_with_its_reason_and_the_server_serves_on
     assert server.process.returncode == 0, server.log()
 
 
+def test_a_request_too_long_or_refused_at_length_is_an_error_and_the_server_serves_on(
+        tmp_path: Path) -> None:
+    """A request longer than the socket carries was taken for the server's end (another
+    server started, the first left running); a refusal quoting a long request overran the
+    client's answer buffer (JSONDecodeError, not ControllerError)."""
+    server = launcher.ForkServer(_child_env())
+    try:
+        ours, theirs = socket.socketpair()
+        with ours, theirs, tempfile.TemporaryFile() as err:
+            fds = [theirs.fileno(), err.fileno()]
+            too_long = json.dumps({"config": "{}", "env": {"X": "x" * (8 << 20)}, "cwd": "/"})
+            with pytest.raises(ControllerError, match="more than the fork server's socket"):
+                server.launch(too_long.encode(), fds, 10)
+            long_key = json.dumps({"config": json.dumps({"k" * 10_000: 1}), "env": {},
+                                   "cwd": "/"})
+            with pytest.raises(ControllerError, match="unexpected keyword argument 'kkk"):
+                server.launch(long_key.encode(), fds, 10)
+            assert server.alive
+    finally:
+        server.sock.close()
+        server.process.wait(timeout=10)
+    assert server.process.returncode == 0, server.log()
+
+
 def test_the_server_ends_with_the_client_that_started_it(tmp_path: Path) -> None:
     """A client killed outright: its server sees its end of the socket close and exits (its
     controller's own watch stops the controller, as before)."""
