@@ -75,10 +75,11 @@ def test_a_killed_controller_is_not_left_a_zombie(controller, until, measured) -
 
 
 def stat(pid: int) -> str:
-    """``/proc/PID/stat``, or "" once the process is gone."""
+    """``/proc/PID/stat``, or "" once the process is gone (reaped while its stat is opened:
+    ESRCH, ProcessLookupError)."""
     try:
         return Path(f"/proc/{pid}/stat").read_text()
-    except FileNotFoundError:
+    except (FileNotFoundError, ProcessLookupError):
         return ""
 
 
