@@ -134,8 +134,15 @@ def test_manual_actuation_ends_the_servo_with_its_report(controller: ControlClie
     servo.start()
     wait_until(lambda: np.any(np.abs(np.array(robot.status().desired) - START) > 0.5), 5,
                "the tool moving")
-    robot.jog([0.0] * UNIMATE.n_joints)  # manual actuation takes over
-    report = servo.wait(5.0)
+
+    def taken_over() -> bool:
+        """Manual actuation again: a velocity the servo sent before it saw the last one
+        takes the controller back to hold."""
+        robot.jog([0.0] * UNIMATE.n_joints)
+        return servo.done.is_set()
+
+    wait_until(taken_over, 5, "the servo to end")
+    report = servo.wait(0)
     assert report.stopped == "the controller left hold (manual_actuate)", report
     assert 0.5 < report.distance < 25.0, report
     wait_until(lambda: robot.status().mode == Mode.MANUAL_ACTUATE, 5, "manual actuation")
