@@ -742,6 +742,12 @@ class ServodeskApp(App[None]):
         """Release the E-stop latch, after a deliberate confirmation."""
         if isinstance(self.screen, ModalScreen):
             return
+        client = self.client
+        if (client is not None and not client.dead and not self.estop_latched
+                and not client.latched):  # no question, and no reset sent mid-move
+            self.notify("No E-stop is latched: nothing to release (^R releases a latched "
+                        "E-stop).", severity="warning")
+            return
         if refusal := self.desk.refusal("release the E-stop"):  # an observer: before asking
             self.notify(refusal, severity="error", timeout=8)
             return

@@ -256,6 +256,9 @@ class Controller:
         self.latch_estop("operator E-stop")
 
     def on_reset(self, command: cmd.Reset) -> None:
+        if not self.guards.latched:  # its hold would stop a move and leave it running
+            self.outbox.put(Refused(command.NAME, "no E-stop is latched: nothing to release"))
+            return
         if self.backend.estop:
             self.outbox.put(Refused(command.NAME,
                                     "E-stop input still pressed: release it, then reset"))

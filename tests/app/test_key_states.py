@@ -8,7 +8,8 @@ valve at 0) in T1 too, aborted a running move into open loop, and took a held Ca
 servo out of hold, whose thread then died on the NaN target.
 
 ^S on the Moves tab looked only at its own move: another tab's, running or in feed hold, was
-superseded by the form's."""
+superseded by the form's. ^R with no E-stop latched asked to release one, and its reset held
+a running move's arm while the move ran on."""
 
 from __future__ import annotations
 
@@ -19,6 +20,7 @@ import numpy as np
 
 from app.tabs.jog import QUIET_STOPS
 from app.tabs.moves import MovesTab
+from app.widgets.dialogs import ConfirmScreen
 from control.client import ControlClient
 from control.motion import moves
 from control.rt.commands import Hold, Manual
@@ -169,5 +171,31 @@ def test_run_move_refuses_while_another_tabs_move_runs_or_stands_in_feed_hold(tu
             await tui.until(lambda: tab.handle is None, timeout=30, what="the step's end")
             assert tab.last_result is not None and tab.last_result.complete, \
                 tab.last_result and tab.last_result.status
+
+    asyncio.run(scenario())
+
+
+def test_release_with_no_estop_latched_says_so_and_leaves_a_running_move_alone(tui) -> None:
+    """^R asked 'Release the E-stop?' with none latched; a yes sent the reset, whose hold
+    stopped the arm of a running move and left the move 'running' (moving, in HOLD) with the
+    Moves tab counting on. Now it says there is nothing to release, and the move ends."""
+    async def scenario() -> None:
+        app = tui.app(lockstep=False)  # real time: the ramp is still under way at ^R
+        async with app.run_test(size=SIZE) as pilot:
+            pilot = DriverPilot(app)
+            await tui.ready(app, pilot)
+            client = app.client
+            seen = tui.notifications(app)
+            start = np.array(client.status().position)
+            end = start.copy()
+            end[1] += 2.0
+            handle = client.move(moves.ramp(start, end, ramp_time=1.0, machine=UNIMATE),
+                                 kind="ramp")
+            await tui.until(lambda: client.status().move_done > 100, what="the ramp under way")
+            await pilot.press("ctrl+r")
+            await tui.until(lambda: any("No E-stop is latched" in m for m in seen),
+                            what=lambda: f"nothing to release, said: {seen}")
+            assert not isinstance(app.screen, ConfirmScreen)
+            assert (await asyncio.to_thread(client.wait, handle, 10)).complete
 
     asyncio.run(scenario())

@@ -184,6 +184,19 @@ def test_estop_input_latches_and_blocks_reset_while_pressed(realtime: ControlCli
     wait_until(lambda: not realtime.status().estop, 1.0, "E-stop released")
 
 
+def test_a_reset_with_nothing_latched_is_refused_and_the_move_runs_on(
+        realtime: ControlClient) -> None:
+    """A reset is the E-stop's release: with none latched it is refused. Its hold stopped a
+    running move's arm before and left the move running (moving, mode HOLD), never ending."""
+    start = realtime.status().position
+    move = realtime.move(moves.step(start, 0, start[0] + 20, duration=1.0, machine=UNIMATE),
+                         kind="step")
+    wait_until(lambda: realtime.status().move_done > 200, 3.0, "the move to run")
+    realtime.reset()
+    assert "no E-stop is latched" in realtime.wait_event("refused", 2.0).message
+    assert realtime.wait(move, timeout=10).complete
+
+
 def test_estop_during_a_move_ends_it_and_saves_what_ran(realtime: ControlClient) -> None:
     start = realtime.status().position
     move = realtime.move(moves.step(start, 0, start[0] + 200, duration=5.0, machine=UNIMATE),
