@@ -4,6 +4,7 @@ in tenths, ctrl+f holds the running move and resumes it, and the header says so.
 from __future__ import annotations
 
 import asyncio
+from collections.abc import Callable
 
 import numpy as np
 
@@ -24,6 +25,18 @@ def test_feed_keys_and_the_moves_tabs_buttons_slow_hold_and_resume_a_running_mov
             status = await tui.ready(app, pilot)
             client = app.client
             header = app.query_one("#header-health", LiveText)
+            sent: list[object] = []
+            send = client._send
+            client._send = lambda command, *fds: (sent.append(command), send(command, *fds))[1]
+
+            def state(awaited: str) -> Callable[[], str]:
+                def said() -> str:
+                    now = client.status()
+                    return (f"{awaited}; paused {now.paused}, feed rate {now.feed_rate}, "
+                            f"override {now.feed_override}, move_done {now.move_done}, moving "
+                            f"{now.moving}, mode {now.mode!r}, header {header.text!r}, sent {sent[-4:]}, log "
+                            f"{[e.what for e in app.desk.events.entries]}")
+                return said
             start = np.array(status.position)
             end = start.copy()
             end[1] += 20.0
@@ -41,7 +54,8 @@ def test_feed_keys_and_the_moves_tabs_buttons_slow_hold_and_resume_a_running_mov
             await asyncio.sleep(0.3)
             assert client.status().move_done == held and client.status().moving
             tui.post_key(app, "ctrl+f")
-            await tui.until(lambda: client.status().move_done > held + 50, what="the resume")
+            await tui.until(lambda: client.status().move_done > held + 50,
+                            what=state("the resume"))
             assert not client.status().paused
             tui.post_key(app, "ctrl+up")
             await tui.until(lambda: client.status().feed_override == 0.6, what="60 %")
@@ -68,8 +82,11 @@ def test_feed_keys_and_the_moves_tabs_buttons_slow_hold_and_resume_a_running_mov
             await pilot.click("#feed-hold")
             await tui.until(lambda: client.status().paused, what="the feed hold")
             await tui.until(lambda: str(button.label) == "resume", what="the button's resume")
-            await pilot.click("#feed-hold")
-            await tui.until(lambda: not client.status().paused, what="the resume")
+            # laid out again for its wider label: a click at the old place missed it
+            await tui.until(lambda: button.content_region.width >= len("resume"),
+                            what=lambda: f"the resume button laid out: {button.content_region}")
+            assert await pilot.click("#feed-hold"), "the click missed the resume button"
+            await tui.until(lambda: not client.status().paused, what=state("the resume"))
             await pilot.click("#feed-up")
             await tui.until(lambda: client.status().feed_override == 1.0, what="100 %")
             tui.post_key(app, "ctrl+g")
