@@ -896,10 +896,17 @@ class ServodeskApp(App[None]):
             "Automatic"), answer)
 
     def _set_speed(self, client: ControlClient, mode: str) -> None:
+        """Switch in a worker: the switch waits (up to 2 s) for the status to show the mode,
+        which a refused one never does, and no key, Esc's E-stop included, may wait with it."""
+        self.run_worker(lambda: self._switch_speed(client, mode), thread=True,
+                        group="speed-mode", name=f"speed mode {mode}")
+
+    def _switch_speed(self, client: ControlClient, mode: str) -> None:
         try:
             client.set_speed_mode(mode)
         except (ControllerError, ValueError) as exc:
-            self.notify(str(exc), severity="error")
+            with contextlib.suppress(RuntimeError):  # the app closed meanwhile
+                self.call_from_thread(self.notify, str(exc), severity="error")
 
     def action_dismiss_fault(self) -> None:
         self.fault_kind = ""

@@ -199,3 +199,37 @@ def test_release_with_no_estop_latched_says_so_and_leaves_a_running_move_alone(t
             assert (await asyncio.to_thread(client.wait, handle, 10)).complete
 
     asyncio.run(scenario())
+
+
+def test_the_estop_is_taken_while_the_switch_to_automatic_waits_for_the_controller(
+        tui, data_dir) -> None:
+    """^Y, yes, during a T1 position jog's travel: the controller refuses automatic while a
+    jog moves, and the switch waited for it on the UI's thread for 2 s, every key held back,
+    Esc too (it latched 2.05 s after in a probe). Now the wait is a worker's: the E-stop
+    latches before the switch has given up."""
+    async def scenario() -> None:
+        app = PilotedApp("unimate2000b", "sim", None, data_dir, lockstep=False,
+                         client_options={"heartbeat_timeout_s": 2.0}, build_behind=False)
+        async with app.run_test(size=SIZE) as pilot:
+            pilot = DriverPilot(app)
+            await tui.ready(app, pilot)  # as the operator starts it: T1, position jog
+            client = app.client
+            seen = tui.notifications(app)
+            await pilot.press("9", "d")  # Up/Down 5° at its 6.25°/s jog speed
+            await tui.until(lambda: abs(client.status().desired[2]
+                                        - client.status().position[2]) > 0.05,
+                            what="Up/Down's jog travelling")
+            await pilot.press("ctrl+y")
+            await tui.until(lambda: isinstance(app.screen, ConfirmScreen), what="the question")
+            tui.post_key(app, "y")
+            await tui.until(lambda: any("automatic (full speed) is set only at rest" in m
+                                        for m in seen), what="the controller's refusal")
+            assert not any("did not switch" in m for m in seen), seen  # it waits on
+            tui.post_key(app, "ctrl+e")
+            await tui.until(lambda: client.status().estop, what="the E-stop")
+            assert not any("did not switch" in m for m in seen), seen  # taken meanwhile
+            await tui.until(lambda: any("did not switch to automatic" in m for m in seen),
+                            what=lambda: f"the switch's failure told: {seen}")
+            assert client.speed_mode == "reduced"
+
+    asyncio.run(scenario())

@@ -34,8 +34,8 @@ def test_feed_keys_and_the_moves_tabs_buttons_slow_hold_and_resume_a_running_mov
                     now = client.status()
                     return (f"{awaited}; paused {now.paused}, feed rate {now.feed_rate}, "
                             f"override {now.feed_override}, move_done {now.move_done}, moving "
-                            f"{now.moving}, mode {now.mode!r}, header {header.text!r}, sent {sent[-4:]}, log "
-                            f"{[e.what for e in app.desk.events.entries]}")
+                            f"{now.moving}, mode {now.mode!r}, header {header.text!r}, sent "
+                            f"{sent[-4:]}, log {[e.what for e in app.desk.events.entries]}")
                 return said
             start = np.array(status.position)
             end = start.copy()
