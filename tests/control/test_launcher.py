@@ -52,7 +52,7 @@ def test_controllers_are_forks_of_one_server_in_the_environment_of_their_launch(
             assert os.readlink(f"/proc/{each.pid}/cwd") == os.getcwd() and moves(each)
             shared |= setting == "report" and "shared" in each.notice  # no warm-up then
             os.kill(each.pid, signal.SIGTERM)  # its loop ends and the counters are written
-            wait_until(lambda: not each.alive, 10, "the controller's end")  # noqa: B023
+            wait_until(lambda: not each.alive, 10, "the controller's end")
             logs.setdefault(setting, []).append(each.controller_log())
     assert all("warm-up: windows" not in log for log in logs["0"]), logs["0"]
     assert shared or "warm-up: windows" in logs["report"][0], logs["report"]
