@@ -9,7 +9,8 @@ servo out of hold, whose thread then died on the NaN target.
 
 ^S on the Moves tab looked only at its own move: another tab's, running or in feed hold, was
 superseded by the form's. ^R with no E-stop latched asked to release one, and its reset held
-a running move's arm while the move ran on."""
+a running move's arm while the move ran on. ^Y's switch to automatic waited for the controller
+on the UI's thread: refused (a T1 jog travelling), it held every key back 2 s, Esc too."""
 
 from __future__ import annotations
 
