@@ -234,6 +234,10 @@ class IdentifyTab(TabPage):
             error.update(Text("an identification is running: wait for it, or abort it with ^G",
                               "yellow"))
             return
+        if busy := self.move_in_progress():
+            error.update(Text(busy, "bold red"))
+            self.notify(f"not run: {busy}", severity="error")
+            return
         client, status = self.client, self.status()
         if client is None or status is None:
             self.command("identify", ControlClient.check)
@@ -457,7 +461,7 @@ class IdentifyTab(TabPage):
         show what it measured beside what the models predict for that set."""
         from control.identify import tuning
 
-        refusal = self.desk.refusal("check move")
+        refusal = self.desk.refusal("check move") or self.move_in_progress()
         outcome, client, status = self.outcome, self.client, self.status()
         if refusal or outcome is None or self.handle is not None:
             self._state(Text(refusal or "wait for the identification to finish", "bold red"))

@@ -67,7 +67,7 @@ from control.motion.moves import summary_cells, summary_columns
 from control.motion.plan import SETTLE_COLUMNS, MovePlan, Summary, moving_joints, settle_cell
 from control.motion.robot_model import has_unimate_model
 from control.recorder import Run
-from control.rt.layout import Mode, Status
+from control.rt.layout import Status
 from hw.machine import Machine
 
 PREVIEW_DELAY_S = 0.25
@@ -299,7 +299,7 @@ class MovesTab(TabPage):
         if self.handle is not None or self.initialising:
             error.update(Text("a move is running: wait for it, or abort it with ^G", "yellow"))
             return
-        if busy := self._busy():
+        if busy := self.move_in_progress():
             error.update(Text(busy, "bold red"))
             self.notify(f"not run: {busy}", severity="error")
             return
@@ -335,18 +335,6 @@ class MovesTab(TabPage):
         self.query_one("#move-result", DataTable).clear()
         self._state(Text(f"running {plan.title}…", "cyan"))
         self._wait(client, handle, plan)
-
-    def _busy(self) -> str:
-        """Why a move of another tab or client stops this one from running ("" if none does):
-        a new move would supersede it, and move the arm off from a feed hold."""
-        status = self.status()
-        if status is None or not (status.moving or status.mode == Mode.INITIALISE):
-            return ""
-        if status.paused:
-            return ("a move stands in feed hold (Program or Positions tab, or another client): "
-                    "resume it (^F) or hold (^G) first")
-        return ("a move is running (Program or Positions tab, or another client): wait for it, "
-                "or hold (^G)")
 
     @work(thread=True, group="move-wait")
     def _wait(self, client: ControlClient, handle: MoveHandle, plan: MovePlan) -> None:

@@ -13,7 +13,7 @@ from textual.timer import Timer
 from app.desk import Desk
 from app.widgets.staged import Staged
 from control.client import ControlClient, ControllerError
-from control.rt.layout import Status
+from control.rt.layout import Mode, Status
 from hw.machine import Machine
 from kinematics.unimate import Unimate2000B
 
@@ -57,6 +57,18 @@ class TabPage(Staged, Container):
             return client.status()
         except (ControllerError, ValueError, TimeoutError):  # closed or died while we asked
             return None
+
+    def move_in_progress(self) -> str:
+        """Why a move must not start now: one of another tab or client runs, or stands in feed
+        hold, and a new one would supersede it (the arm moving off from a feed hold); ""
+        when none does."""
+        status = self.status()
+        if status is None or not (status.moving or status.mode == Mode.INITIALISE):
+            return ""
+        if status.paused:
+            return ("a move stands in feed hold (another tab's or client's): resume it (^F) or "
+                    "hold (^G) first")
+        return "a move is running (another tab's or client's): wait for it, or hold (^G)"
 
     def command(self, what: str, call: Callable[[ControlClient], object]) -> bool:
         """``call(client)`` (``ControlClient.hold``, ``lambda client: client.jog(duty)``); if

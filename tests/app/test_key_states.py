@@ -7,8 +7,8 @@ closed-loop hold: it sent a 0 % manual duty, which let go of the held arm (desir
 valve at 0) in T1 too, aborted a running move into open loop, and took a held Cartesian jog's
 servo out of hold, whose thread then died on the NaN target.
 
-^S on the Moves tab looked only at its own move: another tab's, running or in feed hold, was
-superseded by the form's. ^R with no E-stop latched asked to release one, and its reset held
+^S on the Moves tab, and the Identify tab's Run, looked only at their own move: another tab's,
+running or in feed hold, was superseded by theirs. ^R with no E-stop latched asked to release one, and its reset held
 a running move's arm while the move ran on. ^Y's switch to automatic waited for the controller
 on the UI's thread: refused (a T1 jog travelling), it held every key back 2 s, Esc too."""
 
@@ -19,6 +19,7 @@ import math
 
 import numpy as np
 
+from app.tabs.identify import IdentifyTab
 from app.tabs.jog import QUIET_STOPS
 from app.tabs.moves import MovesTab
 from app.widgets.dialogs import ConfirmScreen
@@ -232,5 +233,33 @@ def test_the_estop_is_taken_while_the_switch_to_automatic_waits_for_the_controll
             await tui.until(lambda: any("did not switch to automatic" in m for m in seen),
                             what=lambda: f"the switch's failure told: {seen}")
             assert client.speed_mode == "reduced"
+
+    asyncio.run(scenario())
+
+
+def test_identify_refuses_to_start_while_another_move_stands_in_feed_hold(tui) -> None:
+    """The Identify tab's Run started its open-loop profile over a move held by ^F (it
+    superseded it: the arm driven open loop from a feed hold); now it is refused, saying
+    why, as the Moves tab's ^S is."""
+    async def scenario() -> None:
+        app = tui.app(lockstep=False)  # real time: the ramp is still under way at Run
+        async with app.run_test(size=SIZE) as pilot:
+            pilot = DriverPilot(app)
+            await tui.ready(app, pilot)
+            client = app.client
+            await pilot.press("f8")
+            tab, error = app.query_one(IdentifyTab), app.query_one("#identify-error")
+            await tui.until(lambda: tab.visible_now, what="the Identify tab")
+            handle = long_ramp(client)
+            await tui.until(lambda: client.status().move_done > 100, what="the ramp under way")
+            await pilot.press("ctrl+f")
+            await tui.until(lambda: client.status().paused, what="the feed hold")
+            await pilot.click("#identify-run")
+            await tui.until(lambda: "feed hold" in str(error.render()),
+                            what=lambda: f"the refusal: {error.render()!s}")
+            assert tab.handle is None and not handle.done.is_set()
+            assert client.status().move_id == handle.move_id and client.status().paused
+            await pilot.press("ctrl+g")
+            await asyncio.to_thread(client.wait, handle, 10)
 
     asyncio.run(scenario())
