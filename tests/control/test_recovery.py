@@ -5,6 +5,7 @@ it keeps the same rules for a live client's runs, in the order they were handed 
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import os
 from multiprocessing import shared_memory
@@ -30,20 +31,30 @@ def dead_pid() -> int:
     return int(Path("/proc/sys/kernel/pid_max").read_text())
 
 
+def orphaned(name: str) -> str:
+    """Segment ``name`` (this process's) given a dead owner's name, as its client's death
+    leaves it: only then may a starting client recover it. One named for a dead owner from
+    the start was any starting client's: another test's, starting while this one set its
+    segment up, took it first (its run saved twice, or in that client's directory)."""
+    dead = shm.segment_name(name.split("_", 2)[-1], pid=dead_pid())
+    os.rename(shm.SHM_DIR / name, shm.SHM_DIR / dead)
+    return dead
+
+
 class LeftSegment:
-    """A move segment as a killed client leaves it: metadata, a record, maybe a status. With
-    ``pid`` (this process's), a live client's, as a run keeper gets it: no other process's
-    recovery takes that one (with a dead pid, a controller another test started at the same
-    moment saved it too: two runs listed, one run at -n 3)."""
+    """A move segment as a killed client leaves it: metadata, a record, maybe a status. Made
+    under this process's name, as its client made it while it lived; ``orphan`` gives it a
+    dead owner's. With ``pid`` (this process's), a live client's, as a run keeper gets it."""
 
     def __init__(self, data_dir: Path, status: str = "complete", recorded: int = ROWS,
                  pid: int | None = None) -> None:
+        self.dies = pid is None
         owner = dead_pid() if pid is None else pid
         self.meta = segment_meta(UNIMATE, "step", UNIMATE.sample_time_s, data_dir, owner,
                                  {"backend": "sim", "coefficients": {}})
         encoded = encode_meta(self.meta)
         self.layout = MoveLayout(ROWS, 6, len(encoded))
-        self.name = shm.segment_name(f"mv{os.urandom(3).hex()}", pid=owner)
+        self.name = shm.segment_name(f"mv{os.urandom(3).hex()}", pid=os.getpid())
         with shm._untracked():
             self.segment = shared_memory.SharedMemory(self.name, create=True,
                                                       size=self.layout.size)
@@ -61,41 +72,60 @@ class LeftSegment:
     def run(self):
         return run_from_segment(self.segment.buf, self.layout, self.meta, "complete")
 
+    def orphan(self) -> None:
+        if self.dies and shm.owner_pid(self.name) == os.getpid():
+            self.name = orphaned(self.name)
+
     def gone(self) -> bool:
         return self.name not in shm.leftover_segments()
 
     def close(self) -> None:
-        shm.release(self.segment, unlink=True)
+        shm.release(self.segment, unlink=False)
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(shm.SHM_DIR / self.name)
+
+
+class Left:
+    """The test's left segments (``left(...)`` makes one); ``recover`` orphans them, then
+    recovers as a starting client does."""
+
+    def __init__(self, data_dir: Path) -> None:
+        self.data_dir = data_dir
+        self.made: list[LeftSegment] = []
+
+    def __call__(self, **options) -> LeftSegment:
+        self.made.append(LeftSegment(self.data_dir, **options))
+        return self.made[-1]
+
+    def recover(self, fallback: Path, wait_s: float = 10.0) -> list[str]:
+        for segment in self.made:
+            segment.orphan()
+        return recover_runs(fallback, wait_s)
 
 
 @pytest.fixture
 def left(tmp_path: Path):
-    made = []
-
-    def make(**options) -> LeftSegment:
-        made.append(LeftSegment(tmp_path / "runs", **options))
-        return made[-1]
-
-    yield make
-    for segment in made:
+    made = Left(tmp_path / "runs")
+    yield made
+    for segment in made.made:
         segment.close()
 
 
 def test_a_finished_move_its_client_never_saved_is_saved_and_marked(left, tmp_path) -> None:
     segment = left()
-    notices = recover_runs(tmp_path / "fallback")
+    notices = left.recover(tmp_path / "fallback")
     (info,) = list_runs(tmp_path / "runs")
     run = load_run(info.files.json)
     assert run.status == "recovered: complete" and run.samples == ROWS
     assert run.meta["recovered"] is True and run.meta["run_id"] == segment.meta["run_id"]
     assert segment.gone()
     assert any(str(info.files.json) in n for n in notices)
-    assert recover_runs(tmp_path / "fallback") == [] and len(list_runs(tmp_path / "runs")) == 1
+    assert left.recover(tmp_path / "fallback") == [] and len(list_runs(tmp_path / "runs")) == 1
 
 
 def test_a_move_that_never_ended_says_so(left, tmp_path) -> None:
     left(status="", recorded=200)
-    recover_runs(tmp_path / "fallback")
+    left.recover(tmp_path / "fallback")
     (info,) = list_runs(tmp_path / "runs")
     assert info.status == "recovered: interrupted: the client and the controller died"
     assert info.samples == 200
@@ -111,7 +141,7 @@ def test_a_save_killed_before_its_json_is_redone_and_its_leftovers_cleared(left,
     (runs / f"{base}.csv.gz").write_text("half")
     (runs / f".{dead_pid()}-0123.tmp").write_text("half")
     (runs / f".{os.getpid()}-4567.tmp").write_text("a live saver's")
-    recover_runs(tmp_path / "fallback")
+    left.recover(tmp_path / "fallback")
     (info,) = list_runs(runs)
     assert load_run(info.files.json).samples == ROWS
     assert not (runs / f".{dead_pid()}-0123.tmp").exists()
@@ -124,7 +154,7 @@ def test_a_save_killed_before_its_json_is_redone_and_its_leftovers_cleared(left,
 def test_a_save_killed_after_its_json_is_not_saved_twice(left, tmp_path) -> None:
     segment = left()
     save_run(segment.run(), tmp_path / "runs")
-    recover_runs(tmp_path / "fallback")
+    left.recover(tmp_path / "fallback")
     (info,) = list_runs(tmp_path / "runs")
     assert info.status == "complete" and segment.gone()
 
@@ -133,7 +163,7 @@ def test_a_run_its_own_directory_cannot_take_goes_to_the_starting_clients(left,
                                                                         tmp_path) -> None:
     left()
     (tmp_path / "runs").write_text("a file where the runs' directory should be")
-    recover_runs(tmp_path / "fallback")
+    left.recover(tmp_path / "fallback")
     (info,) = list_runs(tmp_path / "fallback")
     assert info.status == "recovered: complete"
 
@@ -142,24 +172,26 @@ def test_a_run_that_can_be_saved_nowhere_now_stays_for_the_next_start(left, tmp_
     segment = left()
     (tmp_path / "runs").write_text("a file where the runs' directory should be")
     (tmp_path / "fallback").write_text("and another where the fallback should be")
-    notices = recover_runs(tmp_path / "fallback")
+    notices = left.recover(tmp_path / "fallback")
     assert any("kept for the next start" in n for n in notices), notices
     assert not segment.gone()
     (tmp_path / "runs").unlink()
-    recover_runs(tmp_path / "fallback")
+    left.recover(tmp_path / "fallback")
     assert segment.gone() and len(list_runs(tmp_path / "runs")) == 1
 
 
 def test_a_segment_that_is_not_a_move_is_removed_with_a_notice(tmp_path) -> None:
-    name = shm.segment_name("mvjunk", pid=dead_pid())
     with shm._untracked():
-        junk = shared_memory.SharedMemory(name, create=True, size=4096)
+        junk = shared_memory.SharedMemory(shm.segment_name("mvjunk"), create=True, size=4096)
+    name = orphaned(junk.name.lstrip("/"))
     try:
         notices = recover_runs(tmp_path / "fallback")
         assert any(n.startswith(f"removed {name}: not a move segment") for n in notices)
         assert name not in shm.leftover_segments()
     finally:
-        shm.release(junk, unlink=True)
+        shm.release(junk, unlink=False)
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(shm.SHM_DIR / name)
 
 
 def test_a_move_segment_of_another_layout_version_is_left_alone(left, tmp_path) -> None:
@@ -170,7 +202,7 @@ def test_a_move_segment_of_another_layout_version_is_left_alone(left, tmp_path) 
     header = MoveLayout.HEADER
     magic, version, samples, n = header.unpack_from(segment.segment.buf, 0)
     header.pack_into(segment.segment.buf, 0, magic, version - 1, samples, n)
-    (notice,) = recover_runs(tmp_path / "fallback")
+    (notice,) = left.recover(tmp_path / "fallback")
     assert notice.startswith(f"left {segment.name} alone: a run a servodesk of another version")
     assert f"(layout v{version - 1})" in notice
     assert not segment.gone() and list_runs(tmp_path / "runs") == []
@@ -181,12 +213,13 @@ def test_a_segment_another_start_recovers_is_waited_for_then_left_to_it(left, tm
     fd = os.open(shm.SHM_DIR / segment.name, os.O_RDONLY)
     try:
         fcntl.flock(fd, fcntl.LOCK_EX)  # as a second client starting at the same time holds it
+        segment.orphan()
         (notice,) = recover_runs(tmp_path / "fallback", wait_s=0.02)
         assert "to the process recovering it" in notice
         assert not segment.gone() and list_runs(tmp_path / "runs") == []
     finally:
         os.close(fd)
-    (notice,) = recover_runs(tmp_path / "fallback")
+    (notice,) = left.recover(tmp_path / "fallback")
     assert "recovered" in notice and segment.gone()
     assert len(list_runs(tmp_path / "runs")) == 1
 
@@ -216,7 +249,7 @@ def test_a_run_the_disk_refuses_stays_whole_in_its_segment_and_says_why(left, tm
     assert kept.kept and kept.files is None and kept.problem.startswith("cannot save the step")
     assert kept.run is not None and kept.run.samples == ROWS and not segment.gone()
     (tmp_path / "runs").unlink()
-    assert recover_runs(tmp_path / "fallback") and segment.gone()
+    assert left.recover(tmp_path / "fallback") and segment.gone()
     assert len(list_runs(tmp_path / "runs")) == 1
 
 
