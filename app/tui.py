@@ -258,7 +258,8 @@ class ServodeskApp(App[None]):
         self._positions: tuple[Position, ...] | None = None  # as the Positions tab last read
         self._early: list[ClientReady | ClientFailed | ControllerEvent] | None = []
         self.fault_kind = ""
-        self.feed_tenths = 10  # the feed override as the operator set it, in tenths
+        self.feed_pct = 100  # the feed override as this TUI last set it, in %
+        self._feed_sent = {100}  # what it has sent since the status last showed its own value
         self.estop_latched = False  # an E-stop sent or reported, until the controller releases it
         self._estop_banner = ""  # the latched E-stop's banner, which nothing lesser replaces
         self._estop_reason = ""
@@ -795,17 +796,24 @@ class ServodeskApp(App[None]):
             self.notify(str(exc), severity="error")
 
     def action_feed(self, steps: int) -> None:
-        """Feed override up or down by 10 % (0…100 %), for this move and the next."""
+        """Feed override up or down by 10 % (0…100 %), for this move and the next: from the
+        override in force, which a program's feed step or another client may have set, or
+        from this TUI's own count while the status has yet to show its last keys' values."""
         client = self.client
         if client is None:
             return
-        tenths = min(max(self.feed_tenths + steps, 0), 10)  # keys may come faster than status
         try:
-            client.feed_override(tenths / 10)
-        except ControllerError as exc:
+            shown = round(client.status().feed_override * 100)
+            if shown not in self._feed_sent:  # set by another: step from it
+                self.feed_pct = shown
+            pct = min(max(self.feed_pct + 10 * steps, 0), 100)
+            client.feed_override(pct / 100)
+        except (ControllerError, TimeoutError) as exc:  # dead, or died mid-record
             self.notify(str(exc), severity="error")
             return
-        self.feed_tenths = tenths
+        caught_up = shown == self.feed_pct  # every value sent before is in force or passed
+        self._feed_sent = {shown, pct} if caught_up else {*self._feed_sent, pct}
+        self.feed_pct = pct
 
     async def action_quit(self) -> None:
         """Quit; first ask, when a move is running or the E-stop is latched."""

@@ -10,7 +10,9 @@ servo out of hold, whose thread then died on the NaN target.
 ^S on the Moves tab, and the Identify tab's Run, looked only at their own move: another tab's,
 running or in feed hold, was superseded by theirs. ^R with no E-stop latched asked to release one, and its reset held
 a running move's arm while the move ran on. ^Y's switch to automatic waited for the controller
-on the UI's thread: refused (a T1 jog travelling), it held every key back 2 s, Esc too."""
+on the UI's thread: refused (a T1 jog travelling), it held every key back 2 s, Esc too. The
+feed keys stepped from the TUI's own count, not from an override a program's feed step had set:
+^↓ at 50 % gave 90 %."""
 
 from __future__ import annotations
 
@@ -261,5 +263,29 @@ def test_identify_refuses_to_start_while_another_move_stands_in_feed_hold(tui) -
             assert client.status().move_id == handle.move_id and client.status().paused
             await pilot.press("ctrl+g")
             await asyncio.to_thread(client.wait, handle, 10)
+
+    asyncio.run(scenario())
+
+
+def test_feed_keys_step_from_the_override_in_force_not_from_their_own_count(tui) -> None:
+    """A program's ``feed = 50`` step (the runner sets it on the TUI's own client, as here), or
+    another client, sets the override: ^↓ 'feed −10 %' then took the TUI's own count (100 %)
+    and set 90 %: the key for slower made the arm faster. Now it steps from the 50 % in force;
+    a burst of keys still counts each (the status lags them)."""
+    async def scenario() -> None:
+        app = tui.app()
+        async with app.run_test(size=SIZE) as pilot:
+            pilot = DriverPilot(app)
+            await tui.ready(app, pilot)
+            client = app.client
+            client.feed_override(0.5)  # the program's feed step
+            await tui.until(lambda: client.status().feed_override == 0.5, what="50 %")
+            await pilot.press("ctrl+down")
+            await tui.until(lambda: client.status().feed_override != 0.5, what="a new override")
+            assert client.status().feed_override == 0.4
+            for _ in range(3):  # as fast as the terminal sends them
+                tui.post_key(app, "ctrl+up")
+            await tui.until(lambda: client.status().feed_override == 0.7,
+                            what=lambda: f"70 %: {client.status().feed_override}")
 
     asyncio.run(scenario())
