@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import os
+import resource
 import signal
 import subprocess
 import sys
@@ -198,9 +199,11 @@ def test_an_operators_wait_goes_on_at_enter_on_a_terminal(tmp_path: Path) -> Non
                        'label = "Load the part"\n[[step]]\nwait = 0.1\n', encoding="utf-8")
     terminal, stdin = pty.openpty()
     proc = subprocess.Popen([sys.executable, "-m", "app", "run", str(program), "--lockstep",
-                             "--data-dir", str(tmp_path)], cwd=ROOT, env=ENV, text=True,
-                            stdin=stdin, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+                             "--data-dir", str(tmp_path)], cwd=ROOT, text=True, stdin=stdin,
+                            env={**ENV, "PYTHONFAULTHANDLER": "1"},  # SIGABRT: its threads
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     os.close(stdin)
+    resource.prlimit(proc.pid, resource.RLIMIT_CORE, (0, 0))  # its SIGABRT below: no core file
     try:
         seen = []
         deadline = time.monotonic() + RUN_S
@@ -208,7 +211,13 @@ def test_an_operators_wait_goes_on_at_enter_on_a_terminal(tmp_path: Path) -> Non
             assert time.monotonic() < deadline and proc.poll() is None, "".join(seen)
             seen.append(proc.stderr.readline())
         os.write(terminal, b"\n")
-        out, err = proc.communicate(timeout=RUN_S)
+        try:
+            out, err = proc.communicate(timeout=RUN_S)
+        except subprocess.TimeoutExpired:
+            proc.send_signal(signal.SIGABRT)  # where every thread of it waits, on its stderr
+            out, err = proc.communicate(timeout=30)
+            pytest.fail(f"no end within {RUN_S:g} s of the Enter; it said:\n{''.join(seen)}"
+                        f"{err}\nand on stdout:\n{out}")
     finally:
         os.close(terminal)
         if proc.poll() is None:
