@@ -339,17 +339,23 @@ def test_a_killed_emulator_is_a_lost_link_with_the_last_readings_kept(emulator, 
     board = emulator()
     backend = connect(board.url, watchdog_s=PATIENT_S)
     last = drive(backend, [0.0] * 6, 0.2)[-1]
-    board.kill()
-    assert until(lambda: backend.fault != "", backend, [0.0] * 6)
-    assert backend.fault.startswith("link lost: ")
-    assert backend.counters.link_lost == 1
-    raw = [0] * 6
-    backend.read(raw)
-    assert raw == last
-    drive(backend, [10.0] * 6, 0.05)  # writing to a lost link is harmless
-    assert backend.counters.link_lost == 1
-    with pytest.raises(BoardError, match="cannot open"):
-        backend.reconnect()
+    # the killed emulator's pty number stays taken while this is open: the reconnect finds the
+    # port gone, not another test's terminal opened meanwhile under the same number
+    held = os.open(board.url, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+    try:
+        board.kill()
+        assert until(lambda: backend.fault != "", backend, [0.0] * 6)
+        assert backend.fault.startswith("link lost: ")
+        assert backend.counters.link_lost == 1
+        raw = [0] * 6
+        backend.read(raw)
+        assert raw == last
+        drive(backend, [10.0] * 6, 0.05)  # writing to a lost link is harmless
+        assert backend.counters.link_lost == 1
+        with pytest.raises(BoardError, match="cannot open"):
+            backend.reconnect()
+    finally:
+        os.close(held)
     assert backend.fault.startswith("link lost: reconnect failed after ")
 
 
