@@ -743,9 +743,10 @@ class ServodeskApp(App[None]):
         """Release the E-stop latch, after a deliberate confirmation."""
         if isinstance(self.screen, ModalScreen):
             return
-        client = self.client
-        if (client is not None and not client.dead and not self.estop_latched
-                and not client.latched):  # no question, and no reset sent mid-move
+        client = self._live_client("release the E-stop")
+        if client is None:
+            return
+        if not self.estop_latched and not client.latched:  # no question, no reset mid-move
             self.notify("No E-stop is latched: nothing to release (^R releases a latched "
                         "E-stop).", severity="warning")
             return
@@ -772,9 +773,20 @@ class ServodeskApp(App[None]):
             "The valves open again and every joint holds where it is now. Make sure the "
             "robot's envelope is clear.", "Release"), answer)
 
+    def _live_client(self, what: str) -> ControlClient | None:
+        """The client while its controller runs; else None, and the operator is told why and
+        what to do (as a tab's ``command`` tells it), before any question is asked."""
+        client = self.client
+        if client is None or client.dead:
+            problem = self.client_problem or (client.dead if client is not None else "")
+            self.notify(f"{what}: the controller is not running — "
+                        + (problem or "wait for it to start"), severity="error")
+            return None
+        return client
+
     def action_hold(self) -> None:
         """Abort any move and hold every joint where it is (the thesis's default mode)."""
-        client = self.client
+        client = self._live_client("hold")
         if client is None:
             return
         try:
@@ -784,7 +796,7 @@ class ServodeskApp(App[None]):
 
     def action_feed_hold(self) -> None:
         """Feed hold on the running move, or resume a held one (the header says which)."""
-        client = self.client
+        client = self._live_client("feed hold")
         if client is None:
             return
         try:
@@ -799,7 +811,7 @@ class ServodeskApp(App[None]):
         """Feed override up or down by 10 % (0…100 %), for this move and the next: from the
         override in force, which a program's feed step or another client may have set, or
         from this TUI's own count while the status has yet to show its last keys' values."""
-        client = self.client
+        client = self._live_client("feed override")
         if client is None:
             return
         try:
@@ -883,8 +895,10 @@ class ServodeskApp(App[None]):
     def action_speed_mode(self) -> None:
         """Reduced speed (T1) at once; automatic (full speed) only after asking, and only for
         the commanding client (an observer's switch is refused with who commands)."""
-        client = self.client
-        if client is None or isinstance(self.screen, ConfirmScreen):
+        if isinstance(self.screen, ConfirmScreen):
+            return
+        client = self._live_client("speed mode")
+        if client is None:
             return
         if client.speed_mode == "automatic":
             self._set_speed(client, "reduced")

@@ -8,16 +8,19 @@ valve at 0) in T1 too, aborted a running move into open loop, and took a held Ca
 servo out of hold, whose thread then died on the NaN target.
 
 ^S on the Moves tab, and the Identify tab's Run, looked only at their own move: another tab's,
-running or in feed hold, was superseded by theirs. ^R with no E-stop latched asked to release one, and its reset held
-a running move's arm while the move ran on. ^Y's switch to automatic waited for the controller
-on the UI's thread: refused (a T1 jog travelling), it held every key back 2 s, Esc too. The
-feed keys stepped from the TUI's own count, not from an override a program's feed step had set:
-^↓ at 50 % gave 90 %."""
+running or in feed hold, was superseded by theirs. ^R with no E-stop latched asked to release
+one, and its reset held a running move's arm while the move ran on. ^Y's switch to automatic
+waited for the controller on the UI's thread: refused (a T1 jog travelling), it held every key
+back 2 s, Esc too. The feed keys stepped from the TUI's own count, not from an override a
+program's feed step had set: ^↓ at 50 % gave 90 %. With the controller dead, ^R and ^Y asked
+their questions of it."""
 
 from __future__ import annotations
 
 import asyncio
 import math
+import os
+import signal
 
 import numpy as np
 
@@ -287,5 +290,29 @@ def test_feed_keys_step_from_the_override_in_force_not_from_their_own_count(tui)
                 tui.post_key(app, "ctrl+up")
             await tui.until(lambda: client.status().feed_override == 0.7,
                             what=lambda: f"70 %: {client.status().feed_override}")
+
+    asyncio.run(scenario())
+
+
+def test_with_the_controller_dead_the_global_keys_say_so_and_ask_nothing(tui, data_dir) -> None:
+    """^R asked 'Release the E-stop?' and ^Y (in T1) 'Switch to automatic?' of a dead
+    controller, to fail only after the yes; now each key says at once that the controller is
+    not running and what to do, as the Jog tab's keys do."""
+    async def scenario() -> None:
+        app = PilotedApp("unimate2000b", "sim", None, data_dir, lockstep=True,
+                         client_options={"heartbeat_timeout_s": 2.0}, build_behind=False)
+        async with app.run_test(size=SIZE) as pilot:
+            pilot = DriverPilot(app)
+            await tui.ready(app, pilot)  # as the operator starts it: T1
+            seen = tui.notifications(app)
+            os.kill(app.client.pid, signal.SIGKILL)
+            await tui.until(lambda: app.header.link.state == "dead", what="the death seen")
+            for key in ("ctrl+r", "ctrl+y", "ctrl+g", "ctrl+f", "ctrl+down"):
+                said = len(seen)
+                await pilot.press(key)
+                await tui.until(lambda n=said: any("the controller is not running — it died"
+                                                   in m for m in seen[n:]),
+                                what=lambda k=key, n=said: f"{k} to say why: {seen[n:]}")
+                assert not isinstance(app.screen, ConfirmScreen), key
 
     asyncio.run(scenario())
