@@ -33,9 +33,10 @@ def test_frozen_words_on_time_are_a_feedback_fault_not_a_drive_into_the_stop(
     handle = client.move(moves.step(start, ROTATE, start[ROTATE] + 10.0, duration=3.0,
                                     machine=UNIMATE), kind="step")
     result = client.wait(handle, timeout=10)
+    assert result.status.startswith("estop: feedback fault: Rotate's valve"), (
+        f"the move ended {result.status!r}; the controller's log:\n{client.controller_log()}")
     fault = first_fault(client, "feedback")
     assert fault.payload["joint"] == ROTATE and "has not moved" in fault.message
-    assert result.status.startswith("estop: feedback fault: Rotate's valve")
     status = client.status()
     assert status.estop and status.valve == (0.0,) * 6
     moving = np.flatnonzero(result.run.desired[:, ROTATE] != start[ROTATE])[0]
