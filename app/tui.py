@@ -15,6 +15,7 @@ import gc
 import importlib
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -246,6 +247,10 @@ class ServodeskApp(App[None]):
         self.client_problem = ""
         self.sampler: Sampler | None = None
         self._client_lock = threading.Lock()
+        # ^K and ^O asked for, each with its client, oldest first: the first is being made
+        self._command_changes: deque[tuple[ControlClient, Callable[[ControlClient], None]]] = (
+            deque())
+        self._command_lock = threading.Lock()
         self._client_closing = False
         self._estop_pending = False
         self._active: TabPage | None = None
@@ -886,11 +891,31 @@ class ServodeskApp(App[None]):
         client = self.client
         if client is None or not client.role:
             return
-        try:
-            change(client)
-        except ControllerError as exc:
-            self.notify(str(exc), severity="error")
-        self._link(command=_role(client))
+        with self._command_lock:
+            self._command_changes.append((client, change))
+            first = len(self._command_changes) == 1
+        if first:
+            self.run_worker(self._change_command, thread=True, group="command",
+                            name="command change")
+
+    def _change_command(self) -> None:
+        """Make the command changes asked for, in order, off the UI's thread: each waits for
+        the service's answer (up to ``ANSWER_S``, from a frozen service), and no key, Esc's
+        E-stop included, may wait with it."""
+        while True:
+            with self._command_lock:
+                client, change = self._command_changes[0]
+            try:
+                change(client)
+            except ControllerError as exc:
+                with contextlib.suppress(RuntimeError):  # the app closed meanwhile
+                    self.call_from_thread(self.notify, str(exc), severity="error")
+            with contextlib.suppress(RuntimeError):
+                self.call_from_thread(self._link, command=_role(client))
+            with self._command_lock:
+                self._command_changes.popleft()
+                if not self._command_changes:
+                    return
 
     def action_speed_mode(self) -> None:
         """Reduced speed (T1) at once; automatic (full speed) only after asking, and only for

@@ -5,6 +5,8 @@ handed over with ^O and ^K."""
 from __future__ import annotations
 
 import asyncio
+import os
+import signal
 
 from app.tabs.jog import JogPad
 from app.tui import attached_app
@@ -57,5 +59,36 @@ def test_two_attached_tuis_one_commands_the_other_observes(controller_service, t
             await tui.until(lambda: f"held by {second.client.name}" in headers[0].text,
                             what="the first header naming the new commander")
         assert controller_service.proc.poll() is None  # both TUIs gone, the controller runs on
+
+    asyncio.run(scenario())
+
+
+def test_esc_after_take_command_from_a_frozen_service_latches_at_once(controller_service,
+                                                                      tui) -> None:
+    """^K waits for the service's answer (up to 2 s) off the UI's thread: with the service
+    frozen (SIGSTOP; its controller ticks on), Esc pressed after ^K latches the E-stop through
+    shared memory while the take still waits, and the take then fails, said. The old app
+    waited for the answer on the UI's thread, nothing else running meanwhile."""
+    async def scenario() -> None:
+        app = attached_app(controller_service.socket)
+        async with app.run_test(size=SIZE) as pilot:
+            await tui.ready(app, pilot)
+            said = tui.notifications(app)
+            os.kill(controller_service.proc.pid, signal.SIGSTOP)
+            try:
+                tui.post_key(app, "ctrl+k")
+                await tui.until(lambda: any(w.name == "command change" and w.is_running
+                                            for w in app.workers),
+                                what="the take waiting for its answer off the UI's thread")
+                tui.post_key(app, "escape")
+                await tui.until(lambda: app.estop_latched, what="Esc read")
+                told_before = [text for text in said if "no answer" in text]
+                await tui.until(lambda: app.client.status().estop, what="the E-stop")
+                await tui.until(lambda: any("take command: no answer" in text for text in said),
+                                what=lambda: f"the take's failure told: {said}")
+            finally:
+                os.kill(controller_service.proc.pid, signal.SIGCONT)
+            assert told_before == [], "Esc was read only after the take had failed"
+            assert "COMMANDING" not in app.query_one("#header-health", LiveText).text
 
     asyncio.run(scenario())
