@@ -294,7 +294,8 @@ def test_a_step_pressed_while_another_move_runs_waits_and_the_keys_still_work(tu
     saying so under the pad, then runs from where it ended; meanwhile the keys work: F3 shows
     the Scope while a second go_to still runs (the step waited in the UI's thread before: F3
     came only after), and leaving the tab drops the step waiting, saying so: it ran before,
-    after the go_to, while the Scope was shown, a jog the operator could no longer see. Each
+    after the go_to, while the Scope was shown, a jog the operator could no longer see; the
+    E-stop drops one waiting likewise. Each
     go_to runs at 5 % feed override until what the test waits for is seen, however long that
     takes on a loaded machine, and at full feed after."""
     async def scenario() -> None:
@@ -338,6 +339,20 @@ def test_a_step_pressed_while_another_move_runs_waits_and_the_keys_still_work(tu
             assert client.wait(going, timeout=60).complete
             assert jog._jog is stepped, "the step ran with the Jog tab left"
             assert client.status().desired == pytest.approx(back, abs=1e-6)
+
+            # back on the Jog tab, the E-stop drops a step waiting too (and ends the go_to)
+            await pilot.press("f1")
+            await tui.until(lambda: jog.visible_now, what="the Jog tab shown again")
+            client.feed_override(0.05)
+            going = client.go_to(target, speed=1.0)
+            await tui.until(lambda: client.status().moving, timeout=10, what="the third go_to")
+            await pilot.press("s")
+            await tui.until(lambda: "the step waits: move" in note.text, what="the note")
+            await pilot.press("escape")
+            await tui.until(lambda: any("dropped: the E-stop latched" in m for m in seen),
+                            what=lambda: f"the step dropped by the E-stop, said: {seen}")
+            assert not client.wait(going, timeout=60).complete
+            assert jog._jog is stepped, "a step ran after the E-stop"
 
     asyncio.run(scenario())
 
