@@ -18,6 +18,7 @@ import time
 from collections import deque
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, replace
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, ClassVar, Self, cast
 
@@ -908,10 +909,8 @@ class ServodeskApp(App[None]):
             try:
                 change(client)
             except ControllerError as exc:
-                with contextlib.suppress(RuntimeError):  # the app closed meanwhile
-                    self.call_from_thread(self.notify, str(exc), severity="error")
-            with contextlib.suppress(RuntimeError):
-                self.call_from_thread(self._link, command=_role(client))
+                self._from_worker(partial(self.notify, str(exc), severity="error"))
+            self._from_worker(partial(self._link, command=_role(client)))
             with self._command_lock:
                 self._command_changes.popleft()
                 if not self._command_changes:
@@ -952,8 +951,17 @@ class ServodeskApp(App[None]):
         try:
             client.set_speed_mode(mode)
         except (ControllerError, ValueError) as exc:
-            with contextlib.suppress(RuntimeError):  # the app closed meanwhile
-                self.call_from_thread(self.notify, str(exc), severity="error")
+            self._from_worker(partial(self.notify, str(exc), severity="error"))
+
+    def _from_worker(self, call: Callable[[], object]) -> None:
+        """Run ``call`` on the UI's thread, from a worker's; not once the app is closing: its
+        screen is being torn down, and a header without its lines raised NoMatches."""
+        def live() -> None:
+            if self.is_running and self.header.is_mounted:
+                call()
+
+        with contextlib.suppress(RuntimeError):  # the app closed meanwhile
+            self.call_from_thread(live)
 
     def action_dismiss_fault(self) -> None:
         self.fault_kind = ""
