@@ -20,6 +20,7 @@ import pytest
 from textual import events
 from textual.pilot import Pilot
 from textual.widget import Widget
+from textual.widgets import Button
 from textual.worker import WorkerCancelled
 
 from app.tui import ServodeskApp
@@ -31,13 +32,23 @@ SIZE = (160, 48)
 
 class TabPilot(Pilot):
     """Pilot whose keys leave the tab they chose built and shown before the test goes on
-    (the tests' apps build a tab only when it is first shown)."""
+    (the tests' apps build a tab only when it is first shown), and whose click on a button
+    comes once the button has shown its last (Textual ignores a click on a button while it is
+    ``-active``, 0.2 s after the one before: a test's second Apply or Resume came within
+    that when the first's answer was quick, and was lost)."""
 
     async def press(self, *keys: str) -> None:
         await super().press(*keys)
         await Tui.built(self.app, self)
 
     async def click(self, *args: object, **kwargs: object) -> bool:
+        target = args[0] if args else kwargs.get("widget")
+        if isinstance(target, str):
+            target = self.app.query_one(target)
+        if isinstance(target, Button):
+            button = target
+            await Tui.until(lambda: not button.has_class("-active"),
+                            what=f"{button} to show its last click")
         clicked = await super().click(*args, **kwargs)
         await Tui.built(self.app, self)  # a tab of the tab bar
         return clicked
