@@ -132,10 +132,18 @@ def test_overrun_holds_under_starvation_keep_the_commanded_target(controller, un
     zero = replace(UNIMATE.hold, name="zero", kp=((0.0,),) * 6, ki=(0.0,) * 6,
                    kd=(0.0,) * 6, w=((),) * 6, kv=(0.0,) * 6)
     client.set_coefficients("hold", zero, override="test: the arm stays where it is left")
-    start = np.array(client.status().position)
-    client.jog_position("rotate", 1.5)
-    until(lambda: abs(client.status().desired[ROTATE] - start[ROTATE] - 1.5) < 1e-9, 10.0,
-          "Rotate's target jogged on")
+    before = client.status()
+    start = np.array(before.position)
+    client.jog_position("rotate", 1.5)  # the hold target moves on by 1.5°
+
+    def jog_state() -> str:
+        now = client.status()
+        moved = now.desired[ROTATE] - before.desired[ROTATE]
+        return (f"Rotate's target jogged on: it is {moved:+.6f}° from where it was, mode "
+                f"{now.mode!r}, estop {now.estop}, fault "
+                f"{now.fault!r}; events {[(e.kind, e.payload) for e in client.poll_events()]}")
+    until(lambda: abs(client.status().desired[ROTATE] - before.desired[ROTATE] - 1.5) < 1e-9,
+          10.0, jog_state)
     commanded = np.array(client.status().desired)
     left = client.status().position[ROTATE]
     assert abs(left - start[ROTATE]) < 0.1, f"Rotate moved {left - start[ROTATE]:.2f}° on the jog"
