@@ -248,10 +248,9 @@ class ServodeskApp(App[None]):
         self.client_problem = ""
         self.sampler: Sampler | None = None
         self._client_lock = threading.Lock()
-        # ^K and ^O asked for, each with its client, oldest first: the first is being made
-        self._command_changes: deque[tuple[ControlClient, Callable[[ControlClient], None]]] = (
-            deque())
-        self._command_lock = threading.Lock()
+        # the client calls that may wait seconds (^K, ^O, ^Y), oldest first: the first is made
+        self._calls: deque[Callable[[], object]] = deque()
+        self._calls_lock = threading.Lock()
         self._client_closing = False
         self._estop_pending = False
         self._active: TabPage | None = None
@@ -892,28 +891,37 @@ class ServodeskApp(App[None]):
         client = self.client
         if client is None or not client.role:
             return
-        with self._command_lock:
-            self._command_changes.append((client, change))
-            first = len(self._command_changes) == 1
-        if first:
-            self.run_worker(self._change_command, thread=True, group="command",
-                            name="command change")
+        self._in_order(partial(self._change_command, client, change))
 
-    def _change_command(self) -> None:
-        """Make the command changes asked for, in order, off the UI's thread: each waits for
-        the service's answer (up to ``ANSWER_S``, from a frozen service), and no key, Esc's
-        E-stop included, may wait with it."""
-        while True:
-            with self._command_lock:
-                client, change = self._command_changes[0]
-            try:
-                change(client)
-            except ControllerError as exc:
-                self._from_worker(partial(self.notify, str(exc), severity="error"))
+    def _change_command(self, client: ControlClient,
+                        change: Callable[[ControlClient], None]) -> None:
+        try:
+            change(client)
+        finally:
             self._from_worker(partial(self._link, command=_role(client)))
-            with self._command_lock:
-                self._command_changes.popleft()
-                if not self._command_changes:
+
+    def _in_order(self, call: Callable[[], object]) -> None:
+        """Make ``call`` off the UI's thread, after the calls asked for before it: each may
+        wait seconds (a take for a frozen service's answer, a switch for a refused mode to
+        show), and no key, Esc's E-stop included, may wait with it. Its ControllerError or
+        ValueError is told."""
+        with self._calls_lock:
+            self._calls.append(call)
+            first = len(self._calls) == 1
+        if first:
+            self.run_worker(self._make_calls, thread=True, group="calls", name="client calls")
+
+    def _make_calls(self) -> None:
+        while True:
+            with self._calls_lock:
+                call = self._calls[0]
+            try:
+                call()
+            except (ControllerError, ValueError) as exc:
+                self._from_worker(partial(self.notify, str(exc), severity="error"))
+            with self._calls_lock:
+                self._calls.popleft()
+                if not self._calls:
                     return
 
     def action_speed_mode(self) -> None:
@@ -942,16 +950,9 @@ class ServodeskApp(App[None]):
             "Automatic"), answer)
 
     def _set_speed(self, client: ControlClient, mode: str) -> None:
-        """Switch in a worker: the switch waits (up to 2 s) for the status to show the mode,
-        which a refused one never does, and no key, Esc's E-stop included, may wait with it."""
-        self.run_worker(lambda: self._switch_speed(client, mode), thread=True,
-                        group="speed-mode", name=f"speed mode {mode}")
-
-    def _switch_speed(self, client: ControlClient, mode: str) -> None:
-        try:
-            client.set_speed_mode(mode)
-        except (ControllerError, ValueError) as exc:
-            self._from_worker(partial(self.notify, str(exc), severity="error"))
+        """Switch in order off the UI's thread: the switch waits (up to 2 s) for the status to
+        show the mode, which a refused one never does."""
+        self._in_order(partial(client.set_speed_mode, mode))
 
     def _from_worker(self, call: Callable[[], object]) -> None:
         """Run ``call`` on the UI's thread, from a worker's; not once the app is closing: its

@@ -77,7 +77,7 @@ def test_esc_after_take_command_from_a_frozen_service_latches_at_once(controller
             os.kill(controller_service.proc.pid, signal.SIGSTOP)
             try:
                 tui.post_key(app, "ctrl+k")
-                await tui.until(lambda: any(w.name == "command change" and w.is_running
+                await tui.until(lambda: any(w.name == "client calls" and w.is_running
                                             for w in app.workers),
                                 what="the take waiting for its answer off the UI's thread")
                 tui.post_key(app, "escape")
